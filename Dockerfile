@@ -1,0 +1,33 @@
+# fenicsx_drape: the reference stack is Debian unstable's DOLFINx (>= 0.10 is required:
+# older versions tear a branching truss mesh apart under MPI).
+FROM debian:sid
+
+# The local build passes "-o Acquire::Check-Valid-Until=false" for a frozen archive mirror.
+ARG APT_OPTS=""
+ENV DEBIAN_FRONTEND=noninteractive \
+    OMPI_MCA_rmaps_base_oversubscribe=1 \
+    PRTE_MCA_rmaps_default_mapping_policy=:oversubscribe \
+    OMPI_ALLOW_RUN_AS_ROOT=1 \
+    OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 \
+    MPLBACKEND=Agg
+
+RUN apt-get $APT_OPTS update \
+ && apt-get $APT_OPTS install -y --no-install-recommends \
+      python3-dolfinx python3-gmsh python3-meshio python3-petsc4py python3-mpi4py \
+      python3-numpy python3-scipy python3-matplotlib python3-pytest python3-hypothesis \
+      python3-pip python3-setuptools ruff mpi-default-bin gcc python3-dev make \
+ && rm -rf /var/lib/apt/lists/*
+
+# Fail loudly on a DOLFINx that cannot distribute a branching truss.
+RUN python3 -c "import dolfinx, sys; v = tuple(int(p) for p in dolfinx.__version__.split('.')[:2]); \
+print('DOLFINx', dolfinx.__version__); sys.exit(0 if v >= (0, 10) else 'DOLFINx >= 0.10 required')"
+
+WORKDIR /opt/fenicsx_drape
+COPY pyproject.toml README.md ./
+COPY fenicsx_drape ./fenicsx_drape
+COPY demos ./demos
+COPY meshes ./meshes
+RUN pip install --break-system-packages --no-deps --no-build-isolation -e . \
+ && python3 -c "import fenicsx_drape; print('fenicsx_drape', fenicsx_drape.__version__)"
+
+CMD ["python3", "-m", "fenicsx_drape", "form", "hemisphere", "--out", "results/hemisphere"]

@@ -1,0 +1,5 @@
+import sys
+
+from fenicsx_drape.cli import main
+
+sys.exit(main())

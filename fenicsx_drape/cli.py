@@ -1,0 +1,78 @@
+"""The ``drape`` command line: ``python3 -m fenicsx_drape COMMAND ...``.
+
+Each command lives in ``fenicsx_drape/commands/<name>.py`` with two functions,
+``configure(parser)`` and ``run(args) -> int``; it is imported only when called, so the
+commands that need no DOLFINx start fast and work without it.
+
+Exit status: 0 success, 2 bad input (the message names the file, line or parameter),
+1 internal failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import traceback
+
+from fenicsx_drape import __version__
+from fenicsx_drape.errors import DrapeInputError
+
+COMMANDS: dict[str, str] = {
+    "curves": "tensile and bias-extension curves of a model (the paper's Figs. 2b and 6)",
+    "fit": "fit a model's parameters to a measurement bundle (section 3.2)",
+    "compare": "fit, then show how far and where a model misses a bundle",
+    "diagnose": "find which physical effect a model is missing (REPORT.json contract)",
+    "history": "the ledger of model versions and their errors",
+    "form": "run a forming case (hemisphere) and write fields, pictures and a bundle",
+    "mesh": "build a truss mesh of the woven sheet with Gmsh and write it",
+}
+
+
+def _top_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="drape",
+        description="Forming and wrinkling of woven prepregs: the truss model of Skordos, "
+        "Monroy Aceves & Sutcliffe on FEniCSx.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="commands:\n"
+        + "\n".join(f"  {name:<10} {text}" for name, text in COMMANDS.items())
+        + "\n\n'drape COMMAND --help' gives a command's options.",
+    )
+    parser.add_argument("--version", action="version", version=f"fenicsx_drape {__version__}")
+    parser.add_argument("command", metavar="COMMAND", help="one of: " + ", ".join(COMMANDS))
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    top = _top_parser()
+    if not argv or argv[0] in ("-h", "--help"):
+        top.print_help()
+        return 0 if argv else 2
+    if argv[0] == "--version":
+        print(f"fenicsx_drape {__version__}")
+        return 0
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        top.print_usage(sys.stderr)
+        print(f"drape: error: unknown command {name!r} (choose from {', '.join(COMMANDS)})",
+              file=sys.stderr)
+        return 2
+    module = importlib.import_module(f"fenicsx_drape.commands.{name}")
+    parser = argparse.ArgumentParser(prog=f"drape {name}", description=COMMANDS[name])
+    module.configure(parser)
+    args = parser.parse_args(rest)  # exits 2 on bad options
+    try:
+        return int(module.run(args) or 0)
+    except DrapeInputError as err:
+        print(f"drape {name}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"drape {name}: interrupted", file=sys.stderr)
+        return 130
+    except Exception:
+        traceback.print_exc()
+        print(f"drape {name}: internal error (see the traceback above)", file=sys.stderr)
+        return 1

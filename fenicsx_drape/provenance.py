@@ -1,0 +1,93 @@
+"""Atomic output files and the record of how every output folder was made."""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from fenicsx_drape import __version__
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file and a rename.
+
+    A reader never sees a half-written file, and an interrupted run leaves the previous
+    version in place.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write ``text`` (UTF-8) atomically, see :func:`atomic_write_bytes`."""
+    return atomic_write_bytes(path, text.encode())
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> Path:
+    """Write ``obj`` as indented JSON atomically (NumPy scalars and arrays allowed)."""
+    return atomic_write_text(path, json.dumps(obj, indent=2, default=_to_json) + "\n")
+
+
+def save_figure(fig, path: str | os.PathLike, dpi: int = 150) -> Path:
+    """Save a Matplotlib figure atomically as PNG and close it."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+def _to_json(obj: Any) -> Any:
+    if hasattr(obj, "tolist"):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, (set, frozenset)):
+        return sorted(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def run_record(**details: Any) -> dict[str, Any]:
+    """How a result was made: version, command line, platform, time, plus ``details``.
+
+    Pass the model (effects and parameters), the inputs and the random seed as ``details``.
+    """
+    record = {
+        "fenicsx_drape": __version__,
+        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "cwd": os.getcwd(),
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+    }
+    try:
+        import dolfinx
+
+        record["dolfinx"] = dolfinx.__version__
+    except ImportError:
+        pass
+    record.update(details)
+    return record
+
+
+def write_provenance(out_dir: str | os.PathLike, **details: Any) -> Path:
+    """Write ``provenance.json`` into ``out_dir`` (see :func:`run_record`)."""
+    return write_json(Path(out_dir) / "provenance.json", run_record(**details))
