@@ -46,7 +46,10 @@ def parameter(
     bounds: tuple[float, float] = (0.0, math.inf),
     doc: str = "",
 ) -> Any:
-    """A material parameter field: a finite float within ``bounds`` (inclusive), in ``unit``."""
+    """A material parameter field: finite, within ``bounds`` (inclusive), in ``unit``.
+
+    A parameter is a float, or an array that broadcasts over the points of an update.
+    """
     meta = {_KIND: "parameter", "unit": unit, "bounds": bounds, "doc": doc}
     return dataclasses.field(default=default, metadata=meta)
 
@@ -84,23 +87,25 @@ class MaterialLaw:
         for f in fields_of(self, "parameter"):
             value = getattr(self, f.name)
             try:
-                value = float(value)
+                array = np.asarray(value, dtype=float)
             except (TypeError, ValueError):
                 raise ParameterError(f"{name}: parameter {f.name} = {value!r} is not a number")
             lo, hi = f.metadata["bounds"]
-            if not math.isfinite(value):
+            if not np.isfinite(array).all():
                 raise ParameterError(f"{name}: parameter {f.name} = {value} is not finite")
-            if not lo <= value <= hi:
+            if not ((lo <= array) & (array <= hi)).all():
                 raise ParameterError(
-                    f"{name}: parameter {f.name} = {value:g} {f.metadata['unit']} is outside "
+                    f"{name}: parameter {f.name} = {value} {f.metadata['unit']} is outside "
                     f"its allowed range [{lo:g}, {hi:g}]"
                 )
-            setattr(self, f.name, value)
+            # Scalars stay floats; arrays broadcast over the points (e.g. one parameter set
+            # per point, to evaluate many parameter sets in one vectorised update).
+            setattr(self, f.name, float(array) if array.ndim == 0 else array)
         for f in fields_of(self, "condition"):
-            value = float(getattr(self, f.name))
-            if not math.isfinite(value):
-                raise ParameterError(f"{name}: condition {f.name} = {value} is not finite")
-            setattr(self, f.name, value)
+            array = np.asarray(getattr(self, f.name), dtype=float)
+            if not np.isfinite(array).all():
+                raise ParameterError(f"{name}: condition {f.name} = {array} is not finite")
+            setattr(self, f.name, float(array) if array.ndim == 0 else array)
 
     @property
     def parameters(self) -> dict[str, float]:
