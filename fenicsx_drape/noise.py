@@ -1,0 +1,56 @@
+"""The measurement noise of a test, from its data alone (the noise floor of a comparison).
+
+The diagnosis contract (``shared/spec/measurements.md``) defines the noise of a test as the
+RMS of its ``force_sd_N`` column when given, otherwise a model-free estimate from the data
+alone -- never from a model's residuals, so that a model cannot lower its own bar.
+
+The model-free estimate uses second differences of successive rows. For rows
+``y_i = f(t_i) + e_i`` with a smooth ``f`` and independent noise ``e_i`` of standard deviation
+``s``, the deviation of ``y_i`` from the straight line through its neighbours,
+
+    d_i = y_i - (w_i y_{i-1} + (1 - w_i) y_{i+1}),   w_i = (t_{i+1} - t_i) / (t_{i+1} - t_{i-1}),
+
+has variance ``s² (1 + w_i² + (1 - w_i)²)`` plus the square of the curvature term
+``f''(t) h²/2`` (``h`` the row spacing), negligible for densely sampled curves. The estimate is
+the normalised median absolute deviation of ``d_i / sqrt(1 + w_i² + (1 - w_i)²)``, so the few
+rows at a kink of the history (start of a hold, of unloading) do not inflate it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# The median absolute deviation of a normal variable times this is its standard deviation.
+_MAD_TO_SD = 1.482602218505602
+
+
+def noise_from_sd(sd: np.ndarray) -> float:
+    """The RMS of a per-row standard-deviation column (e.g. ``force_sd_N``), same unit."""
+    sd = np.asarray(sd, dtype=float)
+    return float(np.sqrt(np.mean(sd**2)))
+
+
+def noise_from_second_differences(t: np.ndarray, y: np.ndarray) -> float:
+    """A model-free estimate of the standard deviation of the noise of ``y(t)``.
+
+    Args:
+        t: The abscissa of the rows (e.g. ``time_s``), strictly increasing.
+        y: The measured values (e.g. ``force_N``), same length, at least 5 rows.
+
+    Returns:
+        The estimated standard deviation of one row's noise, in the unit of ``y``.
+
+    Raises:
+        ValueError: with fewer than 5 rows or a non-increasing abscissa.
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if t.shape != y.shape or t.ndim != 1 or t.size < 5:
+        raise ValueError(f"noise estimate needs two equal 1-D columns of at least 5 rows, "
+                         f"got shapes {t.shape} and {y.shape}")
+    h = np.diff(t)
+    if not (h > 0).all():
+        raise ValueError("noise estimate needs a strictly increasing abscissa")
+    w = h[1:] / (h[:-1] + h[1:])
+    d = (y[1:-1] - (w * y[:-2] + (1.0 - w) * y[2:])) / np.sqrt(1.0 + w**2 + (1.0 - w) ** 2)
+    return float(_MAD_TO_SD * np.median(np.abs(d - np.median(d))))
