@@ -1,0 +1,629 @@
+"""Measurement bundles: ``bundle.toml`` plus one CSV table per test (spec: measurements.md).
+
+:func:`load_bundle` reads a bundle into typed, validated objects. Every problem is reported
+as ``file:line: problem``; all problems of a bundle are collected and raised together in one
+:class:`BundleError`, so a bundle is either loaded whole or not at all. Keys the loader does
+not know are kept (as test conditions, or as notes when not numeric) and listed in
+:attr:`Bundle.unknown_keys`.
+
+:func:`write_bundle` writes a bundle back (each file atomically, ``bundle.toml`` last).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.provenance import atomic_write_text
+
+KINDS = ("tensile", "bias_extension", "forming")
+
+# Required and optional CSV columns per test kind.
+COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "tensile": (("time_s", "displacement_mm", "force_N"), ("force_sd_N",)),
+    "bias_extension": (("time_s", "displacement_mm", "force_N"), ("force_sd_N", "shear_deg")),
+    "forming": (
+        ("i", "j", "x0_mm", "y0_mm", "x_mm", "y_mm", "z_mm"),
+        ("position_sd_mm", "shear_deg", "wrinkle_strain"),
+    ),
+}
+
+# Numeric keys of a [[test]] table that describe the test (not conditions), per kind.
+# Keys in REQUIRED_KEYS must be present; ``tows`` may instead be derived from tows_per_mm.
+SETUP_KEYS: dict[str, tuple[str, ...]] = {
+    "tensile": ("gauge_length_mm", "width_mm", "tows", "speed_mm_per_min"),
+    "bias_extension": ("length_mm", "width_mm", "tows", "speed_mm_per_min"),
+    "forming": (
+        "punch_radius_mm", "fillet_radius_mm", "holder_opening_mm", "sheet_mm", "travel_mm",
+        "duration_s", "holder_force_N", "grid_mm",
+    ),
+}
+REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
+    "tensile": ("gauge_length_mm",),
+    "bias_extension": ("length_mm", "width_mm"),
+    "forming": ("geometry", "sheet_mm", "travel_mm", "duration_s", "holder_force_N"),
+}
+
+# The unit each physical quantity must carry in a key or column name. A name made of one of
+# these quantities and another unit (``force_kN``, ``length_m``, ``temperature_K``) is an
+# inconsistent unit and rejected rather than silently misread.
+UNITS: dict[str, str] = {
+    "time": "s", "duration": "s", "displacement": "mm", "force": "N", "force_sd": "N",
+    "length": "mm", "width": "mm", "gauge_length": "mm", "sheet": "mm", "travel": "mm",
+    "grid": "mm", "punch_radius": "mm", "fillet_radius": "mm", "holder_opening": "mm",
+    "holder_force": "N", "position_sd": "mm", "x": "mm", "y": "mm", "z": "mm", "x0": "mm",
+    "y0": "mm", "shear": "deg", "temperature": "C", "speed": "mm_per_min",
+}
+_FOREIGN_UNITS = (
+    "m", "cm", "um", "in", "inch", "ft", "kN", "mN", "lbf", "N", "mm", "s", "ms", "min", "h",
+    "K", "F", "C", "deg", "rad", "mm_per_s", "m_per_s", "mm_per_min", "in_per_min",
+)
+_UNIT_NAME = re.compile(
+    "^({})_({})$".format(*("|".join(sorted(names, key=len, reverse=True))
+                           for names in (UNITS, _FOREIGN_UNITS)))
+)
+
+# A crosshead speed key and the table's own speed may differ (holds, a ramp, ...), but not by
+# the factor of a unit mix-up (60 for min/s, 10 or 1000 for cm/m against mm).
+_SPEED_TOLERANCE = 3.0
+# Given and derived tow counts may differ by the specimen's edge tows, not by a factor 10
+# (tows/cm against tows/mm).
+_TOWS_TOLERANCE = 1.5
+
+
+class BundleError(DrapeInputError):
+    """A bundle that cannot be loaded; ``problems`` lists every ``file:line: problem``."""
+
+    def __init__(self, problems: list[str]):
+        self.problems = list(problems)
+        if len(problems) == 1:
+            message = problems[0]
+        else:
+            message = f"{len(problems)} problems:\n  " + "\n  ".join(problems)
+        super().__init__(message)
+
+
+@dataclasses.dataclass(frozen=True)
+class Test:
+    """One test of a bundle: its setup, conditions and measured table.
+
+    Geometry in mm, speeds in mm/min, forces in N. Keys absent from ``bundle.toml`` are None.
+    """
+
+    id: str  # unique in the bundle
+    kind: str  # "tensile" | "bias_extension" | "forming"
+    file: str  # CSV table, relative to the bundle folder
+    columns: Mapping[str, np.ndarray]  # the table by column name (all read-only float arrays)
+    line: int = 0  # line of the [[test]] header in bundle.toml (for messages)
+    gauge_length_mm: float | None = None  # tensile: gauge length
+    length_mm: float | None = None  # bias extension: specimen length L0
+    width_mm: float | None = None  # specimen width W0
+    tows: float | None = None  # tows sharing the force (per-tow force = force_N / tows)
+    tows_derived: bool = False  # tows computed from tows_per_mm and the width
+    speed_mm_per_min: float | None = None  # nominal crosshead speed (descriptive)
+    geometry: str | None = None  # forming: tool set ("hemisphere")
+    forming: Mapping[str, float] = dataclasses.field(default_factory=dict)  # forming keys
+    conditions: Mapping[str, float] = dataclasses.field(default_factory=dict)  # e.g. temperature_C
+    notes: Mapping[str, str] = dataclasses.field(default_factory=dict)  # non-numeric extra keys
+
+    def column(self, name: str) -> np.ndarray | None:
+        """A column of the table, or None when the table does not have it."""
+        return self.columns.get(name)
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """Time of each row (s)."""
+        return self.columns["time_s"]
+
+    @property
+    def displacement_mm(self) -> np.ndarray:
+        """Crosshead displacement of each row (mm)."""
+        return self.columns["displacement_mm"]
+
+    @property
+    def force_N(self) -> np.ndarray:
+        """Measured force of each row (N)."""
+        return self.columns["force_N"]
+
+    @property
+    def force_sd_N(self) -> np.ndarray | None:
+        """Measurement noise of each row, one standard deviation (N), if given."""
+        return self.columns.get("force_sd_N")
+
+    @property
+    def shear_deg(self) -> np.ndarray | None:
+        """Measured shear angle (deg), if given."""
+        return self.columns.get("shear_deg")
+
+    @property
+    def n_rows(self) -> int:
+        """Number of rows of the table."""
+        return len(next(iter(self.columns.values())))
+
+
+@dataclasses.dataclass(frozen=True)
+class Bundle:
+    """A loaded measurement bundle."""
+
+    name: str
+    tests: tuple[Test, ...]
+    material: str = ""
+    tows_per_mm: float | None = None  # linear tow density (warp = weft), tows/mm
+    path: Path | None = None  # the bundle folder
+    unknown_keys: tuple[str, ...] = ()  # report of keys kept as conditions or notes
+    notes: tuple[str, ...] = ()  # what the loader derived (e.g. tow counts)
+    extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)  # unknown [bundle] keys
+
+    def test(self, test_id: str) -> Test:
+        """The test named ``test_id``."""
+        for t in self.tests:
+            if t.id == test_id:
+                return t
+        raise KeyError(f"bundle {self.name!r} has no test {test_id!r} "
+                       f"(tests: {', '.join(t.id for t in self.tests)})")
+
+    def of_kind(self, *kinds: str) -> tuple[Test, ...]:
+        """The tests of the given kinds, in bundle order."""
+        return tuple(t for t in self.tests if t.kind in kinds)
+
+    def report(self) -> str:
+        """What the loader kept or derived beyond the spec's keys, one line each."""
+        return "\n".join([*self.unknown_keys, *self.notes])
+
+
+def derived_tows(kind: str, tows_per_mm: float, width_mm: float) -> float:
+    """Tows sharing the force in a specimen of width W (section 3.2).
+
+    A tensile specimen cut along the warp holds l_t·W tows; a bias specimen's tows cross its
+    width at 45°, so l_t·W/√2 of each family reach a clamp (0.71 × 70/√2 = 35.1, the paper's
+    35.3).
+    """
+    tows = tows_per_mm * width_mm
+    return tows / math.sqrt(2.0) if kind == "bias_extension" else tows
+
+
+# --------------------------------------------------------------------------------------------
+# Loading
+
+
+class _Problems:
+    """Collects ``file:line: problem`` messages."""
+
+    def __init__(self) -> None:
+        self.items: list[str] = []
+
+    def add(self, file: str, line: int, problem: str) -> None:
+        self.items.append(f"{file}:{line}: {problem}")
+
+
+def _key_lines(text: str) -> dict[tuple[str, int, str], int]:
+    """Line numbers of the keys of ``bundle.toml``.
+
+    Returns a map ``(table, test index, key) -> line`` where table is "bundle", "test",
+    "conditions" or "" (top level), and the headers themselves under key "". A plain line scan
+    is enough for the flat tables of the spec; keys it cannot place fall back to their table's
+    header line.
+    """
+    lines: dict[tuple[str, int, str], int] = {}
+    table, index = "", -1
+    header = re.compile(r"^\s*(\[\[?)\s*([A-Za-z0-9_.\"' -]+?)\s*\]\]?\s*(#.*)?$")
+    keyline = re.compile(r"^\s*([A-Za-z0-9_-]+|\"[^\"]*\"|'[^']*')\s*=")
+    for number, raw in enumerate(text.splitlines(), start=1):
+        if m := header.match(raw):
+            name = m.group(2).replace('"', "").replace("'", "").replace(" ", "")
+            if m.group(1) == "[[" and name == "test":
+                table, index = "test", index + 1
+            elif name == "test.conditions":
+                table = "conditions"
+            else:
+                table = name
+            lines.setdefault((table, index, ""), number)
+        elif m := keyline.match(raw):
+            lines.setdefault((table, index, m.group(1).strip("\"'")), number)
+    return lines
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _unit_problem(name: str) -> str | None:
+    """A message when ``name`` carries a unit other than the spec's for its quantity."""
+    m = _UNIT_NAME.match(name)
+    if m is None:
+        return None
+    quantity, unit = m.groups()
+    expected = UNITS[quantity]
+    if unit == expected:
+        return None
+    return (f"{name!r} is in {unit.replace('_per_', '/')}, but {quantity} must be given in "
+            f"{expected.replace('_per_', '/')} (as {quantity}_{expected})")
+
+
+def _missing(required: tuple[str, ...], present) -> list[str]:
+    """Required names absent from ``present``.
+
+    A name given in another unit is not reported as missing: :func:`_unit_problem` says so.
+    """
+    misunited = {m.group(1) for name in present if (m := _UNIT_NAME.match(name))}
+    return [name for name in required
+            if name not in present and not ((m := _UNIT_NAME.match(name))
+                                            and m.group(1) in misunited)]
+
+
+def load_bundle(path: str | Path) -> Bundle:
+    """Read and validate a measurement bundle (a folder with ``bundle.toml``, or the file).
+
+    Raises:
+        BundleError: listing every problem found as ``file:line: problem``: a missing or
+            unreadable file, a TOML syntax error, a missing or mistyped key, an unknown test
+            kind, a duplicate test id, a unit other than the spec's, a missing or duplicate
+            column, a non-numeric, NaN or infinite cell, a ragged row, non-increasing time,
+            a non-positive standard deviation, a crosshead speed or tow count that contradicts
+            the table or the tow density.
+    """
+    path = Path(path)
+    folder = path.parent if path.name == "bundle.toml" or path.is_file() else path
+    toml_path = path if path.is_file() else folder / "bundle.toml"
+    fname = str(toml_path)
+    if not toml_path.is_file():
+        raise BundleError([f"{fname}:0: no bundle.toml here (a bundle is a folder holding "
+                           "bundle.toml and one CSV table per test)"])
+    text = toml_path.read_text(encoding="utf-8", errors="replace")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        line = re.search(r"line (\d+)", str(err))
+        at = line.group(1) if line else 0
+        raise BundleError([f"{fname}:{at}: not valid TOML: {err}"]) from None
+    lines = _key_lines(text)
+    problems = _Problems()
+    unknown: list[str] = []
+    notes: list[str] = []
+
+    def where(table: str, index: int, key: str = "") -> int:
+        return lines.get((table, index, key), lines.get((table, index, ""), 0))
+
+    for key in data:
+        if key not in ("bundle", "test"):
+            unknown.append(f"{fname}:{where(key, -1)}: unknown top-level entry {key!r} kept "
+                           "in Bundle.extra")
+    head = data.get("bundle")
+    if not isinstance(head, dict):
+        problems.add(fname, 0, "missing [bundle] table (with at least name = \"...\")")
+        head = {}
+    name = head.get("name")
+    if not isinstance(name, str) or not name.strip():
+        problems.add(fname, where("bundle", -1, "name"),
+                     "[bundle] needs name = \"...\" (a non-empty string)")
+    material = head.get("material", "")
+    if not isinstance(material, str):
+        problems.add(fname, where("bundle", -1, "material"), "material must be a string")
+    tows_per_mm = head.get("tows_per_mm")
+    if tows_per_mm is not None and not (_is_number(tows_per_mm) and 0 < tows_per_mm < math.inf):
+        problems.add(fname, where("bundle", -1, "tows_per_mm"),
+                     f"tows_per_mm = {tows_per_mm!r} must be a positive number (tows/mm)")
+        tows_per_mm = None
+    extra = {k: v for k, v in data.items() if k not in ("bundle", "test")}
+    for key, value in head.items():
+        if key in ("name", "material", "tows_per_mm"):
+            continue
+        if msg := _unit_problem(key):
+            problems.add(fname, where("bundle", -1, key), msg)
+            continue
+        extra[key] = value
+        unknown.append(f"{fname}:{where('bundle', -1, key)}: unknown [bundle] key {key!r} "
+                       "kept in Bundle.extra")
+
+    raw_tests = data.get("test", [])
+    if not isinstance(raw_tests, list) or not raw_tests:
+        problems.add(fname, 0, "no [[test]] tables: a bundle needs at least one test")
+        raw_tests = []
+    tests: list[Test] = []
+    seen: dict[str, int] = {}
+    for index, raw in enumerate(raw_tests):
+        test = _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
+                          notes)
+        if test is None:
+            continue
+        at = where("test", index, "id")
+        if test.id in seen:
+            problems.add(fname, at, f"test id {test.id!r} is used twice (first on line "
+                                    f"{seen[test.id]}); ids must be unique")
+            continue
+        seen[test.id] = at
+        tests.append(test)
+    if problems.items:
+        raise BundleError(problems.items)
+    return Bundle(name=name, material=material, tows_per_mm=tows_per_mm, tests=tuple(tests),
+                  path=folder, unknown_keys=tuple(unknown), notes=tuple(notes), extra=extra)
+
+
+def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown, notes):
+    """One [[test]] table and its CSV; None (with problems added) when it cannot be built."""
+    line = where("test", index)
+    if not isinstance(raw, dict):
+        problems.add(fname, line, "a [[test]] entry must be a table")
+        return None
+    before = len(problems.items)
+    test_id = raw.get("id")
+    label = f"test {test_id!r}" if isinstance(test_id, str) else f"test #{index + 1}"
+    if not isinstance(test_id, str) or not test_id.strip():
+        problems.add(fname, line, f"{label}: needs id = \"...\" (a non-empty string)")
+    kind = raw.get("kind")
+    if kind not in KINDS:
+        problems.add(fname, where("test", index, "kind"),
+                     f"{label}: unknown test kind {kind!r} (expected one of: "
+                     f"{', '.join(KINDS)})")
+        return None
+    file = raw.get("file")
+    if not isinstance(file, str) or not file:
+        problems.add(fname, where("test", index, "file"),
+                     f"{label}: needs file = \"table.csv\" (relative to the bundle folder)")
+    for key in _missing(REQUIRED_KEYS[kind], raw):
+        problems.add(fname, line, f"{label}: a {kind} test needs {key}")
+
+    setup: dict[str, float] = {}
+    conditions: dict[str, float] = {}
+    text_notes: dict[str, str] = {}
+    geometry = raw.get("geometry")
+    if kind == "forming" and "geometry" in raw and not isinstance(geometry, str):
+        problems.add(fname, where("test", index, "geometry"),
+                     f"{label}: geometry must be a string (e.g. \"hemisphere\")")
+    known = {"id", "kind", "file", "conditions"} | ({"geometry"} if kind == "forming" else set())
+    for key, value in raw.items():
+        if key in known:
+            continue
+        at = where("test", index, key)
+        if msg := _unit_problem(key):
+            problems.add(fname, at, f"{label}: {msg}")
+        elif key in SETUP_KEYS[kind]:
+            if not (_is_number(value) and 0 < value < math.inf):
+                problems.add(fname, at, f"{label}: {key} = {value!r} must be a positive number")
+            else:
+                setup[key] = float(value)
+        elif _is_number(value):
+            if not math.isfinite(value):
+                problems.add(fname, at, f"{label}: condition {key} = {value} is not finite")
+            conditions[key] = float(value)
+            unknown.append(f"{fname}:{at}: {label}: key {key!r} kept as a test condition")
+        else:
+            text_notes[key] = str(value)
+            unknown.append(f"{fname}:{at}: {label}: non-numeric key {key!r} kept as a note")
+    raw_conditions = raw.get("conditions", {})
+    if not isinstance(raw_conditions, dict):
+        problems.add(fname, where("test", index, "conditions"),
+                     f"{label}: conditions must be a table of numbers")
+        raw_conditions = {}
+    for key, value in raw_conditions.items():
+        at = where("conditions", index, key)
+        if msg := _unit_problem(key):
+            problems.add(fname, at, f"{label}: {msg}")
+        elif not (_is_number(value) and math.isfinite(value)):
+            problems.add(fname, at, f"{label}: condition {key} = {value!r} must be a finite "
+                                    "number")
+        elif key in conditions:
+            problems.add(fname, at, f"{label}: condition {key} given twice")
+        else:
+            conditions[key] = float(value)
+
+    tows, tows_derived = setup.pop("tows", None), False
+    if kind in ("tensile", "bias_extension"):
+        width = setup.get("width_mm")
+        derived = derived_tows(kind, tows_per_mm, width) if tows_per_mm and width else None
+        if tows is None and derived is None:
+            problems.add(fname, line, f"{label}: needs tows (or width_mm together with "
+                                      "[bundle] tows_per_mm to derive it)")
+        elif tows is None:
+            tows, tows_derived = derived, True
+            notes.append(f"{fname}:{line}: {label}: tows = {derived:.4g} derived from "
+                         f"tows_per_mm × width_mm{' / √2' if kind == 'bias_extension' else ''}")
+        elif derived is not None and not (1 / _TOWS_TOLERANCE < tows / derived
+                                          < _TOWS_TOLERANCE):
+            problems.add(fname, where("test", index, "tows"),
+                         f"{label}: tows = {tows:g} contradicts tows_per_mm × width_mm "
+                         f"= {derived:.4g} (inconsistent units? tows_per_mm is per mm)")
+    if len(problems.items) > before or not isinstance(file, str):
+        return None
+    csv_path = folder / file
+    table = _read_table(csv_path, kind, label, problems)
+    if table is None:
+        return None
+    columns, extra_columns, header_line = table
+    unknown += [f"{csv_path}:{header_line}: {label}: extra column {name!r} kept in "
+                "Test.columns" for name in extra_columns]
+    speed = setup.get("speed_mm_per_min")
+    if speed is not None and "displacement_mm" in columns:
+        problem = _speed_problem(columns, speed)
+        if problem:
+            problems.add(fname, where("test", index, "speed_mm_per_min"),
+                         f"{label}: {problem} in {file}")
+            return None
+    forming = {k: v for k, v in setup.items() if kind == "forming"}
+    return Test(
+        id=test_id, kind=kind, file=file, columns=columns, line=line,
+        gauge_length_mm=setup.get("gauge_length_mm"), length_mm=setup.get("length_mm"),
+        width_mm=setup.get("width_mm"), tows=tows, tows_derived=tows_derived,
+        speed_mm_per_min=speed, geometry=geometry if kind == "forming" else None,
+        forming=forming, conditions=conditions, notes=text_notes,
+    )
+
+
+def _read_table(path: Path, kind: str, label: str, problems: _Problems):
+    """The CSV table of a test as read-only float columns, or None (problems added)."""
+    fname = str(path)
+    if not path.is_file():
+        problems.add(fname, 0, f"{label}: the table file does not exist")
+        return None
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        problems.add(fname, 0, f"{label}: cannot read the table: {err}")
+        return None
+    before = len(problems.items)
+    rows: list[tuple[int, list[str]]] = []
+    header: list[str] | None = None
+    header_line = 0
+    for number, raw in enumerate(text.splitlines(), start=1):
+        stripped = raw.strip()
+        if not stripped:
+            continue
+        if header is None:
+            if stripped.startswith("#"):
+                continue
+            header, header_line = [c.strip() for c in stripped.split(",")], number
+            continue
+        rows.append((number, [c.strip() for c in stripped.split(",")]))
+    if header is None:
+        problems.add(fname, 0, f"{label}: the table has no header row")
+        return None
+    required, optional = COLUMNS[kind]
+    for name in header:
+        if msg := _unit_problem(name):
+            problems.add(fname, header_line, f"{label}: column {msg}")
+    missing = _missing(required, header)
+    if missing:
+        problems.add(fname, header_line, f"{label}: missing column(s) {', '.join(missing)} "
+                                         f"(a {kind} table needs {', '.join(required)})")
+    duplicated = sorted({c for c in header if header.count(c) > 1})
+    if duplicated:
+        problems.add(fname, header_line, f"{label}: duplicate column(s) {', '.join(duplicated)}")
+    if "" in header:
+        problems.add(fname, header_line, f"{label}: empty column name in the header")
+    if len(rows) < 2:
+        problems.add(fname, header_line, f"{label}: the table needs at least two data rows "
+                                         f"(has {len(rows)})")
+    if len(problems.items) > before:
+        return None
+    values = np.empty((len(rows), len(header)))
+    for r, (number, cells) in enumerate(rows):
+        if len(cells) != len(header):
+            problems.add(fname, number, f"{label}: {len(cells)} cells, but the header has "
+                                        f"{len(header)} columns")
+            continue
+        for c, cell in enumerate(cells):
+            try:
+                value = float(cell)
+            except ValueError:
+                problems.add(fname, number, f"{label}: column {header[c]}: {cell!r} is not a "
+                                            "number")
+                continue
+            if not math.isfinite(value):
+                problems.add(fname, number, f"{label}: column {header[c]}: {cell!r} is not a "
+                                            "finite number")
+            values[r, c] = value
+    if len(problems.items) > before:
+        return None
+    numbers = [number for number, _ in rows]
+    columns = {name: values[:, c] for c, name in enumerate(header)}
+    if "time_s" in columns:
+        dt = np.diff(columns["time_s"])
+        bad = np.flatnonzero(dt <= 0)
+        if bad.size:
+            r = bad[0] + 1
+            problems.add(fname, numbers[r], f"{label}: time_s must increase row by row "
+                                            f"({columns['time_s'][r - 1]:g} then "
+                                            f"{columns['time_s'][r]:g}; {bad.size} such row(s))")
+    for sd in ("force_sd_N", "position_sd_mm"):
+        if sd in columns and (bad := np.flatnonzero(columns[sd] <= 0)).size:
+            problems.add(fname, numbers[bad[0]], f"{label}: {sd} must be positive (one standard "
+                                                 f"deviation), got {columns[sd][bad[0]]:g}")
+    if kind == "forming":
+        ij = np.stack([columns["i"], columns["j"]], axis=1)
+        bad = np.flatnonzero((ij != np.round(ij)).any(axis=1))
+        if bad.size:
+            problems.add(fname, numbers[bad[0]], f"{label}: grid indices i, j must be integers")
+        _, first, counts = np.unique(ij, axis=0, return_index=True, return_counts=True)
+        if (counts > 1).any():
+            r = int(first[np.argmax(counts > 1)])
+            dup = [i for i in range(len(ij)) if (ij[i] == ij[r]).all()][1]
+            problems.add(fname, numbers[dup], f"{label}: grid node (i, j) = "
+                                              f"({ij[r, 0]:g}, {ij[r, 1]:g}) appears twice")
+    if len(problems.items) > before:
+        return None
+    for array in columns.values():
+        array.setflags(write=False)
+    extra = [name for name in header if name not in required + optional]
+    return columns, extra, header_line
+
+
+def _speed_problem(columns: Mapping[str, np.ndarray], speed_mm_per_min: float) -> str | None:
+    """A message when the speed key contradicts the table by a unit factor (mm/s, m, min)."""
+    rate = np.abs(np.diff(columns["displacement_mm"]) / np.diff(columns["time_s"])) * 60.0
+    moving = rate[rate > 1e-3 * rate.max()]
+    if rate.max() <= 0 or moving.size == 0:
+        return None
+    table_speed = float(np.median(moving))
+    if 1 / _SPEED_TOLERANCE < table_speed / speed_mm_per_min < _SPEED_TOLERANCE:
+        return None
+    return (f"speed_mm_per_min = {speed_mm_per_min:g}, but the table moves at "
+            f"{table_speed:.4g} mm/min (inconsistent units? displacement_mm must be in mm "
+            "and time_s in s)")
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(float(value)) if isinstance(value, float) else str(value)
+    escaped = str(value).replace("\\", "\\\\").replace('"', '\\"')
+    return f'"{escaped}"'
+
+
+def _format_table(columns: Mapping[str, np.ndarray], comment: str = "") -> str:
+    names = list(columns)
+    data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
+    out = [f"# {line}" for line in comment.splitlines()]
+    out.append(",".join(names))
+    out.extend(",".join(repr(float(v)) for v in row) for row in data)
+    return "\n".join(out) + "\n"
+
+
+def write_bundle(bundle: Bundle, path: str | Path, *, comment: str = "") -> Path:
+    """Write ``bundle`` as a bundle folder at ``path``; returns the folder.
+
+    Each file is written atomically and ``bundle.toml`` last, so the folder never holds a
+    ``bundle.toml`` that names a missing or half-written table. ``comment`` heads every file.
+    """
+    folder = Path(path)
+    for test in bundle.tests:
+        atomic_write_text(folder / test.file, _format_table(test.columns, comment))
+    out = [f"# {line}" for line in comment.splitlines()]
+    out += ["[bundle]", f"name = {_toml_value(bundle.name)}"]
+    if bundle.material:
+        out.append(f"material = {_toml_value(bundle.material)}")
+    if bundle.tows_per_mm is not None:
+        out.append(f"tows_per_mm = {_toml_value(bundle.tows_per_mm)}")
+    for key, value in bundle.extra.items():
+        if not isinstance(value, dict):
+            out.append(f"{key} = {_toml_value(value)}")
+    for test in bundle.tests:
+        out += ["", "[[test]]", f"id = {_toml_value(test.id)}",
+                f"kind = {_toml_value(test.kind)}", f"file = {_toml_value(test.file)}"]
+        if test.geometry is not None:
+            out.append(f"geometry = {_toml_value(test.geometry)}")
+        keys = ("gauge_length_mm", "length_mm", "width_mm", "speed_mm_per_min")
+        for key in keys:
+            if (value := getattr(test, key)) is not None:
+                out.append(f"{key} = {_toml_value(value)}")
+        if test.tows is not None and not test.tows_derived:
+            out.append(f"tows = {_toml_value(test.tows)}")
+        out += [f"{k} = {_toml_value(v)}" for k, v in test.forming.items()]
+        out += [f"{k} = {_toml_value(v)}" for k, v in test.notes.items()]
+        if test.conditions:
+            out.append("[test.conditions]")
+            out += [f"{k} = {_toml_value(v)}" for k, v in test.conditions.items()]
+    atomic_write_text(folder / "bundle.toml", "\n".join(out) + "\n")
+    return folder
