@@ -13,7 +13,9 @@ The model-free estimate uses second differences of successive rows. For rows
 has variance ``s² (1 + w_i² + (1 - w_i)²)`` plus the square of the curvature term
 ``f''(t) h²/2`` (``h`` the row spacing), negligible for densely sampled curves. The estimate is
 the normalised median absolute deviation of ``d_i / sqrt(1 + w_i² + (1 - w_i)²)``, so the few
-rows at a kink of the history (start of a hold, of unloading) do not inflate it.
+rows at a kink of the history (start of a hold, of unloading) do not inflate it. When
+readings are quantised so coarsely that the median deviation is zero, the plain RMS of the
+``d_i`` is used instead.
 """
 
 from __future__ import annotations
@@ -53,4 +55,7 @@ def noise_from_second_differences(t: np.ndarray, y: np.ndarray) -> float:
         raise ValueError("noise estimate needs a strictly increasing abscissa")
     w = h[1:] / (h[:-1] + h[1:])
     d = (y[1:-1] - (w * y[:-2] + (1.0 - w) * y[2:])) / np.sqrt(1.0 + w**2 + (1.0 - w) ** 2)
-    return float(_MAD_TO_SD * np.median(np.abs(d - np.median(d))))
+    robust = _MAD_TO_SD * np.median(np.abs(d - np.median(d)))
+    # Readings quantised coarser than the noise make most differences zero (MAD = 0): fall
+    # back to the plain RMS, which the few non-zero differences still inform.
+    return float(robust if robust > 0 else np.sqrt(np.mean(d**2)))

@@ -1,0 +1,599 @@
+"""How far, and where, a model misses a measurement bundle (``drape compare``).
+
+The definitions are those of the diagnosis contract (``shared/spec/measurements.md``):
+
+- the **noise** of a test is the RMS of its ``force_sd_N`` column, or else a model-free
+  estimate from second differences of its rows (:mod:`fenicsx_drape.noise`);
+- a test's error is the RMS of ``measured - simulated`` over its rows (N for coupons); its
+  **normalised** error is that RMSE over the test's noise, and the bundle's ``normalised`` error
+  is ``sqrt(mean over tests of (RMSE / noise)²)`` -- 1.0 is the noise floor;
+- the **share** of a region is its part of the squared normalised error: a row ``i`` of test
+  ``k`` (``n_k`` rows, noise ``s_k``, ``n`` tests) contributes ``r_i² / (s_k² n_k n)``, and these
+  contributions sum to ``normalised²``.
+
+The regions are the ranges of the variables that matter physically: per test, ranges of the
+kinematic strain that separate the mechanisms of the paper's section 3.2 (bias extension:
+initial tow bending, friction plateau, lock-up; tension: decrimping, then tow stretching),
+the phases of the loading history (loading, hold, unloading), and across tests of one kind,
+each value of a condition that varies (``speed_mm_per_min``, ``temperature_C``, ...).
+
+Test kinds plug in through :func:`register_kind` (measured values, noise, simulation,
+regions): coupons are built in; forming tests join through the same entry point.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import re
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.noise import noise_from_sd, noise_from_second_differences
+
+if TYPE_CHECKING:
+    from fenicsx_drape.bundle import Bundle, Test
+    from fenicsx_drape.model import Model
+
+# Regions listed in ``where``: those carrying at least this share of the error, at most this
+# many (the complete list is in ``CompareResult.regions``).
+WHERE_MIN_SHARE = 0.05
+WHERE_MAX_ENTRIES = 12
+
+
+@dataclasses.dataclass(frozen=True)
+class Region:
+    """A range of one variable over the rows of one test."""
+
+    variable: str  # e.g. "diagonal_strain", "time_s"
+    range: tuple[float, float]  # (low, high) of the variable over the region's rows
+    says: str  # what the region is physically, e.g. "lock-up"
+    rows: np.ndarray  # boolean mask over the test's rows
+
+
+@dataclasses.dataclass(frozen=True)
+class Kind:
+    """How one test kind is compared: what is measured, its noise, how it is simulated."""
+
+    unit: str  # unit of the compared quantity ("N" for coupons, "mm" for forming)
+    measured: Callable[[Test], np.ndarray]  # the measured values, one per row
+    noise: Callable[[Test], tuple[float, str]]  # (noise in ``unit``, source)
+    simulate: Callable[[Test, Model], np.ndarray]  # the model's values, one per row
+    regions: Callable[[Test], list[Region]]  # physically meaningful regions of the rows
+    abscissa: Callable[[Test], tuple[str, np.ndarray]]  # (name, values) to plot against
+
+
+KINDS: dict[str, Kind] = {}
+
+
+def register_kind(name: str, kind: Kind) -> None:
+    """Make tests of kind ``name`` comparable (and diagnosable)."""
+    KINDS[name] = kind
+
+
+# --------------------------------------------------------------------------------------------
+# Coupon tests: tensile and bias extension
+
+
+def _coupon_noise(test: Test) -> tuple[float, str]:
+    if test.force_sd_N is not None:
+        return noise_from_sd(test.force_sd_N), "force_sd_N"
+    try:
+        noise = noise_from_second_differences(test.time_s, test.force_N)
+    except ValueError as err:
+        raise DrapeInputError(f"test {test.id!r}: {err}; give a force_sd_N column") from None
+    if noise <= 0:
+        raise DrapeInputError(f"test {test.id!r}: the force has no detectable noise to set a "
+                              "noise floor; give a force_sd_N column")
+    return noise, "second_differences"
+
+
+def _coupon_simulate(test: Test, model: Model) -> np.ndarray:
+    from fenicsx_drape import unitcell
+
+    if test.kind == "tensile":
+        curve = unitcell.tensile(model, test.time_s, test.displacement_mm,
+                                 gauge_length_mm=test.gauge_length_mm,
+                                 conditions=test.conditions)
+    else:
+        curve = unitcell.bias_extension(model, test.time_s, test.displacement_mm,
+                                        length_mm=test.length_mm, width_mm=test.width_mm,
+                                        conditions=test.conditions)
+    return np.asarray(curve.force_per_tow_N) * test.tows
+
+
+def coupon_strain(test: Test) -> tuple[str, np.ndarray]:
+    """The kinematic strain of a coupon's rows: ``("tow_strain" | "diagonal_strain", values)``.
+
+    Tension: the Green-Lagrange strain of the loaded tows, ``e + e²/2`` with
+    ``e = displacement / gauge length`` (eq. 13). Bias extension: the diagonal strain of the
+    gauge region, eq. 21. Both follow from the measured displacement alone.
+    """
+    if test.kind == "tensile":
+        e = test.displacement_mm / test.gauge_length_mm
+        return "tow_strain", e + 0.5 * e**2
+    from fenicsx_drape.unitcell import bias_diagonal_strain
+
+    return "diagonal_strain", np.asarray(
+        bias_diagonal_strain(test.displacement_mm, test.length_mm, test.width_mm))
+
+
+def _loading_phases(time_s: np.ndarray, displacement_mm: np.ndarray) -> np.ndarray:
+    """Per row: +1 loading, 0 hold, -1 unloading (the crosshead motion ending at the row)."""
+    rate = np.diff(displacement_mm) / np.diff(time_s)
+    tol = 1e-3 * np.abs(rate).max() if rate.size and np.abs(rate).max() > 0 else 0.0
+    phase = np.where(rate > tol, 1, np.where(rate < -tol, -1, 0))
+    return np.concatenate([phase[:1], phase])
+
+
+def _hinge_breakpoints(x: np.ndarray, y: np.ndarray, n_breaks: int,
+                       n_grid: int = 48) -> tuple[tuple[float, ...], np.ndarray]:
+    """Breakpoints and slopes of the continuous piecewise-linear least-squares fit of y(x).
+
+    The breakpoints are searched over a grid of quantiles of ``x`` (every combination, solved
+    at once through the normal equations of the hinge basis ``1, x, max(x - b, 0)``).
+    """
+    grid = np.unique(np.quantile(x, np.linspace(0.01, 0.99, n_grid)))
+    basis = np.column_stack([np.ones_like(x), x, np.maximum(x[:, None] - grid[None, :], 0)])
+    gram, rhs = basis.T @ basis, basis.T @ y
+    combos = np.array(list(itertools.combinations(range(len(grid)), n_breaks))) + 2
+    cols = np.column_stack([np.zeros(len(combos), int), np.ones(len(combos), int), combos])
+    g = gram[cols[:, :, None], cols[:, None, :]]
+    b = rhs[cols]
+    # A tiny ridge keeps coincident hinges (repeated quantiles) solvable.
+    g = g + 1e-12 * np.trace(gram) * np.eye(cols.shape[1])
+    coef = np.linalg.solve(g, b[..., None])[..., 0]
+    sse = y @ y - np.einsum("ij,ij->i", b, coef)
+    best = int(np.argmin(sse))
+    slopes = np.cumsum(coef[best, 1:])
+    return tuple(float(grid[c - 2]) for c in combos[best]), slopes
+
+
+# Names of the strain ranges, in order, with the slope pattern that makes them what they are:
+# bias extension stiff - soft - stiff (section 3.2), tension soft - stiff (decrimping).
+_STRAIN_REGIONS = {
+    "bias_extension": (("initial tow bending", "friction plateau", "lock-up"),
+                       lambda s: s[0] > s[1] < s[2]),
+    "tensile": (("decrimping", "tow stretching"), lambda s: s[0] < s[1]),
+}
+
+
+def _coupon_regions(test: Test) -> list[Region]:
+    variable, strain = coupon_strain(test)
+    phases = _loading_phases(test.time_s, test.displacement_mm)
+    regions: list[Region] = []
+    names, pattern = _STRAIN_REGIONS[test.kind]
+    loading = phases > 0
+    if loading.sum() >= 6 * len(names):
+        breaks, slopes = _hinge_breakpoints(strain[loading], test.force_N[loading],
+                                            len(names) - 1)
+        if not pattern(slopes):
+            names = tuple(f"{variable} range {i + 1}" for i in range(len(names)))
+        edges = (-math.inf, *breaks, math.inf)
+        for name, lo, hi in zip(names, edges[:-1], edges[1:]):
+            rows = (strain >= lo) & (strain < hi)
+            if rows.any():
+                regions.append(Region(variable, (float(strain[rows].min()),
+                                                 float(strain[rows].max())), name, rows))
+    if len(np.unique(phases)) > 1:
+        labels = {1: "loading", 0: "hold (relaxation)", -1: "unloading"}
+        starts = np.flatnonzero(np.diff(phases, prepend=phases[0] + 1) != 0)
+        for start, stop in zip(starts, [*starts[1:], len(phases)]):
+            rows = np.zeros(len(phases), bool)
+            rows[start:stop] = True
+            t = test.time_s[rows]
+            regions.append(Region("time_s", (float(t[0]), float(t[-1])),
+                                  labels[int(phases[start])], rows))
+    return regions
+
+
+_COUPON = Kind(unit="N", measured=lambda test: test.force_N, noise=_coupon_noise,
+               simulate=_coupon_simulate, regions=_coupon_regions, abscissa=coupon_strain)
+register_kind("tensile", _COUPON)
+register_kind("bias_extension", _COUPON)
+
+
+# --------------------------------------------------------------------------------------------
+# Errors and their location
+
+
+@dataclasses.dataclass(frozen=True)
+class Comparison:
+    """A model against one test."""
+
+    id: str
+    kind: str
+    unit: str  # of the compared quantity (N for coupons)
+    measured: np.ndarray
+    simulated: np.ndarray
+    noise: float  # one standard deviation of a row's measurement noise, in ``unit``
+    noise_source: str  # "force_sd_N" | "second_differences" | ...
+    regions: tuple[Region, ...]
+    conditions: Mapping[str, float]  # the conditions that may vary across tests
+
+    @property
+    def residual(self) -> np.ndarray:
+        """Measured minus simulated, per row."""
+        return self.measured - self.simulated
+
+    @property
+    def rmse(self) -> float:
+        """RMS error over the rows, in ``unit``."""
+        return float(np.sqrt(np.mean(self.residual**2)))
+
+    @property
+    def mean_abs(self) -> float:
+        """Mean absolute error (the paper's measure, section 3.2), in ``unit``."""
+        return float(np.mean(np.abs(self.residual)))
+
+    @property
+    def percent(self) -> float:
+        """Mean absolute error in % of the mean absolute measured value (the paper's 7-9 %)."""
+        scale = float(np.mean(np.abs(self.measured)))
+        return 100.0 * self.mean_abs / scale if scale > 0 else math.inf
+
+    @property
+    def normalised(self) -> float:
+        """RMSE over noise: 1.0 is the noise floor."""
+        return self.rmse / self.noise
+
+
+def conditions_of(test: Test) -> dict[str, float]:
+    """The scalars a test ran under: its conditions plus the crosshead speed when given."""
+    conditions = dict(test.conditions)
+    if getattr(test, "speed_mm_per_min", None) is not None:
+        conditions.setdefault("speed_mm_per_min", float(test.speed_mm_per_min))
+    return conditions
+
+
+def prepare(bundle: Bundle) -> tuple[list[Test], list[str]]:
+    """The tests of ``bundle`` that can be compared, and a note for each that cannot."""
+    tests, skipped = [], []
+    for test in bundle.tests:
+        if test.kind in KINDS:
+            tests.append(test)
+        else:
+            skipped.append(f"test {test.id!r}: {test.kind} tests cannot be compared yet "
+                           "(no simulation registered for this kind); left out")
+    if not tests:
+        raise DrapeInputError(f"bundle {bundle.name!r}: no test of a comparable kind "
+                              f"({', '.join(KINDS)})")
+    return tests, skipped
+
+
+def compare_tests(tests: Sequence[Test], simulated: Mapping[str, np.ndarray],
+                  regions: Mapping[str, Sequence[Region]] | None = None,
+                  noise: Mapping[str, tuple[float, str]] | None = None,
+                  ) -> list[Comparison]:
+    """Compare given simulated values with the tests (regions and noise computed if absent)."""
+    out = []
+    for test in tests:
+        kind = KINDS[test.kind]
+        values = np.asarray(simulated[test.id], dtype=float)
+        measured = np.asarray(kind.measured(test), dtype=float)
+        if values.shape != measured.shape:
+            raise ValueError(f"test {test.id!r}: {values.shape} simulated values for "
+                             f"{measured.shape} measured")
+        level, source = noise[test.id] if noise else kind.noise(test)
+        test_regions = regions[test.id] if regions is not None else kind.regions(test)
+        out.append(Comparison(test.id, test.kind, kind.unit, measured, values, level,
+                                  source, tuple(test_regions), conditions_of(test)))
+    return out
+
+
+def normalised_error(comparisons: Iterable[Comparison]) -> float:
+    """``sqrt(mean over tests of (RMSE / noise)²)`` (contract definition)."""
+    ratios = [c.normalised for c in comparisons]
+    return float(np.sqrt(np.mean(np.square(ratios))))
+
+
+def pooled_rmse(comparisons: Iterable[Comparison]) -> float:
+    """The RMS error over all rows of all tests (for information only)."""
+    residuals = np.concatenate([c.residual for c in comparisons])
+    return float(np.sqrt(np.mean(residuals**2)))
+
+
+def _contributions(comparisons: Sequence[Comparison]) -> dict[str, np.ndarray]:
+    """Each row's part of the squared normalised error (they sum to ``normalised²``)."""
+    n = len(comparisons)
+    return {c.id: c.residual**2 / (c.noise**2 * c.residual.size * n) for c in comparisons}
+
+
+def locate(comparisons: Sequence[Comparison]) -> list[dict[str, Any]]:
+    """Every region of every test, and every condition group, with its share of the error.
+
+    Sorted by share, largest first. Each entry: ``test`` (id, or ids joined by ", " for a
+    condition group), ``tests``, ``variable``, ``range``, ``share_of_error``,
+    ``share_of_rows`` (of the rows it covers, within its test or tests) and ``says``.
+    """
+    parts = _contributions(comparisons)
+    total = sum(float(p.sum()) for p in parts.values()) or 1.0
+    entries: list[dict[str, Any]] = []
+    for c in comparisons:
+        for region in c.regions:
+            entries.append({
+                "test": c.id, "tests": [c.id], "variable": region.variable,
+                "range": [round(region.range[0], 6), round(region.range[1], 6)],
+                "share_of_error": float(parts[c.id][region.rows].sum()) / total,
+                "share_of_rows": float(region.rows.mean()), "says": region.says,
+            })
+    for kind, variable, groups in _condition_groups(comparisons):
+        rows_total = sum(c.residual.size for group in groups.values() for c in group)
+        for value, group in sorted(groups.items()):
+            ids = [c.id for c in group]
+            entries.append({
+                "test": ", ".join(ids), "tests": ids, "variable": variable,
+                "range": [value, value],
+                "share_of_error": sum(float(parts[i].sum()) for i in ids) / total,
+                "share_of_rows": sum(c.residual.size for c in group) / rows_total,
+                "says": f"{kind.replace('_', ' ')} tests at {variable} = {value:g}",
+            })
+    entries.sort(key=lambda e: (-e["share_of_error"], e["test"], e["variable"]))
+    return entries
+
+
+def where(comparisons: Sequence[Comparison]) -> list[dict[str, Any]]:
+    """The regions carrying most of the error (contract field ``where``).
+
+    Those with at least :data:`WHERE_MIN_SHARE` of the squared normalised error, at most
+    :data:`WHERE_MAX_ENTRIES`, largest first (always at least the largest one).
+    """
+    entries = locate(comparisons)
+    top = [e for e in entries if e["share_of_error"] >= WHERE_MIN_SHARE][:WHERE_MAX_ENTRIES]
+    return top or entries[:1]
+
+
+def _condition_groups(comparisons: Sequence[Comparison]):
+    """Per kind, the conditions taking several values: (kind, variable, {value: tests})."""
+    by_kind: dict[str, list[Comparison]] = {}
+    for c in comparisons:
+        by_kind.setdefault(c.kind, []).append(c)
+    for kind, group in sorted(by_kind.items()):
+        names = sorted({name for c in group for name in c.conditions})
+        for name in names:
+            values: dict[float, list[Comparison]] = {}
+            for c in group:
+                if name in c.conditions:
+                    values.setdefault(c.conditions[name], []).append(c)
+            if len(values) > 1:
+                yield kind, name, values
+
+
+def trends(comparisons: Sequence[Comparison]) -> list[dict[str, Any]]:
+    """How the error varies with each condition that varies across tests of one kind.
+
+    For each (kind, condition) with at least three values: the Spearman rank correlation
+    between the value and the mean squared normalised error of the tests at that value, and
+    the ratio of the largest to the smallest of those errors. ``says`` is set when the error
+    follows the condition (``|rho| >= 0.8`` and a ratio of at least 2).
+    """
+    out = []
+    for kind, variable, groups in _condition_groups(comparisons):
+        if len(groups) < 3:
+            continue
+        values = np.array(sorted(groups))
+        errors = np.array([np.mean([c.normalised**2 for c in groups[v]]) for v in values])
+        rho = _spearman(values, errors)
+        ratio = float(errors.max() / errors.min()) if errors.min() > 0 else math.inf
+        entry = {"kind": kind, "variable": variable, "values": values.tolist(),
+                 "normalised": np.sqrt(errors).tolist(), "spearman": rho,
+                 "ratio": ratio, "says": ""}
+        if abs(rho) >= 0.8 and ratio >= 2.0:
+            direction = "grows" if rho > 0 else "falls"
+            entry["says"] = (f"the residual of the {kind.replace('_', ' ')} tests {direction} "
+                             f"with {_variable_words(variable)}")
+        out.append(entry)
+    return out
+
+
+def _spearman(x: np.ndarray, y: np.ndarray) -> float:
+    rx, ry = np.argsort(np.argsort(x)), np.argsort(np.argsort(y))
+    if np.std(rx) == 0 or np.std(ry) == 0:
+        return 0.0
+    return float(np.corrcoef(rx, ry)[0, 1])
+
+
+_WORDS = {"speed_mm_per_min": "crosshead speed", "temperature_C": "temperature"}
+
+
+def _variable_words(variable: str) -> str:
+    return _WORDS.get(variable, variable.replace("_", " "))
+
+
+# --------------------------------------------------------------------------------------------
+# The compare command's result
+
+
+@dataclasses.dataclass(frozen=True)
+class CompareResult:
+    """A (fitted) model against a bundle: how far, and where."""
+
+    bundle: str  # the bundle's name
+    model: Model  # the model compared (fitted when ``compare`` fitted it)
+    tests: tuple[Comparison, ...]
+    skipped: tuple[str, ...] = ()  # tests left out, with the reason
+
+    @property
+    def normalised(self) -> float:
+        """The bundle's normalised error (1.0 is the noise floor)."""
+        return normalised_error(self.tests)
+
+    @property
+    def rmse(self) -> float:
+        """Pooled RMS error over all rows (information only)."""
+        return pooled_rmse(self.tests)
+
+    def where(self) -> list[dict[str, Any]]:
+        """The regions carrying most of the error, see :func:`where`."""
+        return where(self.tests)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The content of ``compare.json``."""
+        return {
+            "bundle": self.bundle,
+            "model": model_record(self.model),
+            "error": error_record(self.tests),
+            "noise_floor": noise_record(self.tests),
+            "per_test": {c.id: {"kind": c.kind, "unit": c.unit, "rmse": c.rmse,
+                                "mean_abs": c.mean_abs, "percent": c.percent,
+                                "noise": c.noise, "noise_source": c.noise_source,
+                                "normalised": c.normalised, "rows": int(c.measured.size)}
+                         for c in self.tests},
+            "where": self.where(),
+            "regions": locate(self.tests),
+            "trends": trends(self.tests),
+            "skipped": list(self.skipped),
+        }
+
+
+def model_record(model: Model) -> dict[str, Any]:
+    """Effects, parameters and plugins of a model, as written in reports."""
+    return {"effects": list(model.effects),
+            "parameters": {k: float(v) for k, v in sorted(model.parameters.items())},
+            "plugins": [str(p) for p in model.plugins]}
+
+
+def error_record(comparisons: Sequence[Comparison]) -> dict[str, Any]:
+    """The contract's ``error`` object: pooled ``rmse_N``, ``normalised``, ``per_test``."""
+    return {"rmse_N": pooled_rmse(comparisons), "normalised": normalised_error(comparisons),
+            "per_test": {c.id: c.rmse for c in comparisons}}
+
+
+def noise_record(comparisons: Sequence[Comparison]) -> dict[str, Any]:
+    """The contract's ``noise_floor`` object (``source`` is "mixed" when tests differ)."""
+    sources = sorted({c.noise_source for c in comparisons})
+    rows = np.array([c.measured.size for c in comparisons], dtype=float)
+    levels = np.array([c.noise for c in comparisons])
+    return {"rmse_N": float(np.sqrt(np.sum(rows * levels**2) / rows.sum())),
+            "per_test": {c.id: c.noise for c in comparisons},
+            "source": sources[0] if len(sources) == 1 else "mixed",
+            "sources": {c.id: c.noise_source for c in comparisons}}
+
+
+def simulate(tests: Iterable[Test], model: Model) -> dict[str, np.ndarray]:
+    """The model's values for each test (N per row for coupons), by test id."""
+    return {test.id: KINDS[test.kind].simulate(test, model) for test in tests}
+
+
+def evaluate(bundle: Bundle, model: Model) -> CompareResult:
+    """Compare ``model`` as it is (no fit) with the comparable tests of ``bundle``."""
+    tests, skipped = prepare(bundle)
+    return CompareResult(bundle.name, model, tuple(compare_tests(tests, simulate(tests, model))),
+                         tuple(skipped))
+
+
+def compare(bundle: Bundle, model: Model, *, fit: bool = True,
+            progress: Callable[[str], None] | None = None) -> CompareResult:
+    """Fit ``model`` to ``bundle`` (unless ``fit=False``) and compare it with every test.
+
+    Args:
+        bundle: The measurements.
+        model: The model (effects and starting parameters).
+        fit: Fit the model's parameters first (:func:`fenicsx_drape.fit.fit`).
+        progress: Called with a line of text as the fit proceeds.
+
+    Returns:
+        How far the model is from each test and where it fails.
+    """
+    if fit:
+        from fenicsx_drape.fit import fit as fit_model
+
+        model = fit_model(bundle, model, progress=progress).model
+    return evaluate(bundle, model)
+
+
+# --------------------------------------------------------------------------------------------
+# Output
+
+
+def safe_name(text: str) -> str:
+    """A file-name-safe version of a test id."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
+
+
+def plot_residuals(comparison: Comparison, test: Test, path: Path,
+                   shares: Sequence[Mapping[str, Any]] = (), title: str = "") -> Path:
+    """Measured vs simulated (top) and residual with the noise band and regions (bottom)."""
+    import matplotlib.pyplot as plt
+
+    from fenicsx_drape.provenance import save_figure
+
+    name, x = KINDS[comparison.kind].abscissa(test)
+    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7, 6),
+                                      gridspec_kw={"height_ratios": [2, 1]})
+    top.plot(x, comparison.measured, ".", ms=3, color="0.5", label="measured")
+    top.plot(x, comparison.simulated, "-", color="C0", label="model")
+    top.set_ylabel(f"value ({comparison.unit})")
+    top.legend(loc="best")
+    top.set_title(title or f"{comparison.id}: RMSE {comparison.rmse:.3g} {comparison.unit} = "
+                           f"{comparison.normalised:.2f} × noise")
+    bottom.axhspan(-comparison.noise, comparison.noise, color="C2", alpha=0.2,
+                   label="± noise")
+    bottom.plot(x, comparison.residual, ".", ms=3, color="C3", label="measured − model")
+    for i, entry in enumerate(s for s in shares if s["variable"] == name):
+        lo, hi = entry["range"]
+        bottom.axvspan(lo, hi, color=f"C{i % 10}", alpha=0.08)
+        bottom.annotate(f"{entry['says']}\n{100 * entry['share_of_error']:.0f} %",
+                        xy=(0.5 * (lo + hi), 1.0), xycoords=("data", "axes fraction"),
+                        ha="center", va="top", fontsize=7)
+    bottom.set_xlabel(name.replace("_", " "))
+    bottom.set_ylabel(f"residual ({comparison.unit})")
+    bottom.legend(loc="lower left", fontsize=7)
+    return save_figure(fig, path)
+
+
+def plot_where(entries: Sequence[Mapping[str, Any]], path: Path, title: str = "") -> Path:
+    """Horizontal bars: the share of the squared normalised error of each region."""
+    import matplotlib.pyplot as plt
+
+    from fenicsx_drape.provenance import save_figure
+
+    entries = list(entries)[::-1]
+    fig, ax = plt.subplots(figsize=(8, 0.4 * len(entries) + 1.2))
+    labels = [f"{e['test']}: {e['says']}  [{e['range'][0]:.3g}, {e['range'][1]:.3g}]"
+              if e["variable"] not in e["says"] else e["says"] for e in entries]
+    ax.barh(range(len(entries)), [100 * e["share_of_error"] for e in entries], color="C3")
+    ax.barh(range(len(entries)), [100 * e["share_of_rows"] for e in entries], height=0.25,
+            color="0.3", label="share of the rows")
+    ax.set_yticks(range(len(entries)), labels, fontsize=8)
+    ax.set_xlabel("share of the squared normalised error (%)")
+    ax.set_title(title or "where the model misses")
+    ax.legend(loc="lower right", fontsize=8)
+    return save_figure(fig, path)
+
+
+def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
+                  model_path: str | Path | None = None) -> Path:
+    """Write the comparison into ``out_dir`` and record the version in its ledger.
+
+    Files: ``compare.json``, ``model.toml`` (the fitted model, loadable), one
+    ``residual_<test>.png`` per test, ``where.png`` and ``provenance.json``.
+
+    Returns:
+        The path of ``compare.json``.
+    """
+    from fenicsx_drape import ledger
+    from fenicsx_drape.provenance import atomic_write_text, write_json, write_provenance
+
+    out = Path(out_dir)
+    record = result.to_dict()
+    path = write_json(out / "compare.json", record)
+    atomic_write_text(out / "model.toml", result.model.to_toml())
+    tests = {t.id: t for t in bundle.tests}
+    regions = record["regions"]
+    for c in result.tests:
+        plot_residuals(c, tests[c.id], out / f"residual_{safe_name(c.id)}.png",
+                       [e for e in regions if e["tests"] == [c.id]])
+    plot_where(record["where"], out / "where.png",
+               f"{result.bundle}: normalised error {result.normalised:.2f}")
+    ledger.record(out, result, bundle=bundle, model_path=model_path)
+    write_provenance(out, bundle=str(bundle.path) if bundle.path else bundle.name,
+                     model=str(model_path) if model_path else "default",
+                     effects=list(result.model.effects),
+                     parameters=record["model"]["parameters"], seed=None)
+    return path

@@ -1,0 +1,170 @@
+"""The ledger of model versions and their errors (``drape history``).
+
+Every ``drape compare --out DIR`` appends one line to ``DIR/ledger.jsonl``: when, which bundle,
+which model (effects, plugins, fitted parameters) and its errors. :func:`history` gathers the
+ledgers of several folders (or of one folder compared into repeatedly), orders the versions in
+time, says what changed from one version to the next, and plots the normalised error version
+by version against the noise floor.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import hashlib
+import json
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from fenicsx_drape.errors import DrapeInputError
+
+if TYPE_CHECKING:
+    from fenicsx_drape.bundle import Bundle
+    from fenicsx_drape.compare import CompareResult
+
+LEDGER = "ledger.jsonl"
+
+
+def record(out_dir: str | Path, result: CompareResult, *, bundle: Bundle,
+           model_path: str | Path | None = None) -> dict[str, Any]:
+    """Append the version compared in ``result`` to ``out_dir/ledger.jsonl``; returns it."""
+    record = result.to_dict()
+    entry = {
+        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="microseconds"),
+        "dir": str(Path(out_dir).resolve()),
+        "bundle": result.bundle,
+        "bundle_path": str(Path(bundle.path).resolve()) if bundle.path else None,
+        "model_path": str(Path(model_path).resolve()) if model_path else None,
+        **record["model"],
+        "normalised": record["error"]["normalised"],
+        "rmse": record["error"]["rmse_N"],
+        "noise_rmse": record["noise_floor"]["rmse_N"],
+        "per_test": record["error"]["per_test"],
+        "noise_per_test": record["noise_floor"]["per_test"],
+    }
+    entry["id"] = hashlib.sha1(json.dumps(entry, sort_keys=True).encode()).hexdigest()[:12]
+    path = Path(out_dir) / LEDGER
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # One short line appended in one write: concurrent appenders do not interleave.
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        os.write(fd, (json.dumps(entry, sort_keys=True) + "\n").encode())
+    finally:
+        os.close(fd)
+    return entry
+
+
+def read(dirs: Iterable[str | Path]) -> list[dict[str, Any]]:
+    """The ledger entries of the folders, each once, oldest first.
+
+    Raises:
+        DrapeInputError: for a folder without ``ledger.jsonl``, or a line that is not a
+            ledger entry (naming the file and line).
+    """
+    entries: dict[str, dict[str, Any]] = {}
+    for folder in dirs:
+        path = Path(folder) / LEDGER
+        if not path.is_file():
+            raise DrapeInputError(f"{folder}: no {LEDGER} here (run 'drape compare BUNDLE "
+                                  f"--out {folder}' first)")
+        for number, line in enumerate(path.read_text().splitlines(), start=1):
+            if not line.strip():
+                continue
+            try:
+                entry = json.loads(line)
+                entry["id"], entry["created"], entry["normalised"], entry["effects"]
+            except (json.JSONDecodeError, KeyError, TypeError) as err:
+                raise DrapeInputError(f"{path}:{number}: not a ledger entry ({err})") from None
+            entries.setdefault(entry["id"], entry)
+    return sorted(entries.values(), key=lambda e: (e["created"], e["id"]))
+
+
+@dataclasses.dataclass(frozen=True)
+class Version:
+    """One model version in the history."""
+
+    label: str  # "v1", "v2", ... per bundle
+    change: str  # what changed from the previous version of the same bundle
+    entry: dict[str, Any]  # the ledger entry
+
+
+def versions(entries: Sequence[dict[str, Any]]) -> list[Version]:
+    """Label the entries version by version (per bundle) with what changed."""
+    out: list[Version] = []
+    last: dict[str, dict[str, Any]] = {}
+    for entry in entries:
+        previous = last.get(entry["bundle"])
+        count = sum(1 for v in out if v.entry["bundle"] == entry["bundle"]) + 1
+        out.append(Version(f"v{count}", _change(previous, entry), entry))
+        last[entry["bundle"]] = entry
+    return out
+
+
+def _change(previous: dict[str, Any] | None, entry: dict[str, Any]) -> str:
+    if previous is None:
+        return "first version"
+    before, after = set(previous["effects"]), set(entry["effects"])
+    parts = [f"+{e}" for e in sorted(after - before)] + [f"-{e}" for e in sorted(before - after)]
+    new_plugins = sorted(set(entry.get("plugins", [])) - set(previous.get("plugins", [])))
+    parts += [f"plugin {Path(p).name}" for p in new_plugins]
+    return ", ".join(parts) if parts else "same effects (refit)"
+
+
+def table(history: Sequence[Version]) -> str:
+    """The history as a text table."""
+    rows = [("version", "bundle", "normalised", "rmse", "noise", "change", "folder")]
+    for v in history:
+        e = v.entry
+        rows.append((v.label, e["bundle"], f"{e['normalised']:.3g}", f"{e['rmse']:.3g}",
+                     f"{e['noise_rmse']:.3g}", v.change, e["dir"]))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def plot(history: Sequence[Version], path: str | Path) -> Path:
+    """``history.png``: normalised error version by version, the noise floor at 1."""
+    import matplotlib.pyplot as plt
+
+    from fenicsx_drape.provenance import save_figure
+
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.2 * len(history)), 4.5))
+    bundles = list(dict.fromkeys(v.entry["bundle"] for v in history))
+    for i, name in enumerate(bundles):
+        points = [(k, v) for k, v in enumerate(history) if v.entry["bundle"] == name]
+        ax.plot([k for k, _ in points], [v.entry["normalised"] for _, v in points], "o-",
+                color=f"C{i}", label=name)
+        for k, v in points:
+            ax.annotate(f"{v.entry['normalised']:.2f}", (k, v.entry["normalised"]),
+                        textcoords="offset points", xytext=(0, 7), ha="center", fontsize=8)
+    ax.axhline(1.0, color="k", ls="--", lw=1, label="noise floor")
+    ax.axhline(1.5, color="0.5", ls=":", lw=1, label="adequate (1.5 × noise)")
+    ax.set_yscale("log")
+    ax.set_xticks(range(len(history)),
+                  [f"{v.label}\n{v.change}".replace(", ", "\n") for v in history], fontsize=7)
+    ax.set_ylabel("normalised error (RMSE / noise)")
+    ax.set_title("model versions")
+    ax.legend(fontsize=8)
+    return save_figure(fig, path)
+
+
+def history(dirs: Iterable[str | Path], out_dir: str | Path | None = None) -> list[Version]:
+    """The versions recorded in the ledgers of ``dirs``, oldest first.
+
+    With ``out_dir``, also writes ``history.png``, ``history.json`` and ``provenance.json``
+    there.
+    """
+    dirs = list(dirs)
+    result = versions(read(dirs))
+    if out_dir is not None:
+        from fenicsx_drape.provenance import write_json, write_provenance
+
+        out = Path(out_dir)
+        plot(result, out / "history.png")
+        write_json(out / "history.json", [{"version": v.label, "change": v.change, **v.entry}
+                                          for v in result])
+        write_provenance(out, ledgers=[str(Path(d).resolve()) for d in dirs])
+    return result
