@@ -1,0 +1,105 @@
+"""compare: noise floor, errors, regions and their shares of the error."""
+
+import numpy as np
+import pytest
+
+from fenicsx_drape.compare import (
+    Comparison,
+    Region,
+    _hinge_breakpoints,
+    _loading_phases,
+    locate,
+    normalised_error,
+    trends,
+    where,
+)
+from fenicsx_drape.noise import noise_from_sd, noise_from_second_differences
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_second_difference_noise_recovers_the_noise(seed):
+    rng = np.random.default_rng(seed)
+    # Non-uniform rows over a curve with a plateau and a steep rise (a bias-extension shape).
+    t = np.sort(rng.uniform(0.0, 100.0, 400))
+    sd = 0.05 * (1 + seed)
+    f = 3 * (1 - np.exp(-t / 5)) + 0.01 * t + 5 * np.exp((t - 100) / 12)
+    estimate = noise_from_second_differences(t, f + rng.normal(0, sd, t.size))
+    # The estimator's own scatter is about 5 % at 400 rows: allow three of its deviations.
+    assert estimate == pytest.approx(sd, rel=0.15)
+
+
+def test_second_difference_noise_ignores_kinks_and_needs_rows():
+    rng = np.random.default_rng(5)
+    t = np.linspace(0, 60, 300)
+    # Loading, a hold and unloading: the kinks must not inflate the estimate.
+    f = np.interp(t, [0, 20, 40, 60], [0, 50, 30, 0]) + rng.normal(0, 0.2, t.size)
+    assert noise_from_second_differences(t, f) == pytest.approx(0.2, rel=0.15)
+    with pytest.raises(ValueError, match="at least 5 rows"):
+        noise_from_second_differences(t[:4], f[:4])
+    with pytest.raises(ValueError, match="increasing"):
+        noise_from_second_differences(t[::-1], f)
+
+
+def test_noise_from_sd_is_the_rms():
+    assert noise_from_sd(np.array([3.0, 4.0])) == pytest.approx(np.sqrt(12.5))
+
+
+def test_hinge_breakpoints_find_a_three_segment_curve():
+    rng = np.random.default_rng(1)
+    x = np.linspace(0, 0.45, 500)
+    y = np.interp(x, [0, 0.03, 0.3, 0.45], [0, 3.0, 4.0, 14.0]) + rng.normal(0, 0.02, x.size)
+    (b1, b2), slopes = _hinge_breakpoints(x, y, 2)
+    assert b1 == pytest.approx(0.03, abs=0.01)
+    assert b2 == pytest.approx(0.30, abs=0.01)
+    # The breakpoints sit on a grid of quantiles, so the slopes are near, not equal.
+    assert slopes == pytest.approx([100.0, 3.7, 66.7], rel=0.25)
+
+
+def test_loading_phases():
+    t = np.arange(7.0)
+    d = np.array([0, 1, 2, 2, 2, 1, 0.0])
+    assert _loading_phases(t, d).tolist() == [1, 1, 1, 0, 0, -1, -1]
+
+
+def _comparison(id_, residual, noise, regions=(), conditions=None, kind="bias_extension"):
+    measured = np.linspace(1, 2, residual.size)
+    return Comparison(id_, kind, "N", measured, measured - residual, noise, "force_sd_N",
+                      tuple(regions), conditions or {})
+
+
+def test_normalised_error_and_shares_follow_the_contract():
+    rng = np.random.default_rng(0)
+    r1, r2 = rng.normal(0, 1, 100), rng.normal(0, 3, 50)
+    half = np.arange(100) < 30
+    c1 = _comparison("a", r1, 0.5, [Region("diagonal_strain", (0, 0.1), "low", half),
+                                    Region("diagonal_strain", (0.1, 0.4), "high", ~half)],
+                     {"speed_mm_per_min": 10.0})
+    c2 = _comparison("b", r2, 1.0, [], {"speed_mm_per_min": 40.0})
+    expected = np.sqrt(0.5 * ((np.sqrt(np.mean(r1**2)) / 0.5) ** 2
+                              + (np.sqrt(np.mean(r2**2)) / 1.0) ** 2))
+    assert normalised_error([c1, c2]) == pytest.approx(expected)
+    entries = locate([c1, c2])
+    by = {(e["test"], e["says"]): e["share_of_error"] for e in entries}
+    # The regions of a test share its part of the error; condition groups share the whole.
+    share_a = (np.mean(r1**2) / 0.25) / (2 * expected**2)
+    assert by["a", "low"] + by["a", "high"] == pytest.approx(share_a)
+    assert by["a", "low"] == pytest.approx(np.sum(r1[half] ** 2) / 0.25 / 100 / 2
+                                           / expected**2)
+    speeds = [e for e in entries if e["variable"] == "speed_mm_per_min"]
+    assert sum(e["share_of_error"] for e in speeds) == pytest.approx(1.0)
+    assert [e["share_of_error"] for e in entries] == sorted(
+        (e["share_of_error"] for e in entries), reverse=True)
+    assert all(e["share_of_error"] >= 0.05 for e in where([c1, c2]))
+
+
+def test_trend_says_the_error_grows_with_speed():
+    rng = np.random.default_rng(2)
+    comps = [_comparison(f"bias-{v}", rng.normal(0, s, 80), 1.0, [],
+                         {"speed_mm_per_min": float(v)})
+             for v, s in ((10, 1.0), (40, 2.0), (160, 4.0))]
+    (trend,) = trends(comps)
+    assert trend["spearman"] == pytest.approx(1.0)
+    assert "grows with crosshead speed" in trend["says"]
+    flat = [_comparison(f"bias-{v}", rng.normal(0, 1.0, 80), 1.0, [],
+                        {"speed_mm_per_min": float(v)}) for v in (10, 40, 160)]
+    assert trends(flat)[0]["says"] == ""
