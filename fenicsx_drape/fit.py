@@ -215,11 +215,8 @@ class _Variables:
 
         p0 = np.array([float(model.parameters[n]) for n in names])
         bounds = np.array([parameter_info(n).bounds for n in names], dtype=float)
-        log = bounds[:, 0] >= 0.0
-        if (log & (p0 <= 0)).any():
-            bad = names[int(np.argmax(log & (p0 <= 0)))]
-            raise DrapeInputError(f"parameter {bad} must start above 0 to be fitted")
-        scale = np.where(log, 1.0, np.maximum(np.abs(p0), 1e-12))
+        log = (bounds[:, 0] >= 0.0) & (p0 > 0.0)  # a parameter starting at 0 stays linear
+        scale = np.where(log | (p0 == 0.0), 1.0, np.abs(p0))
         span = 10.0**DECADES
         lo = np.where(log, np.maximum(bounds[:, 0], p0 / span), bounds[:, 0])
         hi = np.where(log, np.minimum(bounds[:, 1], p0 * span), bounds[:, 1])

@@ -1,0 +1,46 @@
+"""``drape fit BUNDLE [--model MODEL.toml] --out DIR``: identify a model's parameters.
+
+The same in Python: ``write_fit(fit(load_bundle(BUNDLE), load_model(MODEL)), DIR)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Options of ``drape fit``."""
+    parser.add_argument("bundle", help="measurement bundle folder (bundle.toml + CSV tables)")
+    parser.add_argument("--model", help="MODEL.toml: effects, plugins, start or fixed "
+                        "parameters (default: the paper's model, Table 2 as the start)")
+    parser.add_argument("--out", required=True, help="output folder")
+    parser.add_argument("--warm-start", action="store_true",
+                        help="start from the model's parameter values instead of the "
+                        "curve-feature guess of section 3.2")
+    parser.add_argument("--tests", nargs="+", metavar="ID", help="fit only these tests")
+    parser.add_argument("--max-iterations", type=int, default=200,
+                        help="cap on the optimiser's iterations per block (default 200)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Fit, print progress and the errors, write the outputs."""
+    from fenicsx_drape.bundle import load_bundle
+    from fenicsx_drape.fit import fit, write_fit
+    from fenicsx_drape.model import default_model, load_model
+    from fenicsx_drape.sensitivity import format_table
+
+    bundle = load_bundle(args.bundle)
+    for line in bundle.report().splitlines():
+        print(f"note: {line}")
+    model = load_model(args.model) if args.model else default_model()
+    result = fit(bundle, model, progress=print, initial_guess_from_features=not args.warm_start,
+                 tests=args.tests, max_iterations=args.max_iterations)
+    for kind, e in result.errors_per_kind().items():
+        print(f"{kind}: mean |error| {e['mean_abs_N']:.3g} N ({e['mean_abs_pct']:.2g} %)")
+    print(f"normalised error {result.normalised:.3g} (1 = noise floor), "
+          f"{result.seconds:.1f} s")
+    print("sensitivities (Table 2: relative change per relative change of the parameter)")
+    print(format_table(result.sensitivity))
+    out = write_fit(result, args.out)
+    print(f"wrote {out}/model.toml, report.json, sensitivity.csv, fit_*.png")
+    return 0
