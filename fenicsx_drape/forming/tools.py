@@ -1,0 +1,281 @@
+"""Rigid forming tools as exact surfaces of revolution: signed gap, normal and curvature.
+
+Frame (``shared/spec/measurements.md``): origin on the punch axis, z along the punch travel,
+z = 0 the plane of the undeformed sheet, the punch moving towards +z; x is the warp, y the weft.
+
+A tool is a *profile* in the meridian half-plane (r, h), r = √(x² + y²) the distance from the
+axis and h = z − z_tool(t) the height above the tool's reference plane, revolved about the
+z axis and translated along z with a prescribed motion. The profile is a chain of circular
+arcs and straight segments, joined with continuous tangents (G1), traced so that the tool's
+material lies on the right of the direction of travel. For a G1 chain the closest point of
+any sheet node lies inside one piece, so the signed distance φ (positive outside the tool)
+is exact, and so are its gradient (the outward normal) and its Hessian (the curvature), which
+the penalty contact needs for its consistent Jacobian:
+
+    φ(x) = φ₂(r, h),   ∇φ = φ_r e_r + φ_h e_z,
+    ∇∇φ = φ₂'' (in the meridian plane) + (φ_r / r) (I − e_r⊗e_r − e_z⊗e_z)   (hoop term).
+
+Only the punch of the paper's hemisphere (section 4.1: radius 60 mm, fillet 20 mm) and its
+matched die are built here (:class:`HemisphereTools`); the blank holder is a plane and lives
+in :mod:`fenicsx_drape.forming.holder`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from fenicsx_drape.errors import ParameterError
+
+_TINY = 1e-12
+
+
+@dataclasses.dataclass(frozen=True)
+class Arc:
+    """A circular arc of the profile.
+
+    It runs from angle ``start`` to ``end`` (radians about ``centre``, counter-clockwise
+    positive; ``end < start`` runs clockwise).
+    """
+
+    centre: tuple[float, float]  # (r, h) in mm
+    radius: float  # mm
+    start: float  # rad
+    end: float  # rad
+
+    @property
+    def material_inside(self) -> bool:
+        """Clockwise arcs have the material (on the right) inside the circle: convex."""
+        return self.end < self.start
+
+    def point(self, angle: float) -> np.ndarray:
+        """The profile point at ``angle`` (rad)."""
+        return np.asarray(self.centre) + self.radius * np.array([math.cos(angle), math.sin(angle)])
+
+    def closest(self, p: np.ndarray):
+        """Closest points, outward normals and curvatures for points ``p`` shaped (n, 2).
+
+        Returns ``q`` (n, 2), ``n`` (n, 2) and ``c`` (n,) in 1/mm: the Hessian of φ in the
+        meridian plane is ``c t⊗t`` with ``t`` the tangent.
+        """
+        c = np.asarray(self.centre)
+        d = p - c
+        ρ = np.maximum(np.hypot(d[:, 0], d[:, 1]), _TINY)
+        sweep = self.end - self.start
+        δ = np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - self.start)))
+        inside = (δ / sweep >= 0.0) & (δ / sweep <= 1.0)
+        radial = d / ρ[:, None]
+        q = np.where(inside[:, None], c + self.radius * radial, 0.0)
+        sign = 1.0 if self.material_inside else -1.0
+        n = sign * radial
+        curv = np.where(inside, sign / ρ, 0.0)
+        if not inside.all():  # beyond the ends: the nearer end point, with its normal
+            a, b = self.point(self.start), self.point(self.end)
+            use_a = np.linalg.norm(p - a, axis=1) <= np.linalg.norm(p - b, axis=1)
+            end = np.where(use_a[:, None], a, b)
+            n_end = sign * np.where(use_a[:, None], a - c, b - c) / self.radius
+            q = np.where(inside[:, None], q, end)
+            n = np.where(inside[:, None], n, n_end)
+        return q, n, curv
+
+
+@dataclasses.dataclass(frozen=True)
+class Segment:
+    """A straight piece of the profile from ``a`` to ``b`` ((r, h) in mm)."""
+
+    a: tuple[float, float]
+    b: tuple[float, float]
+
+    def closest(self, p: np.ndarray):
+        """See :meth:`Arc.closest`; a segment has no curvature."""
+        a, b = np.asarray(self.a), np.asarray(self.b)
+        τ = b - a
+        s = np.clip((p - a) @ τ / (τ @ τ), 0.0, 1.0)
+        q = a + s[:, None] * τ
+        n = np.broadcast_to(np.array([-τ[1], τ[0]]) / np.linalg.norm(τ), p.shape)
+        return q, n, np.zeros(len(p))
+
+
+Piece = Arc | Segment
+
+
+@dataclasses.dataclass(frozen=True)
+class Gap:
+    """Signed gap of nodes to a tool, its gradient and its Hessian.
+
+    ``phi`` (n,) in mm (negative = penetration), the outward normal ``normal`` (n, 3) = ∇φ
+    and the curvature ``hessian`` (n, 3, 3) = ∇∇φ in 1/mm.
+    """
+
+    phi: np.ndarray
+    normal: np.ndarray
+    hessian: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class RevolvedTool:
+    """A rigid tool: a G1 profile revolved about the z axis, translated along z in time.
+
+    The profile's reference plane h = 0 sits at ``z = z0_mm + speed_mm_per_s · t``.
+    """
+
+    name: str
+    profile: tuple[Piece, ...]
+    z0_mm: float = 0.0
+    speed_mm_per_s: float = 0.0
+
+    def z_offset(self, t: float) -> float:
+        """Height (mm) of the tool's reference plane at time ``t`` (s)."""
+        return self.z0_mm + self.speed_mm_per_s * t
+
+    def gap(self, x: np.ndarray, t: float) -> Gap:
+        """Signed gap, normal and curvature at the positions ``x`` (n, 3) in mm at time ``t``."""
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        r = np.hypot(x[:, 0], x[:, 1])
+        p = np.column_stack([r, x[:, 2] - self.z_offset(t)])
+        best = None
+        for piece in self.profile:
+            q, n, c = piece.closest(p)
+            d = np.linalg.norm(p - q, axis=1)
+            on_axis = isinstance(piece, Arc) and abs(piece.centre[0]) < _TINY
+            # φ_r / r: for arcs centred on the axis this is c itself (finite on the axis).
+            hoop = c if on_axis else n[:, 0] / np.maximum(r, _TINY)
+            if best is None:
+                best = [d, q, n, c, hoop]
+                continue
+            closer = d < best[0]
+            for k, v in enumerate((d, q, n, c, hoop)):
+                best[k] = np.where(closer[:, None] if v.ndim == 2 else closer, v, best[k])
+        d, q, n, c, hoop = best
+        side = np.einsum("ij,ij->i", p - q, n)
+        phi = np.where(side < 0.0, -d, d)
+        # The meridian-plane basis: e_r (radial, any unit vector on the axis) and e_z.
+        e_r = np.zeros_like(x)
+        e_r[:, 0] = 1.0
+        off = r > _TINY
+        e_r[off, :2] = x[off, :2] / r[off, None]
+        e_z = np.array([0.0, 0.0, 1.0])
+        normal = n[:, :1] * e_r + n[:, 1:] * e_z
+        tangent = n[:, 1:] * e_r - n[:, :1] * e_z
+        hessian = c[:, None, None] * np.einsum("ni,nj->nij", tangent, tangent)
+        hoop_proj = np.eye(3) - np.einsum("ni,nj->nij", e_r, e_r) - np.outer(e_z, e_z)
+        hessian += hoop[:, None, None] * hoop_proj
+        return Gap(phi, normal, hessian)
+
+
+@dataclasses.dataclass(frozen=True)
+class HemisphereTools:
+    """The paper's hemisphere tool set (section 4.1) built from its parameters.
+
+    The punch is a spherical cap of radius ``punch_radius_mm`` whose centre lies
+    ``fillet_radius_mm`` above the punch base plane, joined to the flat base (shoulder) by a
+    concave fillet of radius ``fillet_radius_mm`` centred at r = R + R_f; the shoulder runs
+    out to ``shoulder_radius_mm`` (just inside the holder opening) where a small edge round
+    ``edge_radius_mm`` turns it into the punch's cylindrical side. Apex-to-base height is
+    R + R_f (80 mm). The punch starts with its apex at z = 0 and moves ``travel_mm`` towards
+    +z, so with the default 80 mm its base reaches the sheet plane at the end.
+
+    The die (not given in the paper) is the matched female tool: the punch surface offset by
+    the ply thickness, stationary at the punch's final position and contacted from above. Its
+    flat face (z = ply thickness) covers the shoulder region inside the holder opening, and
+    its convex lip (the offset fillet) is the entry radius the sheet is drawn over.
+
+    The blank holder is two plates at z = 0 with a circular opening ``holder_opening_mm`` in
+    diameter (:class:`~fenicsx_drape.forming.holder.BlankHolder`).
+    """
+
+    punch_radius_mm: float = 60.0
+    fillet_radius_mm: float = 20.0
+    shoulder_radius_mm: float = 84.0
+    edge_radius_mm: float = 1.0
+    holder_opening_mm: float = 170.0
+    sheet_mm: float = 240.0
+    travel_mm: float = 80.0
+    ply_thickness_mm: float = 0.3
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ParameterError(f"HemisphereTools: {f.name} = {value} must be positive")
+        base = self.punch_radius_mm + self.fillet_radius_mm
+        if not base + self.edge_radius_mm <= self.shoulder_radius_mm <= self.opening_radius_mm:
+            raise ParameterError(
+                f"HemisphereTools: shoulder_radius_mm = {self.shoulder_radius_mm} must lie "
+                f"between the fillet's foot plus the edge radius ({base + self.edge_radius_mm}) "
+                f"and the holder opening's radius ({self.opening_radius_mm})")
+        if self.ply_thickness_mm >= self.fillet_radius_mm:
+            raise ParameterError("HemisphereTools: ply_thickness_mm must be below the fillet "
+                                 "radius (the die's lip is the fillet offset by it)")
+
+    @property
+    def height_mm(self) -> float:
+        """Apex-to-base height of the punch (mm)."""
+        return self.punch_radius_mm + self.fillet_radius_mm
+
+    @property
+    def opening_radius_mm(self) -> float:
+        """Radius of the holder opening (mm)."""
+        return 0.5 * self.holder_opening_mm
+
+    def part_profile(self, offset: float = 0.0) -> tuple[Piece, ...]:
+        """The formed part's profile (cap, fillet, flange plane) from the apex outwards.
+
+        Offset outward by ``offset`` mm; the material (the punch) lies on the right.
+        """
+        R, Rf, t = self.punch_radius_mm, self.fillet_radius_mm, offset
+        base = R + Rf
+        return (
+            Arc((0.0, Rf), R + t, math.pi / 2, 0.0),
+            Arc((base, Rf), Rf - t, math.pi, 1.5 * math.pi),
+            Segment((base, t), (1e4, t)),
+        )
+
+    def punch_profile(self) -> tuple[Piece, ...]:
+        """The punch's profile: cap, fillet, shoulder, edge round and cylindrical side.
+
+        Traced from the apex outwards, the material on the right.
+        """
+        rs, re = self.shoulder_radius_mm, self.edge_radius_mm
+        sphere, fillet, _ = self.part_profile()
+        base = self.height_mm
+        return (
+            sphere,
+            fillet,
+            Segment((base, 0.0), (rs - re, 0.0)),
+            Arc((rs - re, -re), re, math.pi / 2, 0.0),
+            Segment((rs, -re), (rs, -1e4)),
+        )
+
+    def punch(self, duration_s: float) -> RevolvedTool:
+        """The punch moving ``travel_mm`` in ``duration_s`` at constant speed.
+
+        Its apex is at z = 0 at t = 0.
+        """
+        if not duration_s > 0.0:
+            raise ParameterError(f"punch: duration_s = {duration_s} must be positive")
+        return RevolvedTool("punch", self.punch_profile(), z0_mm=-self.height_mm,
+                            speed_mm_per_s=self.travel_mm / duration_s)
+
+    def die(self) -> RevolvedTool:
+        """The matched die, fixed at the punch's final position, material above its surface.
+
+        Its profile is the punch's offset by the ply thickness, traced from outside inwards
+        so that the die's material lies on the right.
+        """
+        pieces = []
+        for piece in reversed(self.part_profile(self.ply_thickness_mm)):
+            if isinstance(piece, Arc):
+                pieces.append(Arc(piece.centre, piece.radius, piece.end, piece.start))
+            else:
+                pieces.append(Segment(piece.b, piece.a))
+        return RevolvedTool("die", tuple(pieces), z0_mm=self.travel_mm - self.height_mm)
+
+    def formed_part(self) -> RevolvedTool:
+        """The formed part's surface, the one the kinematic drape maps the net onto.
+
+        The punch at its final position, continued by the holder plane z = 0.
+        """
+        return RevolvedTool("part", self.part_profile(), z0_mm=self.travel_mm - self.height_mm)
