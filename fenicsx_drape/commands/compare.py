@@ -1,0 +1,54 @@
+"""``drape compare BUNDLE --model MODEL.toml --out DIR``: how far, and where, a model misses."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from fenicsx_drape.errors import DrapeInputError
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the command's arguments."""
+    parser.add_argument("bundle", help="measurement bundle folder (or its bundle.toml)")
+    parser.add_argument("--model", help="MODEL.toml (effects, plugins, starting parameters); "
+                        "default: the paper's model with Table 2 parameters")
+    parser.add_argument("--out", required=True, help="output folder (compare.json, plots, "
+                        "the ledger of versions)")
+    parser.add_argument("--no-fit", action="store_true",
+                        help="compare the model as given, without fitting its parameters")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Fit, compare, write the outputs and print the summary; returns the exit status."""
+    from fenicsx_drape.bundle import load_bundle
+    from fenicsx_drape.compare import compare, write_compare
+    from fenicsx_drape.model import default_model, load_model
+
+    bundle = load_bundle(args.bundle)
+    model = load_model(args.model) if args.model else default_model()
+    result = compare(bundle, model, fit=not args.no_fit,
+                     progress=lambda line: print(line, file=sys.stderr))
+    if not result.tests:
+        raise DrapeInputError(f"{args.bundle}: nothing to compare")
+    write_compare(result, bundle, args.out, model_path=args.model)
+    print(summary(result))
+    print(f"written to {args.out}")
+    return 0
+
+
+def summary(result) -> str:
+    """The comparison as text: per-test errors, noise floor and where the error sits."""
+    lines = [f"bundle {result.bundle!r}, effects: {', '.join(result.model.effects) or 'none'}",
+             f"{'test':<16} {'RMSE':>10} {'mean|e|':>10} {'%':>6} {'noise':>10} "
+             f"{'RMSE/noise':>10}"]
+    for c in result.tests:
+        lines.append(f"{c.id:<16} {c.rmse:>8.3g} {c.unit:<1} {c.mean_abs:>8.3g} {c.unit:<1} "
+                     f"{c.percent:>6.1f} {c.noise:>8.3g} {c.unit:<1} {c.normalised:>10.2f}")
+    lines.append(f"normalised error {result.normalised:.3f} (1 = noise floor)")
+    lines.append("where the error sits:")
+    for e in result.where():
+        lines.append(f"  {100 * e['share_of_error']:5.1f} %  {e['test']}: {e['says']} "
+                     f"({e['variable']} {e['range'][0]:.3g} to {e['range'][1]:.3g})")
+    lines += [f"note: {s}" for s in result.skipped]
+    return "\n".join(lines)
