@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.forming.holder import BlankHolder
+from fenicsx_drape.materials import FrictionLaw
 
 
 def sheet(cell=10.0, half=120.0, quarter=True):
@@ -12,9 +13,10 @@ def sheet(cell=10.0, half=120.0, quarter=True):
     return np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
 
 
-def holder(force, axes, **kw):
-    return BlankHolder(opening_radius_mm=85.0, force_N=force, friction=0.3,
-                       clamp_stiffness_N_per_mm=2.4e3, symmetry_axes=axes, **kw)
+def holder(force, axes, slip=0.05, friction=True):
+    law = FrictionLaw(mu=0.3, holder_slip_mm=slip, holder_friction=friction)
+    return BlankHolder(law, opening_radius_mm=85.0, force_N=force,
+                       clamp_stiffness_N_per_mm=2.4e3, symmetry_axes=axes)
 
 
 def test_quarter_and_full_share_the_force_alike():
@@ -27,9 +29,9 @@ def test_quarter_and_full_share_the_force_alike():
     assert hf.n_s == n_full
     assert hq.n_s == pytest.approx(n_full / 4)
     interior = (Xq[:, 0] > 0) & (Xq[:, 1] > 0) & hq.under
-    np.testing.assert_allclose(hq.f_y[interior], 133.0 * 0.3 / n_full)
+    np.testing.assert_allclose(hq.yield_force_N[interior], 133.0 * 0.3 / n_full)
     edge = (Xq[:, 1] == 0) & hq.under
-    np.testing.assert_allclose(hq.f_y[edge], 0.5 * 133.0 * 0.3 / n_full)
+    np.testing.assert_allclose(hq.yield_force_N[edge], 0.5 * 133.0 * 0.3 / n_full)
 
 
 def test_sliding_sheet_carries_the_holding_force_times_mu():
@@ -51,10 +53,10 @@ def test_sliding_sheet_carries_the_holding_force_times_mu():
 
 def test_elastic_stick_then_perfectly_plastic_sliding():
     X = sheet(quarter=False)
-    h = holder(133.0, (), stick_slip_mm=0.05)
+    h = holder(133.0, (), slip=0.05)
     h.bind(X, np.ones(len(X), bool), None)
     node = np.argmax(np.hypot(X[:, 0], X[:, 1]))  # a corner
-    f_y = h.f_y[node]
+    f_y = h.yield_force_N[node]
     forces = []
     for u in (0.01, 0.02, 0.04, 0.1, 0.3):  # monotonic draw-in along the diagonal
         x = X.copy()
@@ -98,12 +100,12 @@ def test_n_s_follows_the_draw_in_and_revert_forgets():
     h.forces(x, 1.0, 1.0)
     h.commit()
     assert h.n_s == np.count_nonzero(np.hypot(x[:, 0], x[:, 1]) > 85.0) < n0
-    assert h.f_y[h.under].sum() == pytest.approx(133.0 * 0.3)
+    assert h.yield_force_N[h.under].sum() == pytest.approx(133.0 * 0.3)
 
 
 def test_without_holder_friction_the_plates_only_clamp():
     X = sheet(quarter=False)
-    h = holder(133.0, (), holder_friction=False)
+    h = holder(133.0, (), friction=False)
     h.bind(X, np.ones(len(X), bool), None)
     f, _ = h.forces(X * 0.98, 1.0, 1.0)
     assert np.abs(f).max() == 0.0

@@ -11,11 +11,11 @@ distance from the axis exceeds R_o is *under the holder*:
   coefficient, shared by the n_s nodes under the holder. As in the paper the bar lies along
   the node's *total* in-plane displacement u (not the slip velocity):
 
-      N = k_f (|u| − e_p),  |N| ≤ f_y = w F μ / n_s,   f = −N u/|u|,
+      N = N(|u|) from the friction law,  f = −N u/|u|,
 
-  with e_p the bar's plastic (sliding) elongation, a history variable committed with the
-  step. Before sliding the bar is elastic with stiffness ``k_f = f_y / u_e``: it slides once
-  the node has moved the *stick slip* ``u_e`` (default 0.05 mm, 0.5 % of a 10 mm cell).
+  with the law (``"paper_friction"``, :class:`~fenicsx_drape.materials.FrictionLaw`, or a
+  user law of role ``"friction"``) elastic up to the slip ``holder_slip_mm`` and then
+  perfectly plastic at N = F_tot μ / n_s; its sliding slip is committed with the step.
 
 ``n_s`` follows the sheet as it draws in: the set of nodes under the holder, and n_s with it,
 is re-evaluated from the converged positions after every step (so it lags by one step, which
@@ -29,41 +29,43 @@ interior node; a quarter model then reproduces the full sheet's force per node, 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from fenicsx_drape.errors import ParameterError
+from fenicsx_drape.materials.base import MaterialLaw
 
 
 class BlankHolder:
     """Clamping plates with a circular opening and eq. 1 friction bars (a :class:`NodalTerm`).
 
     Args:
+        law: the friction bar's law (role ``"friction"``; force in N against slip in mm),
+            e.g. ``model.laws()["friction"]``; its conditions ``holder_force_N`` and
+            ``holder_nodes`` are set here, node by node and step by step.
         opening_radius_mm: radius of the plates' opening, R_o.
         force_N: holding force F_tot carried by the modelled part (F/4 for a quarter).
-        friction: textile-tool friction coefficient μ.
         clamp_stiffness_N_per_mm: penalty stiffness ``k_z`` holding the nodes at z = 0.
-        stick_slip_mm: elastic slip ``u_e`` of a friction bar before it slides.
         symmetry_axes: coordinate axes normal to the model's symmetry planes (0 for x = 0,
             1 for y = 0): nodes on them count with weight 1/2.
-        holder_friction: the effect ``holder_friction``; without it the plates only clamp.
     """
 
-    def __init__(self, *, opening_radius_mm: float, force_N: float, friction: float,
-                 clamp_stiffness_N_per_mm: float, stick_slip_mm: float = 0.05,
-                 symmetry_axes: tuple[int, ...] = (), holder_friction: bool = True) -> None:
+    def __init__(self, law: MaterialLaw, *, opening_radius_mm: float, force_N: float,
+                 clamp_stiffness_N_per_mm: float, symmetry_axes: tuple[int, ...] = ()) -> None:
+        if law.role != "friction":
+            raise ParameterError(f"BlankHolder: the law {type(law).__name__} has role "
+                                 f"{law.role!r}, expected 'friction'")
         for name, value in (("opening_radius_mm", opening_radius_mm), ("force_N", force_N),
-                            ("friction", friction), ("stick_slip_mm", stick_slip_mm),
                             ("clamp_stiffness_N_per_mm", clamp_stiffness_N_per_mm)):
             if not (np.isfinite(value) and value >= 0.0):
                 raise ParameterError(f"BlankHolder: {name} = {value} must be finite and >= 0")
-        if stick_slip_mm <= 0.0 or clamp_stiffness_N_per_mm <= 0.0:
-            raise ParameterError("BlankHolder: stick_slip_mm and clamp_stiffness_N_per_mm "
-                                 "must be positive")
+        if clamp_stiffness_N_per_mm <= 0.0:
+            raise ParameterError("BlankHolder: clamp_stiffness_N_per_mm must be positive")
+        self.law = law
         self.R_o = float(opening_radius_mm)
-        self.F = float(force_N) if holder_friction else 0.0
-        self.μ = float(friction)
+        self.F = float(force_N)
         self.k_z = float(clamp_stiffness_N_per_mm)
-        self.u_e = float(stick_slip_mm)
         self.symmetry_axes = tuple(symmetry_axes)
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
@@ -75,7 +77,7 @@ class BlankHolder:
         self.w = np.ones(len(self.X))
         for axis in self.symmetry_axes:
             self.w[np.abs(self.X[:, axis]) < 1e-9 * scale] *= 0.5
-        self.e_p = np.zeros(len(self.X))  # plastic (sliding) elongation of the bars, mm
+        self.state = self.law.initial_state(len(self.X))  # the bars' history (sliding slip)
         self._trial: tuple[np.ndarray, np.ndarray] | None = None
         self._hold(self.X)
 
@@ -84,49 +86,50 @@ class BlankHolder:
         self.under = np.hypot(x[:, 0], x[:, 1]) > self.R_o
         local = float(self.w[self.under & self.owned].sum())
         self.n_s = self.comm.allreduce(local) if self.comm is not None else local
-        self.f_y = self.w * self.F * self.μ / max(self.n_s, 1e-300)
+        self.bars = np.flatnonzero(self.under)
+        # Each bar's share of the force: a node on a symmetry plane is half a node.
+        self._law = dataclasses.replace(self.law, holder_force_N=self.F * self.w[self.bars],
+                                        holder_nodes=max(self.n_s, 1e-300))
+
+    @property
+    def yield_force_N(self) -> np.ndarray:
+        """The force (N) at which each node under the holder slides (0 elsewhere)."""
+        f_y = np.zeros(len(self.X))
+        f_y[self.bars] = np.broadcast_to(self._law.yield_force_N, self.bars.shape)
+        return f_y
 
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Clamping and friction forces (N) and stiffness −∂f/∂x (N/mm) at positions ``x``."""
-        n = len(x)
+        n, b = len(x), self.bars
         f = np.zeros((n, 3))
         K = np.zeros((n, 3, 3))
-        on = self.under
-        f[on, 2] = -self.k_z * x[on, 2]
-        K[on, 2, 2] = self.k_z
-        # Friction bars along the total in-plane displacement (eq. 1), return mapping on e_p.
-        u = x[:, :2] - self.X[:, :2]
+        f[b, 2] = -self.k_z * x[b, 2]
+        K[b, 2, 2] = self.k_z
+        # Friction bars along the total in-plane displacement (eq. 1).
+        u = x[b, :2] - self.X[b, :2]
         e = np.hypot(u[:, 0], u[:, 1])
-        k_f = self.f_y / self.u_e
-        N = k_f * (e - self.e_p)
-        sliding = np.abs(N) > self.f_y
-        N = np.where(sliding, np.sign(N) * self.f_y, N)
-        dN = np.where(sliding, 0.0, k_f)
-        e_p = np.where(sliding, e - N / np.where(k_f > 0, k_f, 1.0), self.e_p)
-        small = e < 1e-12 * self.u_e
+        N, dN, state = self._law.update(e, dt, self.state[b])
+        # N/e and the direction; at e → 0 the elastic bar is isotropic: N/e → dN/de.
+        small = e < 1e-9 * getattr(self.law, "holder_slip_mm", 1.0)
         û = u / np.where(small, 1.0, e)[:, None]
-        N_over_e = np.where(small, k_f, N / np.where(small, 1.0, e))
+        N_e = np.where(small, dN, N / np.where(small, 1.0, e))
         uu = np.einsum("ni,nj->nij", û, û)
-        K_bar = N_over_e[:, None, None] * (np.eye(2) - uu) + dN[:, None, None] * uu
-        bar = on & (self.f_y > 0.0)
-        f[bar, :2] = -N_over_e[bar, None] * u[bar]
-        K[bar, :2, :2] = K_bar[bar]
-        self._trial = (np.array(x, dtype=float), np.where(bar, e_p, self.e_p))
+        f[b, :2] = -N_e[:, None] * u
+        K[b, :2, :2] = N_e[:, None, None] * (np.eye(2) - uu) + dN[:, None, None] * uu
+        new = self.state.copy()
+        new[b] = state
+        self._trial = (np.array(x, dtype=float), new)
         return f, K
 
     def commit(self) -> None:
         """Keep the bars' sliding, then let the set under the holder follow the sheet."""
         if self._trial is None:
             return
-        x, self.e_p = self._trial
+        x, self.state = self._trial
+        self._trial = None
         self._hold(x)
-        self.e_p = np.where(self.under, self.e_p, 0.0)
+        self.state[~self.under] = 0.0  # a node that left the holder has lost its bar
 
     def revert(self) -> None:
         """Forget the trial sliding of a step that is cut back."""
         self._trial = None
-
-    def draw_in(self, x: np.ndarray) -> np.ndarray:
-        """Inward in-plane displacement (mm) of every node towards the axis."""
-        r0 = np.hypot(self.X[:, 0], self.X[:, 1])
-        return r0 - np.hypot(x[:, 0], x[:, 1])
