@@ -4,11 +4,14 @@ FROM debian:sid
 
 # The local build passes "-o Acquire::Check-Valid-Until=false" for a frozen archive mirror.
 ARG APT_OPTS=""
+# Open MPI may run as root in the container and start more ranks than cores
+# (Open MPI 4 reads the OMPI_ variable, Open MPI 5 and 6 the PRTE_ one).
 ENV DEBIAN_FRONTEND=noninteractive \
-    OMPI_MCA_rmaps_base_oversubscribe=1 \
-    PRTE_MCA_rmaps_default_mapping_policy=:oversubscribe \
     OMPI_ALLOW_RUN_AS_ROOT=1 \
     OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 \
+    OMPI_MCA_rmaps_base_oversubscribe=1 \
+    PRTE_MCA_mapby=:oversubscribe \
+    OMP_NUM_THREADS=1 \
     MPLBACKEND=Agg
 
 RUN apt-get $APT_OPTS update \
