@@ -1,0 +1,35 @@
+"""The truss finite-element core on DOLFINx (section 2.1 and section 4 of the paper).
+
+One call per task::
+
+    sheet = truss_sheet(size_mm=240, cell_mm=10, quarter=True)   # mesh (Gmsh → DOLFINx)
+    problem = TrussProblem(sheet, model, nodal_terms=[...])      # laws, options
+    problem.symmetry(); problem.fix("border", (0,), lambda t: 0.1 * t)
+    problem.run(duration_s=10.0, dt_s=0.5)                       # adaptive load stepping
+    res = problem.results()                                      # shear, wrinkling, totals
+"""
+
+from fenicsx_drape.fe.grid import TrussGrid, read_grid, sheet_grid, write_grid
+from fenicsx_drape.fe.mesh import Sheet, load_sheet, truss_sheet
+from fenicsx_drape.fe.output import FieldWriter, Results, grid_points, write_grid_csv
+from fenicsx_drape.fe.solver import SolverOptions, StepReport, TrussProblem
+from fenicsx_drape.fe.stepping import RunReport, run
+
+__all__ = [
+    "FieldWriter",
+    "Results",
+    "RunReport",
+    "Sheet",
+    "SolverOptions",
+    "StepReport",
+    "TrussGrid",
+    "TrussProblem",
+    "grid_points",
+    "load_sheet",
+    "read_grid",
+    "run",
+    "sheet_grid",
+    "truss_sheet",
+    "write_grid",
+    "write_grid_csv",
+]

@@ -1,0 +1,181 @@
+"""The woven sheet as a structured truss: nodes, bars and tags (plain NumPy).
+
+Section 2.1 and Fig. 1 of the paper: square unit cells of size Δ whose sides are tow bars
+along the warp (x) and weft (y) directions and whose two diagonals are shear bars. The two
+diagonals of a cell cross at its centre *without* a node (a node there would add a mechanism
+and halve the shear bars), so every bar is one two-node element.
+
+Frame (the measurement spec's): origin on the punch axis, x along warp, y along weft, the sheet
+in the plane z = 0. A full sheet is centred on the origin; a quarter model covers x, y >= 0 and
+its edges x = 0 and y = 0 are symmetry planes.
+
+Node flags are bits, so a corner node can be on two edges at once:
+
+- :data:`SYMMETRY_X` — on the symmetry plane x = 0 (u_x = 0 there),
+- :data:`SYMMETRY_Y` — on the symmetry plane y = 0 (u_y = 0 there),
+- :data:`BORDER` — on a free edge of the sheet.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+
+from fenicsx_drape.errors import DrapeInputError
+
+# Bar kinds (cell tags): tows along warp and weft, and the two shear diagonals.
+WARP, WEFT, DIAGONAL_PLUS, DIAGONAL_MINUS = 1, 2, 3, 4
+BAR_KINDS = {WARP: "warp", WEFT: "weft", DIAGONAL_PLUS: "diagonal_plus",
+             DIAGONAL_MINUS: "diagonal_minus"}
+
+# Node flags (vertex tags), combined bitwise.
+SYMMETRY_X, SYMMETRY_Y, BORDER = 1, 2, 4
+NODE_FLAGS = {SYMMETRY_X: "symmetry_x", SYMMETRY_Y: "symmetry_y", BORDER: "border"}
+
+
+def flag_name(value: int) -> str:
+    """The name of a combination of node flags, e.g. ``"symmetry_x+border"``."""
+    return "+".join(name for bit, name in NODE_FLAGS.items() if value & bit)
+
+
+@dataclasses.dataclass(frozen=True)
+class TrussGrid:
+    """A structured truss sheet: ``(nx + 1) × (ny + 1)`` nodes, ``nx × ny`` unit cells.
+
+    Node ``(i, j)`` sits at ``origin_mm + (i, j) · cell_mm`` and has index ``j (nx + 1) + i``.
+    """
+
+    nx: int  # unit cells along x (warp)
+    ny: int  # unit cells along y (weft)
+    cell_mm: float  # unit-cell size Δ (mm)
+    origin_mm: tuple[float, float]  # position of node (0, 0) (mm)
+    quarter: bool  # the edges x = 0 and y = 0 are symmetry planes
+
+    @property
+    def ij(self) -> np.ndarray:
+        """Grid indices ``(i, j)`` of every node, shaped (n_nodes, 2)."""
+        j, i = np.divmod(np.arange((self.nx + 1) * (self.ny + 1)), self.nx + 1)
+        return np.column_stack([i, j])
+
+    @property
+    def nodes(self) -> np.ndarray:
+        """Node positions (n_nodes, 3) in mm, z = 0."""
+        xy = self.ij * self.cell_mm + np.asarray(self.origin_mm)
+        return np.column_stack([xy, np.zeros(len(xy))])
+
+    def node(self, i: np.ndarray | int, j: np.ndarray | int) -> np.ndarray | int:
+        """Index of node ``(i, j)``."""
+        return np.asarray(j) * (self.nx + 1) + np.asarray(i)
+
+    @property
+    def bars(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bars as node pairs (n_bars, 2) and their kinds (n_bars,)."""
+        nx, ny = self.nx, self.ny
+        ix, jx = np.meshgrid(np.arange(nx), np.arange(ny + 1), indexing="ij")
+        iy, jy = np.meshgrid(np.arange(nx + 1), np.arange(ny), indexing="ij")
+        ic, jc = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+        n = self.node
+        pairs = [
+            (n(ix, jx), n(ix + 1, jx), WARP),
+            (n(iy, jy), n(iy, jy + 1), WEFT),
+            (n(ic, jc), n(ic + 1, jc + 1), DIAGONAL_PLUS),
+            (n(ic + 1, jc), n(ic, jc + 1), DIAGONAL_MINUS),
+        ]
+        bars = np.concatenate([np.column_stack([a.ravel(), b.ravel()]) for a, b, _ in pairs])
+        kinds = np.concatenate([np.full(a.size, k, dtype=np.int32) for a, _, k in pairs])
+        return bars.astype(np.int64), kinds
+
+    @property
+    def node_flags(self) -> np.ndarray:
+        """Bitwise node flags (n_nodes,): symmetry planes and free border."""
+        i, j = self.ij.T
+        on_low = (i == 0, j == 0)
+        on_high = (i == self.nx, j == self.ny)
+        flags = np.zeros(len(i), dtype=np.int32)
+        if self.quarter:
+            flags |= np.where(on_low[0], SYMMETRY_X, 0)
+            flags |= np.where(on_low[1], SYMMETRY_Y, 0)
+            flags |= np.where(on_high[0] | on_high[1], BORDER, 0)
+        else:
+            flags |= np.where(on_low[0] | on_low[1] | on_high[0] | on_high[1], BORDER, 0)
+        return flags
+
+
+def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = False,
+               ) -> TrussGrid:
+    """The square sheet of side ``size_mm``, or its quarter ``x, y >= 0``.
+
+    The number of cells along a half side is ``round(size_mm / 2 / cell_mm)`` (at least 1),
+    and Δ is adjusted so that they fit exactly; the full sheet has a node on the punch axis.
+
+    Args:
+        size_mm: Side of the square sheet (mm).
+        cell_mm: Requested unit-cell size Δ (mm).
+        quarter: Model one quarter with symmetry edges on x = 0 and y = 0.
+    """
+    if not (math.isfinite(size_mm) and size_mm > 0):
+        raise DrapeInputError(f"sheet size_mm = {size_mm} must be a positive number")
+    if not (math.isfinite(cell_mm) and 0 < cell_mm <= size_mm / 2):
+        raise DrapeInputError(f"cell_mm = {cell_mm} must be in (0, size_mm / 2 = {size_mm / 2}]")
+    n_half = max(1, round(size_mm / 2 / cell_mm))
+    Δ = size_mm / 2 / n_half
+    if quarter:
+        return TrussGrid(n_half, n_half, Δ, (0.0, 0.0), True)
+    return TrussGrid(2 * n_half, 2 * n_half, Δ, (-size_mm / 2, -size_mm / 2), False)
+
+
+def write_grid(grid: TrussGrid, path: str | Path) -> Path:
+    """Write the truss with meshio (``.msh``, ``.xdmf``, ``.vtu``, ... by the file suffix).
+
+    Cell data ``kind`` holds the bar kinds, point data ``flags`` the node flags; a ``.msh``
+    file also gets them as physical groups (``gmsh:physical``).
+    """
+    import meshio
+
+    path = Path(path)
+    bars, kinds = grid.bars
+    cell_data = {"kind": [kinds]}
+    if path.suffix == ".msh":
+        cell_data["gmsh:physical"] = [kinds]
+        cell_data["gmsh:geometrical"] = [kinds]
+    mesh = meshio.Mesh(grid.nodes, [("line", bars)], point_data={"flags": grid.node_flags},
+                       cell_data=cell_data)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mesh.write(path)
+    return path
+
+
+def read_grid(path: str | Path) -> TrussGrid:
+    """Read a truss sheet written by :func:`write_grid` (or any structured truss like it).
+
+    The grid is recovered from the node positions and checked against the file's bars.
+    """
+    import meshio
+
+    path = Path(path)
+    if not path.exists():
+        raise DrapeInputError(f"{path}: no such mesh file")
+    try:
+        mesh = meshio.read(path)
+    except Exception as err:  # meshio raises many kinds of errors on bad files
+        raise DrapeInputError(f"{path}: cannot read the mesh ({err})") from err
+    x = np.asarray(mesh.points, dtype=float)
+    lines = [c.data for c in mesh.cells if c.type == "line"]
+    if not lines or len(x) < 4:
+        raise DrapeInputError(f"{path}: no line cells; not a truss sheet")
+    bars = np.concatenate(lines)
+    lo, hi = x[:, :2].min(axis=0), x[:, :2].max(axis=0)
+    Δ = float(np.min(np.linalg.norm(x[bars[:, 1], :2] - x[bars[:, 0], :2], axis=1)))
+    nx, ny = (round(float(v)) for v in (hi - lo) / Δ)
+    quarter = bool(np.allclose(lo, 0.0))
+    grid = TrussGrid(nx, ny, Δ, (float(lo[0]), float(lo[1])), quarter)
+    expected_bars, _ = grid.bars
+    off_grid = np.abs((x[:, :2] - lo) / Δ - np.round((x[:, :2] - lo) / Δ)).max()
+    if (len(x) != (nx + 1) * (ny + 1) or len(bars) != len(expected_bars) or off_grid > 1e-6
+            or np.abs(x[:, 2]).max() > 1e-9 * Δ):
+        raise DrapeInputError(f"{path}: {len(x)} nodes and {len(bars)} bars do not form a "
+                              f"{nx} × {ny} woven truss with Δ = {Δ:g} mm")
+    return grid

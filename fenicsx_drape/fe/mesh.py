@@ -1,0 +1,158 @@
+"""The truss sheet as a DOLFINx mesh: built with Gmsh, distributed over MPI ranks.
+
+The bars are interval cells embedded in 3D. Up to eight bars meet at a node (four tows, four
+diagonals), so the mesh is created with ``max_facet_to_cell_links=8``; with DOLFINx >= 0.10
+this distributes the branching truss without duplicating any node (the global vertex count
+is the same on any number of ranks).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from mpi4py import MPI
+
+import dolfinx
+import numpy as np
+from dolfinx.io import gmsh as gmshio
+
+from fenicsx_drape.fe.grid import BAR_KINDS, TrussGrid, flag_name, read_grid, sheet_grid
+
+MAX_BARS_AT_NODE = 8
+
+
+@dataclasses.dataclass
+class Sheet:
+    """A truss sheet on DOLFINx: the mesh, its tags and the structured grid it came from."""
+
+    mesh: dolfinx.mesh.Mesh  # interval cells in 3D, the reference (flat) configuration
+    bar_tags: dolfinx.mesh.MeshTags  # cell tags: WARP, WEFT, DIAGONAL_PLUS, DIAGONAL_MINUS
+    node_tags: dolfinx.mesh.MeshTags | None  # vertex tags: SYMMETRY_X | SYMMETRY_Y | BORDER
+    grid: TrussGrid | None  # the structured grid (same on every rank); None for a free truss
+    cell_mm: float  # unit-cell size Δ (mm): a bar stands for n_t = l_t Δ tows
+
+    @property
+    def num_nodes_global(self) -> int:
+        """Number of nodes of the whole sheet (all ranks)."""
+        return self.mesh.topology.index_map(0).size_global
+
+
+def _gmsh_model(nodes: np.ndarray, bars: np.ndarray, kinds: np.ndarray, flags: np.ndarray):
+    """A Gmsh model holding the truss as discrete entities (no fragmenting, no new nodes)."""
+    import gmsh
+
+    model = gmsh.model
+    model.add("truss")
+    # All nodes on the first curve; the other curves use them (node tags start at 1).
+    for kind in BAR_KINDS:
+        model.addDiscreteEntity(1, kind)
+    model.mesh.addNodes(1, 1, np.arange(1, len(nodes) + 1), nodes.ravel())
+    first = 1
+    for kind, name in BAR_KINDS.items():
+        sel = bars[kinds == kind] + 1
+        tags = np.arange(first, first + len(sel))
+        first += len(sel)
+        model.mesh.addElementsByType(kind, 1, tags, sel.ravel())  # type 1: 2-node line
+        if len(sel):
+            model.addPhysicalGroup(1, [kind], kind, name=name)
+    # One point entity per flagged node, grouped by flag value.
+    for value in np.unique(flags[flags > 0]):
+        points = []
+        for node in np.flatnonzero(flags == value):
+            tag = model.addDiscreteEntity(0)
+            model.mesh.addElementsByType(tag, 15, [first], [node + 1])  # type 15: point
+            first += 1
+            points.append(tag)
+        model.addPhysicalGroup(0, points, int(value), name=flag_name(int(value)))
+    return model
+
+
+def _partitioner():
+    return dolfinx.mesh.create_cell_partitioner(dolfinx.mesh.GhostMode.none, MAX_BARS_AT_NODE)
+
+
+def grid_to_sheet(grid: TrussGrid, comm: MPI.Comm = MPI.COMM_WORLD) -> Sheet:
+    """Build the Gmsh model of ``grid`` on rank 0 and distribute it as a DOLFINx mesh."""
+    if comm.rank == 0:
+        bars, kinds = grid.bars
+        data = (grid.nodes, bars, kinds, grid.node_flags)
+    else:
+        data = None
+    mesh, bar_tags, node_tags = _distribute(data, comm)
+    return Sheet(mesh, bar_tags, node_tags, grid, grid.cell_mm)
+
+
+def truss_mesh(nodes: np.ndarray, bars: np.ndarray, kinds: np.ndarray, cell_mm: float,
+               comm: MPI.Comm = MPI.COMM_WORLD) -> Sheet:
+    """Any truss (not a woven grid), e.g. for tests: bars are node pairs, kinds the bar kinds.
+
+    Args:
+        nodes: Node positions (n, 3) in mm (read on rank 0).
+        bars: Node pairs (m, 2).
+        kinds: Kind of each bar (WARP or WEFT: tow law; DIAGONAL_*: shear law).
+        cell_mm: Unit-cell size Δ a bar stands for (n_t = l_t Δ tows).
+        comm: MPI communicator.
+    """
+    data = None
+    if comm.rank == 0:
+        data = (np.asarray(nodes, float), np.asarray(bars, np.int64),
+                np.asarray(kinds, np.int32), np.zeros(len(nodes), np.int32))
+    mesh, bar_tags, _ = _distribute(data, comm)
+    return Sheet(mesh, bar_tags, None, None, float(cell_mm))
+
+
+def _distribute(data, comm: MPI.Comm):
+    """Gmsh model of ``data = (nodes, bars, kinds, flags)`` on rank 0 → DOLFINx mesh, tags."""
+    import gmsh
+
+    model = None
+    if comm.rank == 0:
+        initialised = gmsh.isInitialized()
+        if not initialised:
+            gmsh.initialize(interruptible=False)
+        gmsh.option.setNumber("General.Terminal", 0)
+        model = _gmsh_model(*data)
+    try:
+        data = gmshio.model_to_mesh(model, comm, 0, gdim=3, partitioner=_partitioner(),
+                                    max_facet_to_cell_links=MAX_BARS_AT_NODE)
+    finally:
+        if comm.rank == 0:
+            gmsh.model.remove()
+            if not initialised:
+                gmsh.finalize()
+    data.mesh.topology.create_connectivity(0, 1)
+    return data.mesh, data.cell_tags, data.facet_tags
+
+
+def truss_sheet(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = False,
+                comm: MPI.Comm = MPI.COMM_WORLD) -> Sheet:
+    """The woven sheet (or its symmetric quarter) as a distributed truss mesh.
+
+    Args:
+        size_mm: Side of the square sheet (mm).
+        cell_mm: Unit-cell size Δ (mm), adjusted so that a whole number of cells fits a half
+            side (see :func:`~fenicsx_drape.fe.grid.sheet_grid`).
+        quarter: Model the quarter x, y >= 0 with symmetry edges on x = 0 and y = 0.
+        comm: MPI communicator.
+
+    Example::
+
+        sheet = truss_sheet(240, 10, quarter=True)
+    """
+    grid = sheet_grid(size_mm, cell_mm, quarter) if comm.rank == 0 else None
+    return grid_to_sheet(comm.bcast(grid, root=0), comm)
+
+
+def load_sheet(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD) -> Sheet:
+    """Read a sheet written by :func:`~fenicsx_drape.fe.grid.write_grid` (``.msh``, ``.xdmf``)."""
+    grid, error = None, None
+    if comm.rank == 0:
+        try:
+            grid = read_grid(path)
+        except Exception as err:  # raised again on every rank below
+            error = err
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        raise error
+    return grid_to_sheet(comm.bcast(grid, root=0), comm)

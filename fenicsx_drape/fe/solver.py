@@ -1,0 +1,453 @@
+"""The implicit truss solver: one load step with PETSc SNES, driven by hand.
+
+:class:`TrussProblem` owns the displacement, the material state at the quadrature points, the
+Dirichlet conditions and the nodal terms (contact, blank holder: :mod:`fenicsx_drape.nodal`).
+The SNES callbacks evaluate the material laws at every iterate and assemble the residual and
+the consistent Jacobian; a converged step commits the history of the laws and of the nodal
+terms, a failed one reverts both. Load stepping with cut-back is in
+:mod:`~fenicsx_drape.fe.stepping`, outputs in :mod:`~fenicsx_drape.fe.output`.
+
+Nodes are the blocks of the vector P1 space in its local order (owned nodes first, then
+ghosts); that is the order of every nodal array this module hands out or takes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import itertools
+from collections.abc import Callable, Mapping, Sequence
+
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import dolfinx
+import dolfinx.fem.petsc as fem_petsc
+import numpy as np
+
+from fenicsx_drape import nodal
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
+from fenicsx_drape.fe.kinematics import truss_forms
+from fenicsx_drape.fe.mesh import Sheet
+from fenicsx_drape.fe.state import MaterialState, StrainError
+from fenicsx_drape.materials.base import MaterialLaw
+
+_ids = itertools.count()
+
+
+@dataclasses.dataclass
+class SolverOptions:
+    """Options of the truss model and of its solver.
+
+    The first four are part of the *model* (they change results); halving the last two and
+    reporting the change is how their effect is stated (see ``benchmarks/bench_fe.py``).
+    """
+
+    tows_per_mm: float = 0.71  # l_t, tows per mm in warp and weft (Table 1: 7.1 tows/cm)
+    # Tow bars on a free edge or a symmetry edge stand for half a strip of tows, so a sheet
+    # of width W holds l_t·W tows (a patch pulled along the tows gives the tensile force).
+    edge_tow_factor: float = 0.5
+    buckled_tow_stiffness_N: float = 0.04  # residual stiffness of buckled tows (N/tow), state.py
+    drag_N_per_mm: float = 0.0  # pseudo-viscous drag c (u - u_n) per node: numerical damping
+    snes_atol: float = 1e-8  # absolute residual tolerance (N)
+    snes_rtol: float = 1e-9  # relative residual tolerance
+    snes_max_it: int = 25
+    line_search: str = "bt"  # PETSc SNES line search: bt, basic, l2, cp
+    linear_solver: str = "mumps"  # LU factorisation package (mumps, superlu_dist, petsc)
+    predictor: bool = True  # extrapolate the last increment, then let nodal terms project
+    petsc_options: dict = dataclasses.field(default_factory=dict)  # extra SNES/KSP options
+
+    def __post_init__(self):
+        for name in ("tows_per_mm", "snes_atol"):
+            if not getattr(self, name) > 0:
+                raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be > 0")
+        for name in ("edge_tow_factor", "buckled_tow_stiffness_N", "drag_N_per_mm"):
+            if not getattr(self, name) >= 0:
+                raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be "
+                                      ">= 0")
+
+
+@dataclasses.dataclass(frozen=True)
+class StepReport:
+    """How one load step went."""
+
+    time_s: float  # time at the end of the step
+    dt_s: float  # step length
+    converged: bool
+    iterations: int  # SNES (Newton) iterations
+    reason: str  # SNES converged/diverged reason
+
+
+_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
+
+Where = str | np.ndarray | Callable[[np.ndarray], np.ndarray]
+
+
+class TrussProblem:
+    """The truss sheet, its laws, constraints and nodal terms, solved step by step.
+
+    Args:
+        sheet: The mesh and its tags (:func:`~fenicsx_drape.fe.mesh.truss_sheet`).
+        model: A :class:`~fenicsx_drape.model.Model` (its ``laws(conditions)`` gives the law
+            of each role) or a mapping ``{"tow": law, "shear": law}``.
+        nodal_terms: Contact, holder or other :class:`~fenicsx_drape.nodal.NodalTerm` s.
+        options: Model and solver options.
+        conditions: Test conditions handed to ``model.laws`` (e.g. ``temperature_C``).
+
+    Example::
+
+        problem = TrussProblem(sheet, default_model())
+        problem.symmetry()
+        problem.fix("border", (0,), lambda t: 0.1 * t)
+        problem.run(10.0, 0.5)
+        res = problem.results()
+    """
+
+    def __init__(self, sheet: Sheet, model, nodal_terms: Sequence[nodal.NodalTerm] = (),
+                 options: SolverOptions | None = None,
+                 conditions: Mapping[str, float] | None = None):
+        self.sheet = sheet
+        self.options = options = options or SolverOptions()
+        laws: Mapping[str, MaterialLaw] = (model.laws(conditions) if hasattr(model, "laws")
+                                           else dict(model))
+        self.laws = laws
+        mesh = sheet.mesh
+        self.comm: MPI.Comm = mesh.comm
+        V = dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (3,)))
+        self.V = V
+        self.u = dolfinx.fem.Function(V, name="displacement_mm")
+        self._u_n = self.u.x.array.copy()  # last converged displacement
+        self._du_n: np.ndarray | None = None  # last converged increment (predictor)
+        index_map = V.dofmap.index_map
+        self.num_owned = index_map.size_local
+        self.X = V.tabulate_dof_coordinates().copy()  # reference node positions (mm)
+        self.owned = np.arange(len(self.X)) < self.num_owned
+        self.node_flags = self._node_flags()
+
+        kinds, tows = self._bars()
+        self.state = MaterialState(self.u, kinds, tows, laws, options.buckled_tow_stiffness_N)
+        residual, jacobian = truss_forms(self.u, self.state.S, self.state.dS)
+        self._F = dolfinx.fem.form(residual)
+        self._J = dolfinx.fem.form(jacobian)
+        self._fixes: list[tuple[np.ndarray, tuple[int, ...], Callable]] = []
+        self._bcs: list[dolfinx.fem.DirichletBC] = []
+        self._bc_values: list[tuple[dolfinx.fem.Function, np.ndarray, np.ndarray]] = []
+        self.constrained = np.zeros((len(self.X), 3), dtype=bool)
+
+        self.nodal_terms = list(nodal_terms)
+        for term in self.nodal_terms:
+            term.bind(self.X.copy(), self.owned.copy(), self.comm)
+        self.t = 0.0
+        self.dt = 0.0
+        self.steps: list[StepReport] = []
+        self._evaluated_at: np.ndarray | None = None
+        self._nodal_f = np.zeros((len(self.X), 3))
+        self._nodal_K = np.zeros((len(self.X), 3, 3))
+        self._setup_snes()
+
+    # -- geometry and selections -------------------------------------------------------
+
+    def _node_flags(self) -> np.ndarray:
+        flags = np.zeros(len(self.X), dtype=np.int32)
+        tags = self.sheet.node_tags
+        if tags is not None:
+            for value in np.unique(tags.values):
+                vertices = tags.find(value)
+                nodes = dolfinx.fem.locate_dofs_topological(self.V, 0, vertices)
+                flags[nodes] |= int(value)
+        return flags
+
+    def _bars(self) -> tuple[np.ndarray, np.ndarray]:
+        """Kind and number of tows ``n_t`` of every owned bar."""
+        mesh, grid, opts = self.sheet.mesh, self.sheet.grid, self.options
+        n = mesh.topology.index_map(1).size_local
+        kinds = np.zeros(n, dtype=np.int32)
+        tags = self.sheet.bar_tags
+        owned = tags.indices < n
+        kinds[tags.indices[owned]] = tags.values[owned]
+        if (kinds == 0).any():
+            raise DrapeInputError("the sheet has bars without a kind tag")
+        # n_t = l_t Δ (NOTES.md: the printed l_t/Δ is a typo); half on edge tows.
+        tows = np.full(n, opts.tows_per_mm * self.sheet.cell_mm)
+        if grid is None:
+            return kinds, tows
+        nodes = mesh.geometry.dofmap[:n]
+        mid = mesh.geometry.x[nodes].mean(axis=1)
+        ij = (mid[:, :2] - np.asarray(grid.origin_mm)) / grid.cell_mm
+        j, i = np.round(ij[:, 1]), np.round(ij[:, 0])
+        edge = ((kinds == WARP) & ((j == 0) | (j == grid.ny))) | (
+            (kinds == WEFT) & ((i == 0) | (i == grid.nx)))
+        tows[edge] *= opts.edge_tow_factor
+        return kinds, tows
+
+    def nodes(self, where: Where) -> np.ndarray:
+        """Boolean mask of the local nodes selected by ``where``.
+
+        ``where`` is ``"all"``, a node flag name (``"symmetry_x"``, ``"symmetry_y"``,
+        ``"border"``), a boolean mask over the local nodes, or a function of the reference
+        positions ``X`` (n, 3) returning such a mask.
+        """
+        if isinstance(where, str):
+            if where == "all":
+                return np.ones(len(self.X), dtype=bool)
+            bits = {name: bit for bit, name in NODE_FLAGS.items()}
+            if where not in bits:
+                raise DrapeInputError(f"unknown node set {where!r} (choose from all, "
+                                      f"{', '.join(bits)})")
+            return (self.node_flags & bits[where]) != 0
+        mask = np.asarray(where(self.X) if callable(where) else where, dtype=bool)
+        if mask.shape != (len(self.X),):
+            raise DrapeInputError(f"node selection shaped {mask.shape}, expected "
+                                  f"({len(self.X)},) (the local nodes)")
+        return mask
+
+    def positions(self) -> np.ndarray:
+        """Current positions ``x = X + u`` of the local nodes (n, 3) in mm."""
+        return self.X + self.u.x.array.reshape(-1, 3)
+
+    # -- Dirichlet conditions ----------------------------------------------------------
+
+    def fix(self, where: Where, components: Sequence[int] = (0, 1, 2),
+            value: float | Sequence[float] | Callable = 0.0) -> None:
+        """Prescribe displacement components (0 = x, 1 = y, 2 = z) on a node set.
+
+        Args:
+            where: The nodes (see :meth:`nodes`).
+            components: Which displacement components are prescribed.
+            value: Displacement in mm: a number or one per component, or a function of time
+                ``value(t)``, or of time and reference positions ``value(t, X)`` returning an
+                array broadcastable to (n_selected, len(components)).
+        """
+        components = tuple(int(c) for c in components)
+        if not components or any(c not in (0, 1, 2) for c in components):
+            raise DrapeInputError(f"components {components} must be among 0, 1, 2 (x, y, z)")
+        mask = self.nodes(where)
+        if callable(value):
+            f = value
+            if len(inspect.signature(f).parameters) == 1:
+                def f(t, X, g=value):
+                    return g(t)
+        else:
+            constant = np.asarray(value, dtype=float)
+
+            def f(t, X, c=constant):
+                return c
+        self._fixes.append((mask, components, f))
+        self._build_bcs()
+
+    def symmetry(self) -> None:
+        """The symmetry conditions of a quarter model: u_x = 0 on x = 0, u_y = 0 on y = 0."""
+        self.fix("symmetry_x", (0,))
+        self.fix("symmetry_y", (1,))
+
+    def _build_bcs(self) -> None:
+        constrained = np.zeros((len(self.X), 3), dtype=bool)
+        for mask, components, _ in self._fixes:
+            for c in components:
+                constrained[mask, c] = True
+        self.constrained = constrained
+        self._bcs, self._bc_values = [], []
+        for c in range(3):
+            Vc, parent = self.V.sub(c).collapse()
+            to_collapsed = np.empty(len(self.X), dtype=np.int32)
+            parent = np.asarray(parent).ravel()
+            to_collapsed[(parent - c) // 3] = np.arange(len(parent))
+            nodes_c = np.flatnonzero(constrained[:, c]).astype(np.int32)
+            g = dolfinx.fem.Function(Vc)
+            dofs = [3 * nodes_c + c, to_collapsed[nodes_c]]
+            self._bcs.append(dolfinx.fem.dirichletbc(g, dofs, self.V.sub(c)))
+            self._bc_values.append((g, nodes_c, to_collapsed))
+
+    def _set_bc_values(self, t: float) -> None:
+        """Write the prescribed displacements at time ``t`` into the conditions and ``u``."""
+        for c, (g, _, to_collapsed) in enumerate(self._bc_values):
+            for mask, components, f in self._fixes:
+                if c in components:
+                    nodes = np.flatnonzero(mask)
+                    values = np.broadcast_to(f(t, self.X[nodes]), (len(nodes), len(components)))
+                    g.x.array[to_collapsed[nodes]] = values[:, components.index(c)]
+        for bc in self._bcs:
+            bc.set(self.u.x.array)
+
+    # -- SNES ---------------------------------------------------------------------------
+
+    def _setup_snes(self) -> None:
+        opts = self.options
+        self._A = fem_petsc.create_matrix(self._J)
+        self._b = fem_petsc.create_vector(self.V)
+        self._x = fem_petsc.create_vector(self.V)
+        snes = PETSc.SNES().create(self.comm)
+        prefix = f"drape_truss_{next(_ids)}_"
+        snes.setOptionsPrefix(prefix)
+        petsc_opts = {
+            "snes_type": "newtonls",
+            "snes_linesearch_type": opts.line_search,
+            "snes_atol": opts.snes_atol,
+            "snes_rtol": opts.snes_rtol,
+            "snes_stol": 0.0,
+            "snes_max_it": opts.snes_max_it,
+            "ksp_type": "preonly",
+            "pc_type": "lu",
+            "pc_factor_mat_solver_type": opts.linear_solver,
+            **opts.petsc_options,
+        }
+        options = PETSc.Options()
+        for key, val in petsc_opts.items():
+            options[prefix + key] = val
+        snes.setFromOptions()
+        for key in petsc_opts:
+            options.delValue(prefix + key)
+        snes.setFunction(self._residual, self._b)
+        snes.setJacobian(self._jacobian, self._A)
+        self.snes = snes
+
+    def _evaluate(self, x: PETSc.Vec) -> bool:
+        """Displacement, material state and nodal terms at the iterate ``x``.
+
+        Returns False on every rank when a bar collapsed or a law failed on any rank.
+        """
+        x.ghostUpdate(PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+        with x.localForm() as xl:
+            self.u.x.array[:] = xl.array_r
+        self._evaluated_at = self.u.x.array.copy()
+        try:
+            self.state.evaluate(self.dt)
+            ok = True
+        except (StrainError, ValueError):
+            ok = False
+        if not self.comm.allreduce(ok, op=MPI.LAND):
+            self._evaluated_at = None
+            return False
+        n = len(self.X)
+        f, K = np.zeros((n, 3)), np.zeros((n, 3, 3))
+        xpos = self.positions()
+        for term in self.nodal_terms:
+            ft, Kt = term.forces(xpos, self.t + self.dt, self.dt)
+            f += ft
+            K += Kt
+        c = self.options.drag_N_per_mm
+        if c:
+            f -= c * (self.u.x.array - self._u_n).reshape(-1, 3)
+            K += c * np.eye(3)
+        free = ~self.constrained
+        self._nodal_f = f * free
+        self._nodal_K = K * free[:, :, None] * free[:, None, :]
+        return True
+
+    def _residual(self, snes, x, b) -> None:
+        if not self._evaluate(x):
+            snes.setFunctionDomainError()
+            return
+        with b.localForm() as bl:
+            bl.set(0.0)
+        fem_petsc.assemble_vector(b, self._F)
+        fem_petsc.apply_lifting(b, [self._J], [self._bcs], x0=[x], alpha=-1.0)
+        b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+        b.array_w[:] -= self._nodal_f[: self.num_owned].ravel()
+        fem_petsc.set_bc(b, self._bcs, x, -1.0)
+
+    def _stale(self, x: PETSc.Vec) -> bool:
+        """Whether ``x`` differs from the last evaluated iterate on any rank."""
+        n = 3 * self.num_owned
+        last = self._evaluated_at
+        changed = last is None or not np.array_equal(x.array_r[:n], last[:n])
+        return self.comm.allreduce(changed, op=MPI.LOR)
+
+    def _jacobian(self, snes, x, A, P) -> None:
+        if self._stale(x):
+            self._evaluate(x)
+        A.zeroEntries()
+        fem_petsc.assemble_matrix(A, self._J, bcs=self._bcs)
+        A.assemble(PETSc.Mat.AssemblyType.FLUSH)
+        n = self.num_owned
+        if self.nodal_terms or self.options.drag_N_per_mm:
+            A.setValuesBlockedLocalCSR(np.arange(n + 1, dtype=PETSc.IntType),
+                                       np.arange(n, dtype=PETSc.IntType),
+                                       self._nodal_K[:n].ravel(), PETSc.InsertMode.ADD_VALUES)
+        A.assemble()
+
+    # -- stepping -----------------------------------------------------------------------
+
+    def step(self, t: float) -> StepReport:
+        """Solve for the equilibrium at time ``t`` (s) from the last converged state.
+
+        A converged step commits the history of the laws and nodal terms; a failed one
+        restores the last converged state (nothing is committed) and reports it.
+        """
+        dt = t - self.t
+        if not dt > 0:
+            raise ValueError(f"step to t = {t} s is not after the current time {self.t} s")
+        self.dt = dt
+        u = self.u.x.array
+        u[:] = self._u_n
+        if self.options.predictor and self._du_n is not None:
+            u += self._du_n * (dt / self._dt_n)
+        self._set_bc_values(t)
+        if self.options.predictor and self.nodal_terms:
+            projected = nodal.predict(self.nodal_terms, self.positions(), t) - self.X
+            free = ~self.constrained.ravel()
+            u[free] = projected.ravel()[free]
+        self.u.x.scatter_forward()
+        with self._x.localForm() as xl:
+            xl.array_w[:] = u
+        try:
+            self.snes.solve(None, self._x)
+            reason = self.snes.getConvergedReason()
+        except PETSc.Error:
+            reason = PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
+        iterations = self.snes.getIterationNumber()
+        converged = reason > 0
+        if converged:
+            if self._stale(self._x):
+                self._evaluate(self._x)
+            self.state.commit()
+            for term in self.nodal_terms:
+                term.commit()
+            self._du_n = self.u.x.array - self._u_n
+            self._dt_n = dt
+            self._u_n = self.u.x.array.copy()
+            self.t = t
+        else:
+            self.revert()
+        report = StepReport(t, dt, converged, iterations, _REASONS.get(reason, str(reason)))
+        self.steps.append(report)
+        return report
+
+    def revert(self) -> None:
+        """Return to the last converged state (displacement, laws, nodal terms)."""
+        self.u.x.array[:] = self._u_n
+        self._evaluated_at = None
+        self.state.revert()
+        for term in self.nodal_terms:
+            term.revert()
+
+    def run(self, duration_s: float, dt_s: float, **kwargs):
+        """Step to ``t + duration_s`` with adaptive steps; see :func:`~.stepping.run`."""
+        from fenicsx_drape.fe.stepping import run
+
+        return run(self, self.t + duration_s, dt_s, **kwargs)
+
+    # -- forces and results -------------------------------------------------------------
+
+    def reaction_force(self, where: Where) -> np.ndarray:
+        """Total force (3,) in N that the constraints exert on the selected nodes.
+
+        It is the internal force of the bars minus the nodal-term forces at those nodes, at
+        the last evaluated state, summed over all ranks.
+        """
+        mask = self.nodes(where)[: self.num_owned]
+        b = fem_petsc.assemble_vector(self._F)
+        b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+        r = b.array_r.reshape(-1, 3) - self._nodal_f[: self.num_owned]
+        b.destroy()
+        return self.comm.allreduce(r[mask].sum(axis=0), op=MPI.SUM)
+
+    def results(self):
+        """Node positions, shear per unit cell, wrinkling per tow and totals (all ranks).
+
+        See :func:`~fenicsx_drape.fe.output.results`.
+        """
+        from fenicsx_drape.fe.output import results
+
+        return results(self)
