@@ -1,0 +1,457 @@
+"""Which physical effect is a model missing? (``drape diagnose``, contract 2).
+
+The procedure follows the diagnosis contract of ``shared/spec/measurements.md``:
+
+1. **Baseline.** The model is fitted to the bundle (:func:`fenicsx_drape.fit.fit`) and compared
+   with every test (:mod:`fenicsx_drape.compare`): per-test RMSE, the noise floor (from
+   ``force_sd_N`` or model-free), ``normalised`` and ``where`` the error sits.
+2. **Candidates.** Every catalogued effect not in the model (:data:`fenicsx_drape.effects.
+   EFFECTS`), and every user law the model's plugins register, is a candidate. An effect whose
+   prerequisite is missing is tried together with it, under the joined name
+   (``rate_dependence+temperature_dependence``).
+3. **Untestable.** Each candidate is first added at its default strength to the fitted
+   baseline and the tests are simulated with and without it. When the change is below
+   :data:`UNTESTABLE_BELOW` times the noise (normalised like the error), the bundle cannot
+   exercise the effect: it is reported with the reason and not ranked.
+4. **Refit.** A testable candidate is refitted, warm-started from the baseline's fit, over its
+   own parameters and those of the law it acts on; ``error_after`` is its error.
+5. **Held-out error.** Baseline and candidates are judged on rows their fit did not see. The
+   scheme (stated in the report): for a test kind with several tests, *leave one test out*
+   (fit on all other tests, predict the one left out: an unseen speed or temperature); for a
+   kind with a single test, *leave one block out*: its rows are cut into
+   :data:`BLOCKS` consecutive blocks in time, each predicted by a fit that gave that block's
+   rows infinite standard deviation (no weight) -- the history is still followed row by row.
+   Every row is predicted once; ``heldout_normalised`` is the normalised error of these
+   predictions. Each fold is warm-started from the full fit, refits all active parameters and
+   is capped at :data:`FOLD_ITERATIONS` iterations.
+6. **Decision.** ``evidence`` = baseline held-out / candidate held-out. **significant** (fixed
+   rule, the same for every bundle): ``evidence >= EVIDENCE_THRESHOLD`` (1.2: the candidate
+   predicts unseen data with an error at least 17 % lower). Candidates are ranked by
+   ``heldout_normalised``; among those within :data:`PARSIMONY` (5 %) of the best, the one
+   adding the fewest parameters ranks first. ``missing_effect`` is the first candidate if it
+   is significant **and** its refit reaches ``normalised <= ADEQUATE`` (1.5), else null.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fenicsx_drape.compare import (
+    Comparison,
+    compare_tests,
+    error_record,
+    locate,
+    model_record,
+    noise_record,
+    normalised_error,
+    prepare,
+    simulate,
+    trends,
+    where,
+)
+from fenicsx_drape.errors import DrapeInputError
+
+if TYPE_CHECKING:
+    from fenicsx_drape.bundle import Bundle, Test
+    from fenicsx_drape.model import Model
+
+CONTRACT = 2
+EVIDENCE_THRESHOLD = 1.2
+ADEQUATE = 1.5
+UNTESTABLE_BELOW = 0.3
+PARSIMONY = 0.05
+BLOCKS = 3
+REFIT_ITERATIONS = 100
+FOLD_ITERATIONS = 30
+
+SIGNIFICANCE_RULE = (f"significant when evidence (baseline held-out normalised error / "
+                     f"candidate held-out normalised error) >= {EVIDENCE_THRESHOLD}")
+
+Progress = Callable[[str], None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Fold:
+    """One held-out fit: what it is fitted to and which rows it predicts."""
+
+    label: str
+    bundle: Bundle  # the bundle fitted (held-out rows of a single test at infinite sd)
+    fitted: tuple[str, ...]  # ids of the tests fitted
+    predicts: str  # id of the test it predicts
+    rows: np.ndarray  # boolean mask of the rows of that test it predicts
+
+
+@dataclasses.dataclass(frozen=True)
+class _Data:
+    """The bundle in canonical order and what does not depend on the model."""
+
+    bundle: Bundle  # comparable tests only, sorted by id (the result is order-independent)
+    tests: tuple[Test, ...]
+    noise: dict[str, tuple[float, str]]
+    regions: dict[str, list]
+    folds: tuple[Fold, ...]
+    scheme: str
+    notes: tuple[str, ...]
+
+    def compare(self, simulated: dict[str, np.ndarray]) -> list[Comparison]:
+        return compare_tests(self.tests, simulated, self.regions, self.noise)
+
+
+def _prepare(bundle: Bundle) -> _Data:
+    from fenicsx_drape.compare import KINDS
+
+    tests, skipped = prepare(bundle)
+    tests = tuple(sorted(tests, key=lambda t: t.id))
+    canonical = dataclasses.replace(bundle, tests=tests)
+    noise = {t.id: KINDS[t.kind].noise(t) for t in tests}
+    regions = {t.id: KINDS[t.kind].regions(t) for t in tests}
+    folds, scheme = make_folds(canonical, noise)
+    return _Data(canonical, tests, noise, regions, folds, scheme, tuple(skipped))
+
+
+def make_folds(bundle: Bundle, noise: dict[str, tuple[float, str]] | None = None
+               ) -> tuple[tuple[Fold, ...], str]:
+    """The held-out folds of a bundle and the description of the scheme (module doc, 5.)."""
+    by_kind: dict[str, list[Test]] = {}
+    for test in bundle.tests:
+        by_kind.setdefault(test.kind, []).append(test)
+    ids = tuple(t.id for t in bundle.tests)
+    folds: list[Fold] = []
+    parts = []
+    for kind, tests in sorted(by_kind.items()):
+        if len(tests) > 1:
+            parts.append(f"leave-one-test-out over the {len(tests)} {kind} tests")
+            for test in tests:
+                folds.append(Fold(f"without {test.id}", bundle,
+                                  tuple(i for i in ids if i != test.id), test.id,
+                                  np.ones(test.n_rows, bool)))
+            continue
+        (test,) = tests
+        parts.append(f"leave-one-block-out over {BLOCKS} consecutive blocks of the rows of "
+                     f"the single {kind} test {test.id!r}")
+        level = noise[test.id][0] if noise else None
+        for b, rows in enumerate(np.array_split(np.arange(test.n_rows), BLOCKS)):
+            mask = np.zeros(test.n_rows, bool)
+            mask[rows] = True
+            held = _without_rows(test, mask, level)
+            tests_b = tuple(held if t.id == test.id else t for t in bundle.tests)
+            folds.append(Fold(f"{test.id} block {b + 1}/{BLOCKS}",
+                              dataclasses.replace(bundle, tests=tests_b), ids, test.id, mask))
+    return tuple(folds), "; ".join(parts) + (
+        ". Each row is predicted once by a fit that did not see it, warm-started from the "
+        f"full fit, all active parameters refitted, at most {FOLD_ITERATIONS} iterations.")
+
+
+def _without_rows(test: Test, rows: np.ndarray, noise: float | None) -> Test:
+    """``test`` with the given rows at infinite standard deviation (no weight in a fit)."""
+    sd = test.force_sd_N
+    if sd is None:
+        if noise is None:
+            from fenicsx_drape.compare import KINDS
+
+            noise = KINDS[test.kind].noise(test)[0]
+        sd = np.full(test.n_rows, noise)
+    columns = dict(test.columns)
+    columns["force_sd_N"] = np.where(rows, np.inf, sd)
+    return dataclasses.replace(test, columns=columns)
+
+
+# --------------------------------------------------------------------------------------------
+# Fits
+
+
+def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
+         parameters: Sequence[str] | None = None, max_iterations: int,
+         from_features: bool = False) -> Model:
+    from fenicsx_drape.fit import fit
+
+    return fit(bundle, model, tests=tests, parameters=parameters,
+               initial_guess_from_features=from_features, max_iterations=max_iterations,
+               analyse=False).model
+
+
+def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
+    """Every row predicted by the fold that held it out (module doc, 5.)."""
+    predicted = {t.id: np.full(t.n_rows, np.nan) for t in data.tests}
+    tests = {t.id: t for t in data.tests}
+    for i, fold in enumerate(data.folds):
+        say(f"    held-out fold {i + 1}/{len(data.folds)}: {fold.label}")
+        fitted = _fit(fold.bundle, model, tests=fold.fitted, max_iterations=FOLD_ITERATIONS)
+        values = simulate([tests[fold.predicts]], fitted)[fold.predicts]
+        predicted[fold.predicts][fold.rows] = values[fold.rows]
+    return predicted
+
+
+def _sensitivity(data: _Data, without: Model, with_: Model) -> tuple[float, dict[str, float]]:
+    """How much the tests change when an effect is added: normalised like the error."""
+    a, b = simulate(data.tests, without), simulate(data.tests, with_)
+    per_test = {t.id: float(np.sqrt(np.mean((b[t.id] - a[t.id]) ** 2)) / data.noise[t.id][0])
+                for t in data.tests}
+    return float(np.sqrt(np.mean(np.square(list(per_test.values()))))), per_test
+
+
+def candidate_names(model: Model) -> list[str]:
+    """The effects to try: the catalogue's and the laws registered by the model's plugins."""
+    from fenicsx_drape.effects import EFFECTS
+    from fenicsx_drape.materials import registered_laws
+    from fenicsx_drape.model import load_plugin
+
+    modules = {load_plugin(p).__name__ for p in model.plugins}
+    users = [name for name, cls in registered_laws().items() if cls.__module__ in modules]
+    return [name for name in (*EFFECTS, *users) if name not in model.effects]
+
+
+def _refit_parameters(model: Model, name: str) -> tuple[str, ...]:
+    """The candidate's own parameters and those of the law it acts on (if any)."""
+    from fenicsx_drape.effects import describe_effect
+
+    effect = describe_effect(name)
+    laws = model.law_classes()
+    block = laws[effect.acts_on].active_parameters(model.effects) \
+        if effect.acts_on in laws else ()
+    active = set(model.active_parameters())
+    return tuple(n for n in dict.fromkeys((*effect.parameters, *block)) if n in active)
+
+
+# --------------------------------------------------------------------------------------------
+# Diagnosis
+
+
+def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None
+             ) -> dict[str, Any]:
+    """Find which effect ``model`` misses to explain ``bundle`` (the module doc's procedure).
+
+    Args:
+        bundle: The measurements.
+        model: The current model (effects, plugins, starting parameters).
+        progress: Called with a line of text at each stage.
+
+    Returns:
+        The report, a dict with every field of the diagnosis contract (version 2) plus
+        ``heldout_scheme``, ``significance``, ``trends``, ``conclusion`` and more.
+    """
+    from fenicsx_drape.effects import describe_effect
+
+    start = time.perf_counter()
+    say = progress or (lambda line: None)
+    data = _prepare(bundle)
+    say(f"baseline ({', '.join(model.effects) or 'no effects'}): fitting")
+    baseline = _fit(data.bundle, model, max_iterations=REFIT_ITERATIONS, from_features=True)
+    base = data.compare(simulate(data.tests, baseline))
+    say(f"  normalised error {normalised_error(base):.3g}; held-out folds")
+    base_ho = normalised_error(data.compare(_heldout(data, baseline, say)))
+    say(f"  held-out normalised error {base_ho:.3g}")
+
+    candidates, untestable = [], []
+    for name in candidate_names(model):
+        effect = describe_effect(name)
+        prerequisites = tuple(p for p in effect.prerequisites if p not in model.effects)
+        added = (*prerequisites, name)
+        label = "+".join(added)
+        try:
+            reference = baseline.with_effects(*prerequisites)
+            start_model = baseline.with_effects(*added)
+        except DrapeInputError as err:
+            untestable.append({"effect": label, "reason": f"cannot be added: {err}"})
+            continue
+        change, per_test = _sensitivity(data, reference, start_model)
+        if change < UNTESTABLE_BELOW:
+            untestable.append({"effect": label, "effects": list(added),
+                               "reason": _untestable_reason(effect, data, change, per_test),
+                               "sensitivity": change})
+            say(f"candidate {label}: untestable (change {change:.2g} × noise)")
+            continue
+        say(f"candidate {label}: refitting")
+        refit = _fit(data.bundle, start_model, parameters=_refit_parameters(start_model, name),
+                     max_iterations=REFIT_ITERATIONS)
+        after = data.compare(simulate(data.tests, refit))
+        say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
+        heldout = normalised_error(data.compare(_heldout(data, refit, say)))
+        evidence = base_ho / heldout if heldout > 0 else math.inf
+        say(f"  held-out normalised error {heldout:.3g}, evidence {evidence:.3g}")
+        own = [p for a in added for p in describe_effect(a).parameters
+               if p in refit.active_parameters()]
+        candidates.append({
+            "effect": label, "effects": list(added), "acts_on": effect.acts_on,
+            "summary": effect.summary,
+            "parameters": {p: float(refit.parameters[p]) for p in own},
+            "error_after": error_record(after), "heldout_normalised": heldout,
+            "evidence": evidence, "significant": bool(evidence >= EVIDENCE_THRESHOLD),
+            "sensitivity": change, "where_after": where(after)[:3],
+            "_n_parameters": len(own), "_after": after,
+        })
+    ranked = rank(candidates)
+    best = ranked[0] if ranked else None
+    missing = None
+    if best and best["significant"] and best["error_after"]["normalised"] <= ADEQUATE:
+        missing = best
+    pattern = _pattern(base)
+    for c in ranked:
+        c["explanation"] = _explain(c, pattern, normalised_error(base), base_ho)
+        del c["_n_parameters"], c["_after"]
+    report = {
+        "contract": CONTRACT,
+        "bundle": bundle.name,
+        "baseline": {**model_record(baseline), "error": error_record(base),
+                     "heldout_normalised": base_ho},
+        "noise_floor": noise_record(base),
+        "where": where(base),
+        "trends": trends(base),
+        "candidates": ranked,
+        "untestable": untestable,
+        "missing_effect": missing["effect"] if missing else None,
+        "add_effects": missing["effects"] if missing else [],
+        "heldout_scheme": data.scheme,
+        "significance": SIGNIFICANCE_RULE,
+        "ranking": (f"by heldout_normalised; among candidates within {100 * PARSIMONY:g} % of "
+                    "the best, the one adding the fewest parameters first"),
+        "missing_rule": (f"the first candidate if significant and its refit reaches "
+                         f"normalised <= {ADEQUATE}"),
+        "conclusion": _conclusion(missing, best, base, pattern),
+        "notes": list(data.notes),
+        "seconds": time.perf_counter() - start,
+    }
+    say(report["conclusion"])
+    return report
+
+
+def rank(candidates: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Candidates by held-out error, the most parsimonious near-best first (module doc, 6.)."""
+    ranked = sorted(candidates, key=lambda c: (c["heldout_normalised"], c["effect"]))
+    if ranked:
+        near = [c for c in ranked
+                if c["heldout_normalised"] <= (1 + PARSIMONY) * ranked[0]["heldout_normalised"]]
+        first = min(near, key=lambda c: (c["_n_parameters"], c["heldout_normalised"]))
+        ranked.remove(first)
+        ranked.insert(0, first)
+    return ranked
+
+
+# --------------------------------------------------------------------------------------------
+# Words
+
+
+def _untestable_reason(effect, data: _Data, change: float, per_test: dict[str, float]) -> str:
+    kinds = sorted({t.kind for t in data.tests})
+    exercised = [k for k in kinds if k in effect.test_kinds]
+    largest = max(per_test, key=per_test.get)
+    text = (f"adding it at its default strength changes the simulated tests by "
+            f"{change:.2g} × their noise (largest in {largest}: {per_test[largest]:.2g}), "
+            f"below {UNTESTABLE_BELOW}: these tests cannot exercise it")
+    if not exercised:
+        text += (f"; it acts on {effect.acts_on} in {' and '.join(effect.test_kinds)} tests, "
+                 f"and the bundle has only {' and '.join(kinds)} tests")
+    else:
+        conditions = [c for c in effect.conditions
+                      if len({t.conditions.get(c) for t in data.tests}) < 2]
+        if conditions:
+            text += f"; {', '.join(conditions)} does not vary across the tests"
+    return text
+
+
+def _pattern(base: list[Comparison]) -> str:
+    """One clause on where the baseline's residual is, from trends and regions."""
+    normalised = normalised_error(base)
+    if normalised <= 1.2:
+        return f"the residual is at the noise floor (normalised {normalised:.2f})"
+    for trend in trends(base):
+        if trend["says"]:
+            return trend["says"]
+    kinds = {c.id: c.kind for c in base}
+    conditions = {name for c in base for name in c.conditions}
+    shares: dict[tuple[str, str], float] = {}
+    for entry in locate(base):
+        if entry["variable"] not in conditions:
+            key = (kinds[entry["test"]], entry["says"])
+            shares[key] = shares.get(key, 0.0) + entry["share_of_error"]
+    if not shares:
+        return f"the residual is {normalised:.3g} × the noise"
+    kind, says = max(shares, key=shares.get)
+    return (f"{100 * shares[kind, says]:.0f} % of the residual sits in the {says} region of "
+            f"the {kind.replace('_', ' ')} tests")
+
+
+def _explain(c: dict[str, Any], pattern: str, base_norm: float, base_ho: float) -> str:
+    after = c["error_after"]["normalised"]
+    gain = (f"error {base_norm:.3g} → {after:.3g} × noise, held-out {base_ho:.3g} → "
+            f"{c['heldout_normalised']:.3g} (evidence {c['evidence']:.3g})")
+    what = f"the model gets {c['summary']} ({c['effect']})"
+    if c["significant"] and after <= ADEQUATE:
+        return f"{pattern.capitalize()}, and it vanishes when {what}: {gain}."
+    if c["significant"]:
+        remains = c["where_after"][0] if c["where_after"] else None
+        rest = (f"; what remains sits in {remains['test']} ({remains['says']})"
+                if remains else "")
+        return (f"{pattern.capitalize()}; it shrinks but stays above {ADEQUATE} × noise when "
+                f"{what}: {gain}{rest}.")
+    return (f"{pattern.capitalize()}; no real gain when {what}: {gain}, evidence below "
+            f"{EVIDENCE_THRESHOLD}.")
+
+
+def _conclusion(missing, best, base: list[Comparison], pattern: str) -> str:
+    normalised = normalised_error(base)
+    if missing:
+        return (f"Missing effect: {missing['effect']} ({missing['summary']}); adding it "
+                f"brings the normalised error from {normalised:.3g} to "
+                f"{missing['error_after']['normalised']:.3g}.")
+    if normalised <= ADEQUATE:
+        return (f"No effect is missing: the model is at {normalised:.3g} × the noise "
+                f"(adequate at ≤ {ADEQUATE}).")
+    closest = (f" The closest candidate, {best['effect']}, reaches "
+               f"{best['error_after']['normalised']:.3g} × noise (evidence "
+               f"{best['evidence']:.3g}).") if best else ""
+    return (f"None of the candidates explains the residual ({normalised:.3g} × the noise): "
+            f"{pattern}. The missing physics is not in the catalogue; write it as a user law "
+            f"(plugins in MODEL.toml) and diagnose again.{closest}")
+
+
+# --------------------------------------------------------------------------------------------
+# Output
+
+
+def plot_candidates(report: dict[str, Any], path: str | Path) -> Path:
+    """Bars: the baseline's and each candidate's normalised and held-out errors."""
+    import matplotlib.pyplot as plt
+
+    from fenicsx_drape.provenance import save_figure
+
+    rows = [("baseline", report["baseline"]["error"]["normalised"],
+             report["baseline"]["heldout_normalised"], False)]
+    rows += [(c["effect"], c["error_after"]["normalised"], c["heldout_normalised"],
+              c["effect"] == report["missing_effect"]) for c in report["candidates"]]
+    y = np.arange(len(rows))[::-1]
+    fig, ax = plt.subplots(figsize=(8, 0.6 * len(rows) + 1.5))
+    ax.barh(y + 0.18, [r[1] for r in rows], height=0.35, label="fitted (error_after)",
+            color=["C3" if r[3] else "C0" for r in rows])
+    ax.barh(y - 0.18, [r[2] for r in rows], height=0.35, label="held-out", color="0.6")
+    ax.axvline(1.0, color="k", ls="--", lw=1, label="noise floor")
+    ax.axvline(ADEQUATE, color="0.4", ls=":", lw=1, label=f"adequate ({ADEQUATE})")
+    ax.set_xscale("log")
+    ax.set_yticks(y, [r[0] for r in rows], fontsize=8)
+    ax.set_xlabel("normalised error (RMSE / noise)")
+    ax.set_title(f"missing effect: {report['missing_effect']}")
+    ax.legend(fontsize=7, loc="lower right")
+    return save_figure(fig, path)
+
+
+def write_diagnosis(report: dict[str, Any], json_path: str | Path,
+                    out_dir: str | Path | None = None) -> Path:
+    """Write ``REPORT.json`` (atomically); with ``out_dir``, the plots and provenance too."""
+    from fenicsx_drape.provenance import write_json, write_provenance
+
+    path = write_json(json_path, report)
+    if out_dir is not None:
+        out = Path(out_dir)
+        plot_candidates(report, out / "candidates.png")
+        write_json(out / "report.json", report)
+        write_provenance(out, bundle=report["bundle"], effects=report["baseline"]["effects"],
+                         parameters=report["baseline"]["parameters"],
+                         missing_effect=report["missing_effect"], seed=None)
+    return path
