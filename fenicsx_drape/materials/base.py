@@ -89,7 +89,8 @@ class MaterialLaw:
             try:
                 array = np.asarray(value, dtype=float)
             except (TypeError, ValueError):
-                raise ParameterError(f"{name}: parameter {f.name} = {value!r} is not a number")
+                raise ParameterError(f"{name}: parameter {f.name} = {value!r} is not a number") \
+                    from None
             lo, hi = f.metadata["bounds"]
             if not np.isfinite(array).all():
                 raise ParameterError(f"{name}: parameter {f.name} = {value} is not finite")
@@ -106,6 +107,15 @@ class MaterialLaw:
             if not np.isfinite(array).all():
                 raise ParameterError(f"{name}: condition {f.name} = {array} is not finite")
             setattr(self, f.name, float(array) if array.ndim == 0 else array)
+
+    @classmethod
+    def active_parameters(cls, effects: Iterable[str] = ()) -> tuple[str, ...]:
+        """The parameters that shape the response with these effects on (default: all).
+
+        Laws override this when an effect switches parameters off (e.g. the linear tow
+        without ``decrimping`` uses only ``E_inf``); fitting varies exactly these.
+        """
+        return tuple(f.name for f in fields_of(cls, "parameter"))
 
     @property
     def parameters(self) -> dict[str, float]:
@@ -134,7 +144,8 @@ class MaterialLaw:
         state = np.asarray(state, dtype=float)
         name = type(self).__name__
         if strain.ndim != 1:
-            raise ValueError(f"{name}.update: strain must be shaped (n_points,), got {strain.shape}")
+            raise ValueError(f"{name}.update: strain must be shaped (n_points,), "
+                             f"got {strain.shape}")
         bad = ~np.isfinite(strain)
         if bad.any():
             raise ValueError(f"{name}.update: strain is not finite at {bad.sum()} point(s), "

@@ -1,0 +1,331 @@
+r"""Unit-cell solutions of the tensile and bias-extension tests (section 2.2, eqs. 15-23).
+
+**The cell.** Tow bars ``a`` (warp) and ``b`` (weft) of reference length L, diagonals
+``d1 = a + b`` and ``d2 = a − b`` of reference length L√2. Their Green-Lagrange strains
+satisfy ε_d1,2 = (ε_a + ε_b)/2 ± a·b/(2L²), hence ε_d1 + ε_d2 = ε_a + ε_b: eqs. 15 and 18.
+
+**Bar forces.** The laws' stress σ (N/tow) is work-conjugate to the Green-Lagrange strain: a
+bar standing for n_t tows does the virtual work n_t σ δε per unit reference length, as in the
+total-Lagrangian FE truss (section 4). A bar of stretch λ = √(1 + 2ε) therefore carries the
+axial force n_t σ λ. (The printed eqs. 16-20 use σ itself as the force; the two agree for
+tows, λ ≈ 1, but not for diagonals strained to 0.4.)
+
+**One free-body view for both tests.** Cut the periodic net (every cell owns two tow bars and
+two diagonals) across the load and along it. Per tow bar of one family crossing the cut, the
+bars crossing are that tow, one tow of the other family and two diagonals of one kind; their
+axial forces, resolved, give (the homogenised "virial" stress of the net, the same thing):
+
+- *Tension* (Fig. 3b; warp along the load, ε_1 = e + e²/2 known with e = u/L_g, weft ε_2
+  unknown, both diagonals ε_d = (ε_1 + ε_2)/2 by eq. 15, no shear by symmetry). Zero force
+  across the load (the resolved diagonal stretch is λ_d sin φ = λ_2/√2):
+
+      λ_2 (σ_2 + √2 τ) = 0   →   G(ε_2) + √2 H(ε_d) = 0                    (eq. 16)
+
+  and the force per loaded tow  f = λ_1 (σ_1 + √2 τ) = λ_1 (G(ε_1) − G(ε_2))    (eq. 17).
+- *Bias extension* (Fig. 3c; major diagonal along the load with ε_d1 known from eq. 21, both
+  tows ε_t unknown, minor diagonal ε_d2 = 2ε_t − ε_d1 by eq. 18; tows at ±θ to the load,
+  λ_t cos θ = √((1 + 2ε_d1)/2)). Zero force across the load: 2λ_t sin θ (σ + √2 τ_2) = 0, so
+
+      G(ε_t) + √2 H(2ε_t − ε_d1) = 0                                          (eq. 19)
+
+  and the force per tow of one family crossing the width
+  f = 2λ_t cos θ (σ + √2 τ_1) = √(1 + 2ε_d1) (√2 σ + 2τ_1) = 2√(1 + 2ε_d1)(τ_1 − τ_2)
+  (eq. 20; the last form uses eq. 19).
+
+The printed eq. 19, H + G sin θ = 0, is this balance with bar forces σ instead of σλ (the same
+at θ = 45°). The printed eq. 20, 2σ cos θ + τ_1 (stray ε_i1 dropped), is the node balance of a
+single, isolated cell, which pairs with a transverse balance 2σ sin θ + τ_2 = 0, not with
+eq. 19: the two printed equations mix two free bodies (NOTES.md). The printed eq. 16 is
+likewise a single-node balance. Here everything follows from the periodic net, and the work
+check holds: for path-independent laws ∫ f du equals the stored energy per tow (tested).
+
+Normalisation: "per tow" is per tow of one family crossing the specimen's width, invariant
+under the pin-jointed deformation: l_t W for the tensile specimen (0.713 × 25 = 17.8) and
+l_t W/√2 for the bias specimen (0.713 × 70/√2 = 35.3), as the paper divides its forces.
+
+**Kinematics of the bias test** (eqs. 21-23): the crosshead displacement u is taken by the
+full-shear region of length L_o − W_o, whose diagonal stretches by 1 + u/(L_o − W_o), so
+ε_d = e + e²/2 with e = u/(L_o − W_o). The shear angle (90° minus the angle between tows) is
+γ = arcsin((ε_d1 − ε_d2)/(1 + 2ε_t)), i.e. arcsin(2ε_d1) for inextensible tows. The
+least-squares line through ε_d(t) at constant speed, taken over time up to the pin-jointed
+limit ε_d = 0.5, has slope ε̇_eff = L̇/(L_o − W_o) · (3√2 + 5)/8 (eq. 23).
+
+**Scheme.** Both tests follow the measured history row by row (holds, relaxation and
+unloading included); the first row is reached from the virgin state in one step of zero
+length. In each step the unknown strain (ε_2 or ε_t) solves the balance above by a bracketed
+Newton iteration (the residual is non-decreasing in the unknown; bisection where Newton leaves
+the bracket), with the laws' consistent tangents; then the laws' states are committed. All of
+it is vectorised over parameter sets: a :class:`~fenicsx_drape.model.Model` whose parameters
+are arrays of shape (k,) gives curves shaped (n_rows, k).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from fenicsx_drape.effects import shear_tension_factor
+from fenicsx_drape.errors import DrapeInputError, SolverError
+from fenicsx_drape.model import Model
+
+EFFECTIVE_RATE_FACTOR = (3.0 * math.sqrt(2.0) + 5.0) / 8.0
+"""The factor of eq. 23, 1.1553."""
+
+_SQRT2 = math.sqrt(2.0)
+_MAX_ITERATIONS = 100
+
+
+@dataclass(frozen=True)
+class UnitCellCurve:
+    """The response of a coupon test, row by row.
+
+    Arrays are shaped (n_rows,), or (n_rows, k) for a model with k parameter sets.
+    """
+
+    time_s: np.ndarray
+    displacement_mm: np.ndarray
+    force_per_tow_N: np.ndarray  # test force / number of tows (N/tow)
+    tow_strain: np.ndarray  # tensile: loaded tows; bias: both tow families
+    diagonal_strain: np.ndarray  # tensile: both diagonals; bias: the major diagonal (eq. 21)
+    shear_deg: np.ndarray  # shear angle of the cell (0 in tension)
+    transverse_strain: np.ndarray  # tensile: transverse tows ε_2; bias: minor diagonal ε_d2
+    tow_stress_N: np.ndarray  # stress of the tows of tow_strain (N/tow)
+    diagonal_stress_N: np.ndarray  # stress of the diagonal of diagonal_strain (N/tow)
+
+
+def bias_diagonal_strain(displacement_mm, length_mm: float, width_mm: float) -> np.ndarray:
+    """Green-Lagrange strain of the diagonals in the full-shear region, eq. 21.
+
+    Args:
+        displacement_mm: Crosshead displacement u (mm).
+        length_mm: Specimen length L_o (mm).
+        width_mm: Specimen width W_o (mm), L_o > W_o.
+    """
+    _check_bias_geometry(length_mm, width_mm)
+    e = np.asarray(displacement_mm, dtype=float) / (length_mm - width_mm)
+    return e + 0.5 * e**2
+
+
+def effective_strain_rate(speed_mm_per_min: float, length_mm: float, width_mm: float) -> float:
+    """Effective constant diagonal strain rate of a bias test, eq. 23 (1/s).
+
+    The paper's 10, 40 and 160 mm/min on 210 × 70 mm give 0.001375, 0.005502 and
+    0.022006 s⁻¹ (printed as 0.0013, 0.0055 and 0.022).
+    """
+    _check_bias_geometry(length_mm, width_mm)
+    return speed_mm_per_min / 60.0 / (length_mm - width_mm) * EFFECTIVE_RATE_FACTOR
+
+
+def _check_bias_geometry(length_mm: float, width_mm: float) -> None:
+    if not (np.isfinite(length_mm) and np.isfinite(width_mm) and width_mm > 0.0
+            and length_mm > width_mm):
+        raise DrapeInputError(f"bias extension: need length_mm > width_mm > 0, got "
+                              f"length_mm = {length_mm}, width_mm = {width_mm}")
+
+
+def _history(time_s, displacement_mm) -> tuple[np.ndarray, np.ndarray]:
+    t = np.asarray(time_s, dtype=float)
+    u = np.asarray(displacement_mm, dtype=float)
+    if t.ndim != 1 or t.shape != u.shape or t.size == 0:
+        raise DrapeInputError(f"time_s and displacement_mm must be 1-D of one length, got "
+                              f"shapes {t.shape} and {u.shape}")
+    for name, a in (("time_s", t), ("displacement_mm", u)):
+        bad = ~np.isfinite(a)
+        if bad.any():
+            raise DrapeInputError(f"{name} is not finite at row {int(np.argmax(bad))}")
+    if np.any(np.diff(t) < 0.0):
+        raise DrapeInputError(f"time_s decreases at row {int(np.argmax(np.diff(t) < 0)) + 1}")
+    return t, u
+
+
+def _newton(residual: Callable, x: np.ndarray, lower: np.ndarray, what: str):
+    """Root of a non-decreasing residual per point, by bracketed Newton; x > lower.
+
+    ``residual(x) -> (r, dr/dx, scale, payload)``; returns ``(x, payload)`` of the last
+    evaluation, which is at the returned x for every point.
+    """
+    lo, hi = lower.copy(), np.full_like(x, np.inf)
+    grow = np.full_like(x, 1e-4)
+    for _ in range(_MAX_ITERATIONS):
+        r, dr, scale, payload = residual(x)
+        done = np.abs(r) <= 1e-13 + 1e-11 * scale
+        if done.all():
+            return x, payload
+        lo = np.where(r < 0.0, x, lo)
+        hi = np.where(r > 0.0, x, hi)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = np.where(dr > 0.0, r / dr, np.nan)
+        x_new = x - step
+        inside = (x_new > lo) & (x_new < hi)
+        bracketed = np.isfinite(hi)
+        # Outside the bracket: bisect it, or search upward (no upper bound yet) or halve
+        # the distance to the lower bound.
+        fallback = np.where(bracketed, 0.5 * (lo + hi),
+                            np.where(r < 0.0, x + grow, 0.5 * (lo + x)))
+        grow = np.where(inside | bracketed, grow, 2.0 * grow)
+        x_new = np.where(inside, x_new, fallback)
+        settled = np.abs(x_new - x) <= 4e-16 * (1.0 + np.abs(x))
+        if np.all(done | settled):
+            return x, payload
+        x = np.where(done, x, x_new)
+    raise SolverError(f"unit cell: the {what} did not converge in {_MAX_ITERATIONS} "
+                      f"iterations (residual {np.max(np.abs(r)):.3g} N/tow)")
+
+
+def _prepare(model: Model, conditions: Mapping[str, float] | None):
+    laws = model.laws(conditions)
+    k = model.n_sets
+    coupling = "shear_tension_coupling" in model.effects
+    k_st = model.parameters["k_st"] if coupling else 0.0
+    return laws["tow"], laws["shear"], k, k or 1, coupling, k_st
+
+
+def _finish(k: int | None, **columns: np.ndarray) -> UnitCellCurve:
+    if k is None:
+        columns = {n: c[:, 0] if c.ndim == 2 else c for n, c in columns.items()}
+    return UnitCellCurve(**columns)
+
+
+def tensile(
+    model: Model,
+    time_s,
+    displacement_mm,
+    *,
+    gauge_length_mm: float,
+    conditions: Mapping[str, float] | None = None,
+) -> UnitCellCurve:
+    """Tensile test along the warp, eqs. 15-17 (see the module docstring).
+
+    Args:
+        model: The model (scalar parameters, or arrays of k parameter sets).
+        time_s: Time of each row (s), non-decreasing.
+        displacement_mm: Crosshead displacement of each row (mm).
+        gauge_length_mm: Gauge length L_g (mm); the tow strain is e + e²/2, e = u/L_g.
+        conditions: The test's conditions (e.g. ``temperature_C``).
+
+    Returns:
+        The curve; the test force in N is ``force_per_tow_N`` times the test's tows.
+    """
+    t, u = _history(time_s, displacement_mm)
+    if not (np.isfinite(gauge_length_mm) and gauge_length_mm > 0.0):
+        raise DrapeInputError(f"tensile: gauge_length_mm = {gauge_length_mm} must be > 0")
+    tow, shear, k, m, coupling, k_st = _prepare(model, conditions)
+    e = u / gauge_length_mm
+    ε1_rows = e + 0.5 * e**2
+    n = t.size
+    out = {name: np.zeros((n, m)) for name in
+           ("force", "eps_2", "eps_d", "sigma_1", "tau")}
+    s1, s2, sd = tow.initial_state(m), tow.initial_state(m), shear.initial_state(m)
+    x, dx = np.zeros(m), np.zeros(m)
+    lower = np.full(m, -0.5)
+    for i in range(n):
+        dt = t[i] - t[i - 1] if i else 0.0
+        ε1 = np.full(m, ε1_rows[i])
+        σ1, _, s1_new = tow.update(ε1, dt, s1)
+
+        def residual(ε2, ε1=ε1, σ1=σ1, dt=dt, s2=s2, sd=sd):
+            σ2, dσ2, s2_new = tow.update(ε2, dt, s2)
+            τ, dτ, sd_new = shear.update(0.5 * (ε1 + ε2), dt, sd)
+            c, dc = shear_tension_factor(0.5 * (σ1 + σ2), k_st) if coupling else (1.0, 0.0)
+            r = σ2 + _SQRT2 * c * τ
+            dr = dσ2 + _SQRT2 * (0.5 * c * dτ + 0.5 * dc * dσ2 * τ)
+            return r, dr, np.abs(σ2) + np.abs(_SQRT2 * c * τ), (s2_new, sd_new, c * τ)
+
+        guess = np.maximum(x + dx, 0.5 * (x + lower))
+        x_new, (s2, sd, τ) = _newton(residual, guess, lower, f"tensile balance at row {i}")
+        dx, x, s1 = x_new - x, x_new, s1_new
+        out["force"][i] = np.sqrt(1.0 + 2.0 * ε1) * (σ1 + _SQRT2 * τ)
+        out["eps_2"][i], out["eps_d"][i] = x, 0.5 * (ε1 + x)
+        out["sigma_1"][i], out["tau"][i] = σ1, τ
+    return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=out["force"],
+                   tow_strain=np.repeat(ε1_rows[:, None], m, axis=1),
+                   diagonal_strain=out["eps_d"], shear_deg=np.zeros((n, m)),
+                   transverse_strain=out["eps_2"], tow_stress_N=out["sigma_1"],
+                   diagonal_stress_N=out["tau"])
+
+
+def bias_extension(
+    model: Model,
+    time_s,
+    displacement_mm,
+    *,
+    length_mm: float,
+    width_mm: float,
+    conditions: Mapping[str, float] | None = None,
+) -> UnitCellCurve:
+    """Bias-extension test, eqs. 18-21 (see the module docstring).
+
+    Args:
+        model: The model (scalar parameters, or arrays of k parameter sets).
+        time_s: Time of each row (s), non-decreasing.
+        displacement_mm: Crosshead displacement of each row (mm).
+        length_mm: Specimen length L_o (mm).
+        width_mm: Specimen width W_o (mm).
+        conditions: The test's conditions (e.g. ``temperature_C``).
+
+    Returns:
+        The curve; the test force in N is ``force_per_tow_N`` times the test's tows.
+    """
+    t, u = _history(time_s, displacement_mm)
+    εd1_rows = bias_diagonal_strain(u, length_mm, width_mm)
+    if np.any(εd1_rows <= -0.5):
+        raise DrapeInputError(f"bias extension: displacement {u.min()} mm closes the gauge "
+                              "region (diagonal strain <= -0.5)")
+    tow, shear, k, m, coupling, k_st = _prepare(model, conditions)
+    n = t.size
+    out = {name: np.zeros((n, m)) for name in
+           ("force", "eps_t", "eps_d2", "sigma", "tau_1", "shear")}
+    st, sd1, sd2 = tow.initial_state(m), shear.initial_state(m), shear.initial_state(m)
+    x, dx = np.zeros(m), np.zeros(m)
+    for i in range(n):
+        dt = t[i] - t[i - 1] if i else 0.0
+        εd1 = np.full(m, εd1_rows[i])
+        τ1, _, sd1_new = shear.update(εd1, dt, sd1)
+        lower = np.maximum(0.5 * (εd1 - 0.5), -0.5)  # both ε_d2 and ε_t above -0.5
+
+        def residual(εt, εd1=εd1, dt=dt, st=st, sd2=sd2):
+            σ, dσ, st_new = tow.update(εt, dt, st)
+            τ2, dτ2, sd2_new = shear.update(2.0 * εt - εd1, dt, sd2)
+            c, dc = shear_tension_factor(σ, k_st) if coupling else (1.0, 0.0)
+            r = σ + _SQRT2 * c * τ2
+            dr = dσ + _SQRT2 * (2.0 * c * dτ2 + dc * dσ * τ2)
+            return r, dr, np.abs(σ) + np.abs(_SQRT2 * c * τ2), (st_new, sd2_new, σ, c)
+
+        guess = np.maximum(x + dx, 0.5 * (x + lower))
+        x_new, (st, sd2, σ, c) = _newton(residual, guess, lower,
+                                         f"bias-extension balance at row {i}")
+        dx, x, sd1 = x_new - x, x_new, sd1_new
+        εd2 = 2.0 * x - εd1
+        out["force"][i] = np.sqrt(1.0 + 2.0 * εd1) * (_SQRT2 * σ + 2.0 * c * τ1)
+        out["eps_t"][i], out["eps_d2"][i], out["sigma"][i], out["tau_1"][i] = x, εd2, σ, c * τ1
+        sin_γ = np.clip((εd1 - εd2) / (1.0 + 2.0 * x), -1.0, 1.0)
+        out["shear"][i] = np.degrees(np.arcsin(sin_γ))
+    return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=out["force"],
+                   tow_strain=out["eps_t"], diagonal_strain=np.repeat(εd1_rows[:, None], m, 1),
+                   shear_deg=out["shear"], transverse_strain=out["eps_d2"],
+                   tow_stress_N=out["sigma"], diagonal_stress_N=out["tau_1"])
+
+
+def diagonal_response(
+    model: Model,
+    time_s,
+    strain,
+    *,
+    conditions: Mapping[str, float] | None = None,
+) -> np.ndarray:
+    """Stress history (N/tow) of one shear diagonal driven through a strain history.
+
+    The law-level response of Fig. 2b (loading, relaxation, reloading, unloading).
+    """
+    t, ε = _history(time_s, strain)
+    shear = model.laws(conditions)["shear"]
+    m = model.n_sets or 1
+    state = shear.initial_state(m)
+    stress = np.zeros((t.size, m))
+    for i in range(t.size):
+        dt = t[i] - t[i - 1] if i else 0.0
+        stress[i], _, state = shear.update(np.full(m, ε[i]), dt, state)
+    return stress if model.n_sets else stress[:, 0]
