@@ -8,4 +8,16 @@ DOLFINx >= 0.10 and is imported only when used.
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__"]
+__all__ = ["Model", "__version__", "default_model", "load_model"]
+
+_LAZY = {"Model": "fenicsx_drape.model", "default_model": "fenicsx_drape.model",
+         "load_model": "fenicsx_drape.model"}
+
+
+def __getattr__(name: str):
+    # The model API is imported on first use, so that ``drape --help`` stays fast.
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'fenicsx_drape' has no attribute {name!r}")
