@@ -1,0 +1,54 @@
+"""Test habits of DOLFINx: the same suite runs serially and under ``mpirun -n N``.
+
+- ``@pytest.mark.skip_in_parallel``: the test runs on one process only.
+- ``@pytest.mark.parallel``: the test concerns parallel behaviour; ``make test`` runs these again
+  with ``mpirun -n 2`` and ``-n 3`` (``python3 -m mpi4py -m pytest -m parallel``).
+- After every test, garbage is collected and the ranks meet, so that collective destructors of
+  DOLFINx and PETSc objects run on all ranks together.
+- Forms are compiled by FFCx into its cache (``~/.cache/fenics``, or ``$XDG_CACHE_HOME/fenics``;
+  ``./drape`` keeps it on the host), so a run recompiles only the forms that changed.
+
+mpi4py is optional: the pure-NumPy tests also run on a host without MPI.
+"""
+
+import gc
+
+import pytest
+
+try:
+    from mpi4py import MPI
+except ImportError:  # a host without MPI: one process
+    MPI = None
+
+COMM_SIZE = MPI.COMM_WORLD.size if MPI is not None else 1
+
+
+def pytest_collection_modifyitems(config, items):
+    """Skip the tests marked ``skip_in_parallel`` when running on more than one process."""
+    if COMM_SIZE == 1:
+        return
+    skip = pytest.mark.skip(reason=f"runs on one process only (here {COMM_SIZE})")
+    for item in items:
+        if "skip_in_parallel" in item.keywords:
+            item.add_marker(skip)
+
+
+def pytest_configure(config):
+    """Make Hypothesis draw the same examples on every rank, and share no database file."""
+    if COMM_SIZE == 1:
+        return
+    try:
+        from hypothesis import settings
+    except ImportError:
+        return
+    settings.register_profile("mpi", derandomize=True, database=None)
+    settings.load_profile("mpi")
+
+
+@pytest.fixture(autouse=True)
+def _collective_cleanup():
+    """Collect garbage, then wait for all ranks, after each test."""
+    yield
+    gc.collect()
+    if MPI is not None:
+        MPI.COMM_WORLD.Barrier()
