@@ -131,35 +131,56 @@ def _loading_phases(time_s: np.ndarray, displacement_mm: np.ndarray) -> np.ndarr
     return np.concatenate([phase[:1], phase])
 
 
-def _hinge_breakpoints(x: np.ndarray, y: np.ndarray, n_breaks: int,
-                       n_grid: int = 48) -> tuple[tuple[float, ...], np.ndarray]:
-    """Breakpoints and slopes of the continuous piecewise-linear least-squares fit of y(x).
+def _window_lines(x: np.ndarray, y: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """Slope and intercept of the least-squares line over every ``w`` consecutive points."""
+    x0 = x.mean()
+    xc = x - x0
 
-    The breakpoints are searched over a grid of quantiles of ``x`` (every combination, solved
-    at once through the normal equations of the hinge basis ``1, x, max(x - b, 0)``).
+    def sums(a):
+        c = np.concatenate([[0.0], np.cumsum(a)])
+        return c[w:] - c[:-w]
+
+    sx, sy, sxx, sxy = sums(xc), sums(y), sums(xc * xc), sums(xc * y)
+    slope = (w * sxy - sx * sy) / np.maximum(w * sxx - sx**2, 1e-300)
+    intercept = (sy - slope * sx) / w - slope * x0
+    return slope, intercept
+
+
+def _knees(x: np.ndarray, y: np.ndarray, pattern: str) -> tuple[float, ...]:
+    """Where the mechanisms of a loading curve ``y(x)`` hand over, by tangent intersections.
+
+    The classic onset construction: straight lines fitted over windows of 1/8 of the rows at
+    the start and at the end of the curve and, for ``pattern = "stiff-soft-stiff"`` (bias
+    extension), over the window of least slope in between (the plateau); each knee is where
+    two neighbouring lines cross. A knee is NaN (its two regions merge) when the stiffer line
+    is not at least 1.5 times as steep as the softer one. ``pattern = "soft-stiff"`` (tension)
+    has one knee, between the start and end lines.
     """
-    grid = np.unique(np.quantile(x, np.linspace(0.01, 0.99, n_grid)))
-    basis = np.column_stack([np.ones_like(x), x, np.maximum(x[:, None] - grid[None, :], 0)])
-    gram, rhs = basis.T @ basis, basis.T @ y
-    combos = np.array(list(itertools.combinations(range(len(grid)), n_breaks))) + 2
-    cols = np.column_stack([np.zeros(len(combos), int), np.ones(len(combos), int), combos])
-    g = gram[cols[:, :, None], cols[:, None, :]]
-    b = rhs[cols]
-    # A tiny ridge keeps coincident hinges (repeated quantiles) solvable.
-    g = g + 1e-12 * np.trace(gram) * np.eye(cols.shape[1])
-    coef = np.linalg.solve(g, b[..., None])[..., 0]
-    sse = y @ y - np.einsum("ij,ij->i", b, coef)
-    best = int(np.argmin(sse))
-    slopes = np.cumsum(coef[best, 1:])
-    return tuple(float(grid[c - 2]) for c in combos[best]), slopes
+    order = np.argsort(x, kind="stable")
+    x, y = x[order], y[order]
+    w = max(5, x.size // 8)
+    slope, intercept = _window_lines(x, y, w)
+    lines = [(slope[0], intercept[0])]
+    if pattern == "stiff-soft-stiff":
+        j = int(np.argmin(slope[1:-1])) + 1 if slope.size > 2 else 0
+        lines.append((slope[j], intercept[j]))
+    lines.append((slope[-1], intercept[-1]))
+    knees = []
+    for i, ((s1, b1), (s2, b2)) in enumerate(itertools.pairwise(lines)):
+        stiff, soft = (s1, s2) if (pattern == "stiff-soft-stiff" and i == 0) else (s2, s1)
+        if stiff > 0 and stiff > 1.5 * max(soft, 0.0):
+            knees.append(float(np.clip((b1 - b2) / (s2 - s1), x[0], x[-1])))
+        else:
+            knees.append(math.nan)
+    return tuple(knees)
 
 
-# Names of the strain ranges, in order, with the slope pattern that makes them what they are:
-# bias extension stiff - soft - stiff (section 3.2), tension soft - stiff (decrimping).
+# The strain ranges of each coupon kind, in order, and the shape of its loading curve:
+# bias extension stiff - soft - stiff, tension soft - stiff (section 3.2).
 _STRAIN_REGIONS = {
     "bias_extension": (("initial tow bending", "friction plateau", "lock-up"),
-                       lambda s: s[0] > s[1] < s[2]),
-    "tensile": (("decrimping", "tow stretching"), lambda s: s[0] < s[1]),
+                       "stiff-soft-stiff"),
+    "tensile": (("decrimping", "tow stretching"), "soft-stiff"),
 }
 
 
@@ -169,17 +190,21 @@ def _coupon_regions(test: Test) -> list[Region]:
     regions: list[Region] = []
     names, pattern = _STRAIN_REGIONS[test.kind]
     loading = phases > 0
-    if loading.sum() >= 6 * len(names):
-        breaks, slopes = _hinge_breakpoints(strain[loading], test.force_N[loading],
-                                            len(names) - 1)
-        if not pattern(slopes):
-            names = tuple(f"{variable} range {i + 1}" for i in range(len(names)))
-        edges = (-math.inf, *breaks, math.inf)
-        for name, lo, hi in zip(names, edges[:-1], edges[1:]):
-            rows = (strain >= lo) & (strain < hi)
-            if rows.any():
-                regions.append(Region(variable, (float(strain[rows].min()),
-                                                 float(strain[rows].max())), name, rows))
+    knees = _knees(strain[loading], test.force_N[loading], pattern) \
+        if loading.sum() >= 24 else (math.nan,) * (len(names) - 1)
+    # A missing knee merges its two regions; the merged region keeps the later name.
+    edges, kept = [-math.inf], []
+    for name, knee in zip(names, knees):
+        if not math.isnan(knee) and knee > edges[-1]:
+            kept.append(name)
+            edges.append(knee)
+    kept.append(names[-1])
+    edges.append(math.inf)
+    for name, lo, hi in zip(kept, edges[:-1], edges[1:]):
+        rows = (strain >= lo) & (strain < hi)
+        if rows.any():
+            regions.append(Region(variable, (float(strain[rows].min()),
+                                             float(strain[rows].max())), name, rows))
     if len(np.unique(phases)) > 1:
         labels = {1: "loading", 0: "hold (relaxation)", -1: "unloading"}
         starts = np.flatnonzero(np.diff(phases, prepend=phases[0] + 1) != 0)

@@ -6,7 +6,7 @@ import pytest
 from fenicsx_drape.compare import (
     Comparison,
     Region,
-    _hinge_breakpoints,
+    _knees,
     _loading_phases,
     locate,
     normalised_error,
@@ -44,15 +44,18 @@ def test_noise_from_sd_is_the_rms():
     assert noise_from_sd(np.array([3.0, 4.0])) == pytest.approx(np.sqrt(12.5))
 
 
-def test_hinge_breakpoints_find_a_three_segment_curve():
+def test_knees_of_a_three_segment_curve():
     rng = np.random.default_rng(1)
-    x = np.linspace(0, 0.45, 500)
-    y = np.interp(x, [0, 0.03, 0.3, 0.45], [0, 3.0, 4.0, 14.0]) + rng.normal(0, 0.02, x.size)
-    (b1, b2), slopes = _hinge_breakpoints(x, y, 2)
-    assert b1 == pytest.approx(0.03, abs=0.01)
-    assert b2 == pytest.approx(0.30, abs=0.01)
-    # The breakpoints sit on a grid of quantiles, so the slopes are near, not equal.
-    assert slopes == pytest.approx([100.0, 3.7, 66.7], rel=0.25)
+    x = np.linspace(0, 0.45, 800)
+    y = np.interp(x, [0, 0.08, 0.3, 0.45], [0, 3.0, 4.0, 14.0]) + rng.normal(0, 0.02, x.size)
+    # Tangent intersections of straight segments (longer than the 1/8 windows) are corners.
+    k1, k2 = _knees(x, y, "stiff-soft-stiff")
+    assert k1 == pytest.approx(0.08, abs=0.005)
+    assert k2 == pytest.approx(0.30, abs=0.005)
+    (k,) = _knees(x, np.interp(x, [0, 0.1, 0.45], [0, 1.0, 20.0]), "soft-stiff")
+    assert k == pytest.approx(0.1, abs=1e-9)
+    # A straight line has no knee: its regions merge.
+    assert np.isnan(_knees(x, 2 * x, "soft-stiff")[0])
 
 
 def test_loading_phases():
