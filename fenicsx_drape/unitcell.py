@@ -144,21 +144,24 @@ def _history(time_s, displacement_mm) -> tuple[np.ndarray, np.ndarray]:
 def _newton(residual: Callable, x: np.ndarray, lower: np.ndarray, what: str):
     """Root of a non-decreasing residual per point, by bracketed Newton; x > lower.
 
-    ``residual(x) -> (r, dr/dx, scale, payload)``; returns ``(x, payload)`` of the last
-    evaluation, which is at the returned x for every point.
+    ``residual(x) -> (r, dr/dx, payload)``. A point is done when the Newton correction
+    r/(dr/dx) is below 1e-13 in strain (the forces are then exact to ~1e-11 relative, since
+    they are computed in a form insensitive to the stiff tows' stress). Returns ``(x,
+    payload)`` of the last evaluation, which is at the returned x for every point.
     """
     lo, hi = lower.copy(), np.full_like(x, np.inf)
     grow = np.full_like(x, 1e-4)
     for _ in range(_MAX_ITERATIONS):
-        r, dr, scale, payload = residual(x)
-        done = np.abs(r) <= 1e-13 + 1e-11 * scale
+        r, dr, payload = residual(x)
+        if not np.isfinite(r).all():
+            raise SolverError(f"unit cell: a law returned a non-finite stress in the {what}")
+        done = np.abs(r) <= 1e-13 * np.abs(dr) + 1e-15
         if done.all():
             return x, payload
         lo = np.where(r < 0.0, x, lo)
         hi = np.where(r > 0.0, x, hi)
         with np.errstate(divide="ignore", invalid="ignore"):
-            step = np.where(dr > 0.0, r / dr, np.nan)
-        x_new = x - step
+            x_new = x - np.where(dr > 0.0, r / dr, np.nan)
         inside = (x_new > lo) & (x_new < hi)
         bracketed = np.isfinite(hi)
         # Outside the bracket: bisect it, or search upward (no upper bound yet) or halve
@@ -167,20 +170,38 @@ def _newton(residual: Callable, x: np.ndarray, lower: np.ndarray, what: str):
                             np.where(r < 0.0, x + grow, 0.5 * (lo + x)))
         grow = np.where(inside | bracketed, grow, 2.0 * grow)
         x_new = np.where(inside, x_new, fallback)
-        settled = np.abs(x_new - x) <= 4e-16 * (1.0 + np.abs(x))
-        if np.all(done | settled):
+        if np.all(done | (np.abs(x_new - x) <= 4e-16 * (1.0 + np.abs(x)))):
             return x, payload
         x = np.where(done, x, x_new)
     raise SolverError(f"unit cell: the {what} did not converge in {_MAX_ITERATIONS} "
                       f"iterations (residual {np.max(np.abs(r)):.3g} N/tow)")
 
 
-def _prepare(model: Model, conditions: Mapping[str, float] | None):
-    laws = model.laws(conditions)
-    k = model.n_sets
-    coupling = "shear_tension_coupling" in model.effects
-    k_st = model.parameters["k_st"] if coupling else 0.0
-    return laws["tow"], laws["shear"], k, k or 1, coupling, k_st
+def _predict(t: np.ndarray, i: int, xs: np.ndarray) -> np.ndarray:
+    """Quadratic extrapolation in time of the unknown of rows i-3..i-1 to row i."""
+    if i == 0:
+        return xs[0]
+    ts = t[max(i - 3, 0):i]
+    if len(ts) < 3 or np.any(np.diff(ts) <= 0.0):
+        return xs[i - 1]
+    (t0, t1, t2), (x0, x1, x2) = ts, xs[i - 3:i]
+    ti = t[i]
+    return (x0 * (ti - t1) * (ti - t2) / ((t0 - t1) * (t0 - t2))
+            + x1 * (ti - t0) * (ti - t2) / ((t1 - t0) * (t1 - t2))
+            + x2 * (ti - t0) * (ti - t1) / ((t2 - t0) * (t2 - t1)))
+
+
+def _stacked_laws(model: Model, conditions: Mapping[str, float] | None):
+    """The model's laws, with arrays of parameter sets repeated twice for stacked updates.
+
+    The unit cell updates two bars of one role in one call (the two diagonals in bias
+    extension, the two tow families in tension): call overhead, not array size, is the cost.
+    """
+    if model.n_sets is not None:
+        model = Model(model.effects,
+                      {n: np.tile(v, 2) if np.ndim(v) else v for n, v in model.parameters.items()},
+                      model.plugins, model.fixed)
+    return model.laws(conditions)
 
 
 def _finish(k: int | None, **columns: np.ndarray) -> UnitCellCurve:
@@ -212,38 +233,40 @@ def tensile(
     t, u = _history(time_s, displacement_mm)
     if not (np.isfinite(gauge_length_mm) and gauge_length_mm > 0.0):
         raise DrapeInputError(f"tensile: gauge_length_mm = {gauge_length_mm} must be > 0")
-    tow, shear, k, m, coupling, k_st = _prepare(model, conditions)
+    k, m = model.n_sets, model.n_sets or 1
+    laws, tows = model.laws(conditions), _stacked_laws(model, conditions)["tow"]
+    shear = laws["shear"]
+    k_st = model.parameters["k_st"] if "shear_tension_coupling" in model.effects else 0.0
     e = u / gauge_length_mm
     ε1_rows = e + 0.5 * e**2
     n = t.size
-    out = {name: np.zeros((n, m)) for name in
-           ("force", "eps_2", "eps_d", "sigma_1", "tau")}
-    s1, s2, sd = tow.initial_state(m), tow.initial_state(m), shear.initial_state(m)
-    x, dx = np.zeros(m), np.zeros(m)
+    xs = np.zeros((n, m))
+    out = {name: np.zeros((n, m)) for name in ("force", "sigma_1", "tau")}
+    s_tows, s_d = tows.initial_state(2 * m), shear.initial_state(m)
     lower = np.full(m, -0.5)
     for i in range(n):
         dt = t[i] - t[i - 1] if i else 0.0
         ε1 = np.full(m, ε1_rows[i])
-        σ1, _, s1_new = tow.update(ε1, dt, s1)
 
-        def residual(ε2, ε1=ε1, σ1=σ1, dt=dt, s2=s2, sd=sd):
-            σ2, dσ2, s2_new = tow.update(ε2, dt, s2)
-            τ, dτ, sd_new = shear.update(0.5 * (ε1 + ε2), dt, sd)
-            c, dc = shear_tension_factor(0.5 * (σ1 + σ2), k_st) if coupling else (1.0, 0.0)
+        def residual(ε2, ε1=ε1, dt=dt, s_tows=s_tows, s_d=s_d):
+            σ, dσ, s_tows_new = tows._update(np.concatenate([ε1, ε2]), dt, s_tows)
+            σ1, σ2, dσ2 = σ[:m], σ[m:], dσ[m:]
+            τ, dτ, s_d_new = shear._update(0.5 * (ε1 + ε2), dt, s_d)
+            c, dc = shear_tension_factor(0.5 * (σ1 + σ2), k_st)
             r = σ2 + _SQRT2 * c * τ
             dr = dσ2 + _SQRT2 * (0.5 * c * dτ + 0.5 * dc * dσ2 * τ)
-            return r, dr, np.abs(σ2) + np.abs(_SQRT2 * c * τ), (s2_new, sd_new, c * τ)
+            return r, dr, (s_tows_new, s_d_new, σ1, c * τ)
 
-        guess = np.maximum(x + dx, 0.5 * (x + lower))
-        x_new, (s2, sd, τ) = _newton(residual, guess, lower, f"tensile balance at row {i}")
-        dx, x, s1 = x_new - x, x_new, s1_new
+        guess = np.maximum(_predict(t, i, xs), 0.5 * (xs[i - 1] + lower) if i else lower)
+        xs[i], (s_tows, s_d, σ1, τ) = _newton(residual, guess, lower,
+                                              f"tensile balance at row {i}")
+        # Eq. 17 with the diagonal stress (insensitive to the stiff transverse tows).
         out["force"][i] = np.sqrt(1.0 + 2.0 * ε1) * (σ1 + _SQRT2 * τ)
-        out["eps_2"][i], out["eps_d"][i] = x, 0.5 * (ε1 + x)
         out["sigma_1"][i], out["tau"][i] = σ1, τ
     return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=out["force"],
                    tow_strain=np.repeat(ε1_rows[:, None], m, axis=1),
-                   diagonal_strain=out["eps_d"], shear_deg=np.zeros((n, m)),
-                   transverse_strain=out["eps_2"], tow_stress_N=out["sigma_1"],
+                   diagonal_strain=0.5 * (ε1_rows[:, None] + xs), shear_deg=np.zeros((n, m)),
+                   transverse_strain=xs, tow_stress_N=out["sigma_1"],
                    diagonal_stress_N=out["tau"])
 
 
@@ -274,39 +297,41 @@ def bias_extension(
     if np.any(εd1_rows <= -0.5):
         raise DrapeInputError(f"bias extension: displacement {u.min()} mm closes the gauge "
                               "region (diagonal strain <= -0.5)")
-    tow, shear, k, m, coupling, k_st = _prepare(model, conditions)
+    k, m = model.n_sets, model.n_sets or 1
+    tow, diagonals = model.laws(conditions)["tow"], _stacked_laws(model, conditions)["shear"]
+    k_st = model.parameters["k_st"] if "shear_tension_coupling" in model.effects else 0.0
     n = t.size
-    out = {name: np.zeros((n, m)) for name in
-           ("force", "eps_t", "eps_d2", "sigma", "tau_1", "shear")}
-    st, sd1, sd2 = tow.initial_state(m), shear.initial_state(m), shear.initial_state(m)
-    x, dx = np.zeros(m), np.zeros(m)
+    xs = np.zeros((n, m))
+    out = {name: np.zeros((n, m)) for name in ("force", "sigma", "tau_1")}
+    s_t, s_d = tow.initial_state(m), diagonals.initial_state(2 * m)
     for i in range(n):
         dt = t[i] - t[i - 1] if i else 0.0
         εd1 = np.full(m, εd1_rows[i])
-        τ1, _, sd1_new = shear.update(εd1, dt, sd1)
         lower = np.maximum(0.5 * (εd1 - 0.5), -0.5)  # both ε_d2 and ε_t above -0.5
 
-        def residual(εt, εd1=εd1, dt=dt, st=st, sd2=sd2):
-            σ, dσ, st_new = tow.update(εt, dt, st)
-            τ2, dτ2, sd2_new = shear.update(2.0 * εt - εd1, dt, sd2)
-            c, dc = shear_tension_factor(σ, k_st) if coupling else (1.0, 0.0)
+        def residual(εt, εd1=εd1, dt=dt, s_t=s_t, s_d=s_d):
+            σ, dσ, s_t_new = tow._update(εt, dt, s_t)
+            τ, dτ, s_d_new = diagonals._update(np.concatenate([εd1, 2.0 * εt - εd1]), dt, s_d)
+            τ1, τ2, dτ2 = τ[:m], τ[m:], dτ[m:]
+            c, dc = shear_tension_factor(σ, k_st)
             r = σ + _SQRT2 * c * τ2
             dr = dσ + _SQRT2 * (2.0 * c * dτ2 + dc * dσ * τ2)
-            return r, dr, np.abs(σ) + np.abs(_SQRT2 * c * τ2), (st_new, sd2_new, σ, c)
+            return r, dr, (s_t_new, s_d_new, σ, c * τ1, c * τ2)
 
-        guess = np.maximum(x + dx, 0.5 * (x + lower))
-        x_new, (st, sd2, σ, c) = _newton(residual, guess, lower,
-                                         f"bias-extension balance at row {i}")
-        dx, x, sd1 = x_new - x, x_new, sd1_new
-        εd2 = 2.0 * x - εd1
-        out["force"][i] = np.sqrt(1.0 + 2.0 * εd1) * (_SQRT2 * σ + 2.0 * c * τ1)
-        out["eps_t"][i], out["eps_d2"][i], out["sigma"][i], out["tau_1"][i] = x, εd2, σ, c * τ1
-        sin_γ = np.clip((εd1 - εd2) / (1.0 + 2.0 * x), -1.0, 1.0)
-        out["shear"][i] = np.degrees(np.arcsin(sin_γ))
+        guess = np.maximum(_predict(t, i, xs),
+                           0.5 * (xs[i - 1] + lower) if i else 0.5 * lower)
+        xs[i], (s_t, s_d, σ, τ1, τ2) = _newton(residual, guess, lower,
+                                               f"bias-extension balance at row {i}")
+        # Eq. 20 in the form 2√(1+2ε_d1)(τ_1 − τ_2), insensitive to the stiff tows' stress.
+        out["force"][i] = 2.0 * np.sqrt(1.0 + 2.0 * εd1) * (τ1 - τ2)
+        out["sigma"][i], out["tau_1"][i] = σ, τ1
+    εd1 = εd1_rows[:, None]
+    εd2 = 2.0 * xs - εd1
+    shear_deg = np.degrees(np.arcsin(np.clip((εd1 - εd2) / (1.0 + 2.0 * xs), -1.0, 1.0)))
     return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=out["force"],
-                   tow_strain=out["eps_t"], diagonal_strain=np.repeat(εd1_rows[:, None], m, 1),
-                   shear_deg=out["shear"], transverse_strain=out["eps_d2"],
-                   tow_stress_N=out["sigma"], diagonal_stress_N=out["tau_1"])
+                   tow_strain=xs, diagonal_strain=np.repeat(εd1, m, axis=1),
+                   shear_deg=shear_deg, transverse_strain=εd2, tow_stress_N=out["sigma"],
+                   diagonal_stress_N=out["tau_1"])
 
 
 def diagonal_response(

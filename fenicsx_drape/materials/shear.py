@@ -186,22 +186,18 @@ class ShearLaw(MaterialLaw):
         b, e = s * a, s * ε
         lo = np.maximum(b, 0.0)
         f_lo, _ = self.viscosity_factor(lo)
-        hi = (η_o * f_lo * b + k * e) / (η_o * f_lo + k)
-        hi = np.maximum(hi, lo)
-        y = hi.copy()
+        hi = np.maximum((η_o * f_lo * b + k * e) / (η_o * f_lo + k), lo)
+        y = hi
         for _ in range(_MAX_ITERATIONS):
             f, df = self.viscosity_factor(y)
             φ = η_o * f * (y - b) + k * (y - e)
-            dφ = η_o * (f + df * (y - b)) + k
+            D_y = η_o * (f + df * (y - b))
+            step = φ / (D_y + k)
+            if np.all(np.abs(step) <= 1e-8 * (1.0 + y)):
+                y = y - step  # Newton converges quadratically: its error is now ~step²
+                break
             lo = np.where(φ < 0.0, y, lo)
             hi = np.where(φ > 0.0, y, hi)
-            y_new = y - φ / dφ
-            y_new = np.where((y_new >= lo) & (y_new <= hi), y_new, 0.5 * (lo + hi))
-            step = np.abs(y_new - y)
-            y = y_new
-            if np.all(step <= 1e-14 * (1.0 + y)):
-                break
-        f, df = self.viscosity_factor(y)
-        x = np.where(loading, s * y, x)
-        D = np.where(loading, η_o * (f + df * (y - b)), D)
-        return x, D
+            y_new = y - step
+            y = np.where((y_new >= lo) & (y_new <= hi), y_new, 0.5 * (lo + hi))
+        return np.where(loading, s * y, x), np.where(loading, D_y, D)
