@@ -83,10 +83,8 @@ def simulate(bundle_or_test: Bundle | Test, model) -> np.ndarray | dict[str, np.
                                         conditions=test.conditions)
     else:
         raise ValueError(f"test {test.id!r}: a {test.kind} test is not a coupon test")
-    force = np.asarray(curve.force_per_tow_N) * test.tows
-    if force.ndim == 2 and force.shape[0] == test.n_rows:
-        force = force.T  # one row per parameter set
-    return force
+    # curves are (n_rows,) or (n_rows, k): return one row per parameter set
+    return np.asarray(curve.force_per_tow_N).T * test.tows
 
 
 def test_noise(test: Test) -> tuple[np.ndarray, float, str]:
@@ -281,10 +279,9 @@ class _Residuals:
 
 
 def _laws_parameters(model) -> dict[str, tuple[str, ...]]:
-    """The active parameters of each law role of ``model``."""
-    laws = model.laws()
-    effects = set(model.effects)
-    return {role: tuple(type(law).active_parameters(effects)) for role, law in laws.items()}
+    """The active parameters of each law role of ``model`` (fixed ones included)."""
+    return {role: tuple(cls.active_parameters(model.effects))
+            for role, cls in model.law_classes().items()}
 
 
 def plan_blocks(model, tests: Sequence[Test], names: Sequence[str],
@@ -346,18 +343,23 @@ def initial_guess(model, tests: Sequence[Test], names: Sequence[str]):
     bias = [t for t in tests if t.kind == "bias_extension"]
     if tensile:
         guess |= features.tow_guess(tensile, decrimping="decrimping" in model.effects)
+    rate_independent = "rate_dependence" not in model.effects
     if bias:
-        guess |= features.shear_guess(bias)
+        eta_ref = (float(model.parameters["eta_o"]) * float(model.parameters["rate_ref_per_s"])
+                   if rate_independent and "rate_ref_per_s" in model.parameters else None)
+        guess |= features.shear_guess(bias, eta_ref=eta_ref)
     chosen = {n: v for n, v in guess.items() if n in names and math.isfinite(v) and v > 0}
     for n, v in chosen.items():  # keep inside the physical range
         lo, hi = parameter_info(n).bounds
         chosen[n] = float(min(max(v, lo), hi))
     model = model.with_parameters(**chosen)
-    # Rescale the force-like parameters of each law together (degree-one homogeneity).
+    # Rescale the force-like parameters of each law together (degree-one homogeneity); the
+    # rate-independent lock-up η_o ε̇_ref (f - 1) scales with s_o and s_inf.
     roles = _laws_parameters(model)
+    scaled = ("s_o", "s_inf") if rate_independent else ()
     for kind, group in (("tensile", tensile), ("bias_extension", bias)):
         force_like = [n for n in roles.get(BLOCK_ROLE[kind], ()) if n in names
-                      and parameter_info(n).unit.startswith("N")]
+                      and (parameter_info(n).unit.startswith("N") or n in scaled)]
         if not group or not force_like:
             continue
         sim = np.concatenate([np.ravel(simulate(t, model)) for t in group])
@@ -412,7 +414,7 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
     if not coupons:
         raise DrapeInputError(f"bundle {bundle.name!r}: no tensile or bias-extension test to "
                               "fit")
-    active = tuple(model.active_parameters())
+    active = tuple(model.active_parameters(COUPON_KINDS))
     names = active if parameters is None else tuple(n for n in parameters if n in active)
     if parameters is not None and set(parameters) - set(active):
         notes.append("not fitted (fixed or not used by the model's effects): "
@@ -506,7 +508,7 @@ def write_fit(result: FitResult, out_dir: str | Path) -> Path:
     from fenicsx_drape.provenance import atomic_write_text, write_json, write_provenance
 
     out = Path(out_dir)
-    atomic_write_text(out / "model.toml", result.model.to_toml())
+    atomic_write_text(out / "model.toml", result.model.to_toml(relative_to=out))
     write_json(out / "report.json", result.report())
     atomic_write_text(out / "sensitivity.csv", sensitivity.to_csv(result.sensitivity))
     for test in result.bundle.tests:

@@ -18,6 +18,7 @@ reported as determined only in combination.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -32,13 +33,10 @@ CORRELATED = 0.98  # |correlation| above which two estimates are reported as a c
 
 
 def used_parameters(model) -> tuple[str, ...]:
-    """The parameters the model's laws use with its effects (fixed ones included)."""
-    from fenicsx_drape.fit import _laws_parameters
+    """The parameters that shape the model's coupon tests, fixed ones included."""
+    from fenicsx_drape.fit import COUPON_KINDS
 
-    names: list[str] = []
-    for group in _laws_parameters(model).values():
-        names += [n for n in group if n not in names and n in model.parameters]
-    return tuple(names)
+    return dataclasses.replace(model, fixed=()).active_parameters(COUPON_KINDS)
 
 
 def table2(model, tests: Sequence[Test], names: Sequence[str] | None = None,
