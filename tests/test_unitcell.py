@@ -194,3 +194,24 @@ def test_bad_input():
     with pytest.raises(DrapeInputError, match="gauge_length_mm"):
         uc.tensile(model, [0, 1], [0, 1], gauge_length_mm=-1.0)
     assert isinstance(model, Model)
+
+
+def test_curves_command_writes_tables_and_pictures(tmp_path, capsys):
+    from fenicsx_drape.cli import main
+
+    model_toml = tmp_path / "MODEL.toml"
+    model_toml.write_text(default_model().to_toml())
+    assert main(["curves", "--model", str(model_toml), "--out", str(tmp_path / "out")]) == 0
+    printed = capsys.readouterr().out
+    assert "0.001375 1/s (the paper prints 0.0013)" in printed
+    assert "0.022006 1/s (the paper prints 0.022)" in printed
+    for name in ("tensile.csv", "bias_extension.csv", "shear_law.csv", "provenance.json",
+                 "fig6_characterisation.png", "fig2b_shear_law.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 100
+    table = np.genfromtxt(tmp_path / "out" / "bias_extension.csv", delimiter=",", names=True,
+                          comments="#")
+    assert set(table["speed_mm_per_min"]) == {10.0, 40.0, 160.0}
+    np.testing.assert_allclose(table["force_N"], table["force_per_tow_N"] * 0.713 * 70
+                               / math.sqrt(2), rtol=1e-8)
+    assert main(["curves", "--model", str(tmp_path / "nope.toml"), "--out",
+                 str(tmp_path / "x")]) == 2
