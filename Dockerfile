@@ -14,11 +14,12 @@ ENV DEBIAN_FRONTEND=noninteractive \
     OMP_NUM_THREADS=1 \
     MPLBACKEND=Agg
 
+# gcc and python3-dev: FFCx compiles forms at run time; python3-h5py: meshio's XDMF files.
 RUN apt-get $APT_OPTS update \
  && apt-get $APT_OPTS install -y --no-install-recommends \
       python3-dolfinx python3-gmsh python3-meshio python3-petsc4py python3-mpi4py \
       python3-numpy python3-scipy python3-matplotlib python3-pytest python3-hypothesis \
-      python3-pip python3-setuptools ruff mpi-default-bin gcc python3-dev make \
+      python3-h5py python3-pip python3-setuptools ruff mpi-default-bin gcc python3-dev make \
  && rm -rf /var/lib/apt/lists/*
 
 # Fail loudly on a DOLFINx that cannot distribute a branching truss.
@@ -30,7 +31,8 @@ COPY pyproject.toml README.md ./
 COPY fenicsx_drape ./fenicsx_drape
 COPY demos ./demos
 COPY meshes ./meshes
-RUN pip install --break-system-packages --no-deps --no-build-isolation -e . \
+RUN pip install --break-system-packages --root-user-action=ignore --no-deps --no-build-isolation \
+      -e . \
  && python3 -c "import fenicsx_drape; print('fenicsx_drape', fenicsx_drape.__version__)"
 
 CMD ["python3", "-m", "fenicsx_drape", "form", "hemisphere", "--out", "results/hemisphere"]
