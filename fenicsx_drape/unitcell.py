@@ -4,40 +4,38 @@ r"""Unit-cell solutions of the tensile and bias-extension tests (section 2.2, eq
 ``d1 = a + b`` and ``d2 = a − b`` of reference length L√2. Their Green-Lagrange strains
 satisfy ε_d1,2 = (ε_a + ε_b)/2 ± a·b/(2L²), hence ε_d1 + ε_d2 = ε_a + ε_b: eqs. 15 and 18.
 
-**Bar forces.** The laws' stress σ (N/tow) is work-conjugate to the Green-Lagrange strain: a
-bar standing for n_t tows does the virtual work n_t σ δε per unit reference length, as in the
-total-Lagrangian FE truss (section 4). A bar of stretch λ = √(1 + 2ε) therefore carries the
-axial force n_t σ λ. (The printed eqs. 16-20 use σ itself as the force; the two agree for
-tows, λ ≈ 1, but not for diagonals strained to 0.4.)
+**Bar forces.** As in the paper's eq. 11 (f/n_t = Σ σ r/|r|), the laws' σ (N/tow) is the
+axial force per tow of a bar: a bar standing for n_t tows carries n_t σ along its current
+direction. (The FE truss uses the same convention: its work-conjugate of ε is n_t σ/λ, see
+:mod:`fenicsx_drape.fe.kinematics`; Table 2 was fitted with it.)
 
 **One free-body view for both tests.** Cut the periodic net (every cell owns two tow bars and
-two diagonals) across the load and along it. Per tow bar of one family crossing the cut, the
-bars crossing are that tow, one tow of the other family and two diagonals of one kind; their
-axial forces, resolved, give (the homogenised "virial" stress of the net, the same thing):
+two diagonals) across the load and along it; per period of the cut it crosses one tow bar of
+each family and two diagonals of one kind. Resolving their forces gives (the same as the
+homogenised "virial" stress Σ_bars N (r⊗r)/|r| of a cell):
 
 - *Tension* (Fig. 3b; warp along the load, ε_1 = e + e²/2 known with e = u/L_g, weft ε_2
-  unknown, both diagonals ε_d = (ε_1 + ε_2)/2 by eq. 15, no shear by symmetry). Zero force
-  across the load (the resolved diagonal stretch is λ_d sin φ = λ_2/√2):
+  unknown, both diagonals ε_d = (ε_1 + ε_2)/2 by eq. 15, no shear by symmetry; the diagonals
+  make the angle φ with the load, sin²φ = (1 + 2ε_2)/(2 + 4ε_d)). Zero force across the load
+  and the force per loaded tow:
 
-      λ_2 (σ_2 + √2 τ) = 0   →   G(ε_2) + √2 H(ε_d) = 0                    (eq. 16)
+      G(ε_2) + 2 H(ε_d) sin φ = 0,                                             (eq. 16)
+      f = G(ε_1) + 2 H(ε_d) cos φ,   cos²φ = (1 + 2ε_1)/(2 + 4ε_d).            (eq. 17)
 
-  and the force per loaded tow  f = λ_1 (σ_1 + √2 τ) = λ_1 (G(ε_1) − G(ε_2))    (eq. 17).
 - *Bias extension* (Fig. 3c; major diagonal along the load with ε_d1 known from eq. 21, both
   tows ε_t unknown, minor diagonal ε_d2 = 2ε_t − ε_d1 by eq. 18; tows at ±θ to the load,
-  λ_t cos θ = √((1 + 2ε_d1)/2)). Zero force across the load: 2λ_t sin θ (σ + √2 τ_2) = 0, so
+  sin²θ = (1 + 4ε_t − 2ε_d1)/(2 + 4ε_t), cos²θ = (1 + 2ε_d1)/(2 + 4ε_t)):
 
-      G(ε_t) + √2 H(2ε_t − ε_d1) = 0                                          (eq. 19)
+      H(2ε_t − ε_d1) + G(ε_t) sin θ = 0,                                       (eq. 19)
+      f = 2 (G(ε_t) cos θ + τ_1) = 2 (τ_1 − τ_2 cot θ)   per tow of one family. (eq. 20)
 
-  and the force per tow of one family crossing the width
-  f = 2λ_t cos θ (σ + √2 τ_1) = √(1 + 2ε_d1) (√2 σ + 2τ_1) = 2√(1 + 2ε_d1)(τ_1 − τ_2)
-  (eq. 20; the last form uses eq. 19).
-
-The printed eq. 19, H + G sin θ = 0, is this balance with bar forces σ instead of σλ (the same
-at θ = 45°). The printed eq. 20, 2σ cos θ + τ_1 (stray ε_i1 dropped), is the node balance of a
-single, isolated cell, which pairs with a transverse balance 2σ sin θ + τ_2 = 0, not with
-eq. 19: the two printed equations mix two free bodies (NOTES.md). The printed eq. 16 is
-likewise a single-node balance. Here everything follows from the periodic net, and the work
-check holds: for path-independent laws ∫ f du equals the stored energy per tow (tested).
+Eq. 19 is exactly the printed one. The printed eq. 20, 2σ cos θ + τ_1 (stray ε_i1 dropped), and
+the printed eqs. 16-17 (H sin φ + G = 0, f = τ cos φ + G) are node balances of a single,
+isolated cell; a single cell's transverse balance in bias would be 2σ sin θ + τ_2 = 0, which
+does not pair with the printed eq. 19: the printed equations mix two free bodies (NOTES.md).
+Here everything follows from the periodic net. Check (tested): for path-independent laws the
+work ∫ f du equals the stored energy per tow, with Φ(ε) = ∫ σ/√(1 + 2ε) dε per bar (σ is the
+force, so its work over the length change L dε/λ).
 
 Normalisation: "per tow" is per tow of one family crossing the specimen's width, invariant
 under the pin-jointed deformation: l_t W for the tensile specimen (0.713 × 25 = 17.8) and
@@ -74,7 +72,6 @@ from fenicsx_drape.model import Model
 EFFECTIVE_RATE_FACTOR = (3.0 * math.sqrt(2.0) + 5.0) / 8.0
 """The factor of eq. 23, 1.1553."""
 
-_SQRT2 = math.sqrt(2.0)
 _MAX_ITERATIONS = 100
 
 
@@ -146,7 +143,7 @@ def _newton(residual: Callable, x: np.ndarray, lower: np.ndarray, what: str):
 
     ``residual(x) -> (r, dr/dx, payload)``. A point is done when the Newton correction
     r/(dr/dx) is below 1e-13 in strain (the forces are then exact to ~1e-11 relative, since
-    they are computed in a form insensitive to the stiff tows' stress). Returns ``(x,
+    they are computed in forms insensitive to the stiff tows' stress). Returns ``(x,
     payload)`` of the last evaluation, which is at the returned x for every point.
     """
     lo, hi = lower.copy(), np.full_like(x, np.inf)
@@ -253,15 +250,18 @@ def tensile(
             σ1, σ2, dσ2 = σ[:m], σ[m:], dσ[m:]
             τ, dτ, s_d_new = shear._update(0.5 * (ε1 + ε2), dt, s_d)
             c, dc = shear_tension_factor(0.5 * (σ1 + σ2), k_st)
-            r = σ2 + _SQRT2 * c * τ
-            dr = dσ2 + _SQRT2 * (0.5 * c * dτ + 0.5 * dc * dσ2 * τ)
-            return r, dr, (s_tows_new, s_d_new, σ1, c * τ)
+            q = 2.0 + 2.0 * ε1 + 2.0 * ε2  # 2 + 4ε_d
+            sin_φ = np.sqrt((1.0 + 2.0 * ε2) / q)
+            dsin_φ = (1.0 + 2.0 * ε1) / (q * q * sin_φ)
+            r = σ2 + 2.0 * c * τ * sin_φ
+            dr = dσ2 + 2.0 * (c * (0.5 * dτ * sin_φ + τ * dsin_φ) + 0.5 * dc * dσ2 * τ * sin_φ)
+            cos_φ = np.sqrt((1.0 + 2.0 * ε1) / q)
+            return r, dr, (s_tows_new, s_d_new, σ1, c * τ, cos_φ)
 
         guess = np.maximum(_predict(t, i, xs), 0.5 * (xs[i - 1] + lower) if i else lower)
-        xs[i], (s_tows, s_d, σ1, τ) = _newton(residual, guess, lower,
-                                              f"tensile balance at row {i}")
-        # Eq. 17 with the diagonal stress (insensitive to the stiff transverse tows).
-        out["force"][i] = np.sqrt(1.0 + 2.0 * ε1) * (σ1 + _SQRT2 * τ)
+        xs[i], (s_tows, s_d, σ1, τ, cos_φ) = _newton(residual, guess, lower,
+                                                     f"tensile balance at row {i}")
+        out["force"][i] = σ1 + 2.0 * τ * cos_φ  # eq. 17
         out["sigma_1"][i], out["tau"][i] = σ1, τ
     return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=out["force"],
                    tow_strain=np.repeat(ε1_rows[:, None], m, axis=1),
@@ -314,16 +314,20 @@ def bias_extension(
             τ, dτ, s_d_new = diagonals._update(np.concatenate([εd1, 2.0 * εt - εd1]), dt, s_d)
             τ1, τ2, dτ2 = τ[:m], τ[m:], dτ[m:]
             c, dc = shear_tension_factor(σ, k_st)
-            r = σ + _SQRT2 * c * τ2
-            dr = dσ + _SQRT2 * (2.0 * c * dτ2 + dc * dσ * τ2)
-            return r, dr, (s_t_new, s_d_new, σ, c * τ1, c * τ2)
+            q = 2.0 + 4.0 * εt
+            sin_θ = np.sqrt((1.0 + 4.0 * εt - 2.0 * εd1) / q)
+            dsin_θ = 2.0 * (1.0 + 2.0 * εd1) / (q * q * sin_θ)
+            r = c * τ2 + σ * sin_θ
+            dr = 2.0 * c * dτ2 + dc * dσ * τ2 + dσ * sin_θ + σ * dsin_θ
+            cot_θ = np.sqrt((1.0 + 2.0 * εd1) / (1.0 + 4.0 * εt - 2.0 * εd1))
+            return r, dr, (s_t_new, s_d_new, σ, c * τ1, c * τ2, cot_θ)
 
         guess = np.maximum(_predict(t, i, xs),
                            0.5 * (xs[i - 1] + lower) if i else 0.5 * lower)
-        xs[i], (s_t, s_d, σ, τ1, τ2) = _newton(residual, guess, lower,
-                                               f"bias-extension balance at row {i}")
-        # Eq. 20 in the form 2√(1+2ε_d1)(τ_1 − τ_2), insensitive to the stiff tows' stress.
-        out["force"][i] = 2.0 * np.sqrt(1.0 + 2.0 * εd1) * (τ1 - τ2)
+        xs[i], (s_t, s_d, σ, τ1, τ2, cot_θ) = _newton(residual, guess, lower,
+                                                      f"bias-extension balance at row {i}")
+        # Eq. 20 in the form 2(τ_1 − τ_2 cot θ), insensitive to the stiff tows' stress.
+        out["force"][i] = 2.0 * (τ1 - τ2 * cot_θ)
         out["sigma"][i], out["tau_1"][i] = σ, τ1
     εd1 = εd1_rows[:, None]
     εd2 = 2.0 * xs - εd1
