@@ -148,28 +148,29 @@ def _newton(residual: Callable, x: np.ndarray, lower: np.ndarray, what: str):
     """
     lo, hi = lower.copy(), np.full_like(x, np.inf)
     grow = np.full_like(x, 1e-4)
-    for _ in range(_MAX_ITERATIONS):
-        r, dr, payload = residual(x)
-        if not np.isfinite(r).all():
-            raise SolverError(f"unit cell: a law returned a non-finite stress in the {what}")
-        done = np.abs(r) <= 1e-13 * np.abs(dr) + 1e-15
-        if done.all():
-            return x, payload
-        lo = np.where(r < 0.0, x, lo)
-        hi = np.where(r > 0.0, x, hi)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x_new = x - np.where(dr > 0.0, r / dr, np.nan)
-        inside = (x_new > lo) & (x_new < hi)
-        bracketed = np.isfinite(hi)
-        # Outside the bracket: bisect it, or search upward (no upper bound yet) or halve
-        # the distance to the lower bound.
-        fallback = np.where(bracketed, 0.5 * (lo + hi),
-                            np.where(r < 0.0, x + grow, 0.5 * (lo + x)))
-        grow = np.where(inside | bracketed, grow, 2.0 * grow)
-        x_new = np.where(inside, x_new, fallback)
-        if np.all(done | (np.abs(x_new - x) <= 4e-16 * (1.0 + np.abs(x)))):
-            return x, payload
-        x = np.where(done, x, x_new)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for _ in range(_MAX_ITERATIONS):
+            r, dr, payload = residual(x)
+            if not np.isfinite(r).all():
+                raise SolverError(f"unit cell: a law returned a non-finite stress in the {what}")
+            done = np.abs(r) <= 1e-13 * np.abs(dr) + 1e-15
+            if done.all():
+                return x, payload
+            lo = np.where(r < 0.0, x, lo)
+            hi = np.where(r > 0.0, x, hi)
+            x_new = x - r / dr
+            inside = (x_new > lo) & (x_new < hi)  # False for dr <= 0 too
+            if not inside.all():
+                # Outside the bracket: bisect it, or search upward (no upper bound yet) or
+                # halve the distance to the lower bound.
+                bracketed = np.isfinite(hi)
+                fallback = np.where(bracketed, 0.5 * (lo + hi),
+                                    np.where(r < 0.0, x + grow, 0.5 * (lo + x)))
+                grow = np.where(inside | bracketed, grow, 2.0 * grow)
+                x_new = np.where(inside, x_new, fallback)
+            if np.all(done | (np.abs(x_new - x) <= 4e-16 * (1.0 + np.abs(x)))):
+                return x, payload
+            x = np.where(done, x, x_new)
     raise SolverError(f"unit cell: the {what} did not converge in {_MAX_ITERATIONS} "
                       f"iterations (residual {np.max(np.abs(r)):.3g} N/tow)")
 
