@@ -17,6 +17,16 @@ TABLE2 = {"sigma_o": 2.62e-2, "eta_o": 1.37, "s_o": 7.48, "s_inf": 5.39e3, "alph
           "eps_bar": 1.44e-3, "alpha": 1.33e4}
 
 
+@pytest.fixture(autouse=True)
+def _isolated_registry(monkeypatch):
+    """Laws registered by a test (plugins) are forgotten after it."""
+    from fenicsx_drape import model
+    from fenicsx_drape.materials import base
+
+    monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
+    monkeypatch.setattr(model, "_PLUGINS", dict(model._PLUGINS))
+
+
 def test_default_parameters_are_table2():
     values = default_parameters()
     for name, value in TABLE2.items():

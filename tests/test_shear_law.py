@@ -191,3 +191,8 @@ def test_bad_input_named():
         law.update(np.array([np.nan]), 1.0, law.initial_state(1))
     with pytest.raises(ValueError, match="dt"):
         law.update(np.array([0.1]), -1.0, law.initial_state(1))
+
+
+def test_bad_condition_is_named():
+    with pytest.raises(ParameterError, match="temperature_C"):
+        shear(conditions={"temperature_C": "hot"})

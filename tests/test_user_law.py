@@ -14,6 +14,16 @@ DEMO = Path(__file__).parents[1] / "demos" / "user_laws" / "power_law_viscosity.
 L0, W0 = 210.0, 70.0
 
 
+@pytest.fixture(autouse=True)
+def _isolated_registry(monkeypatch):
+    """Laws registered by a test (plugins) are forgotten after it."""
+    from fenicsx_drape import model
+    from fenicsx_drape.materials import base
+
+    monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
+    monkeypatch.setattr(model, "_PLUGINS", dict(model._PLUGINS))
+
+
 def power_law_model(n_power):
     base = default_model()
     return Model(("power_law_viscosity", "decrimping", "tow_buckling"),

@@ -103,7 +103,12 @@ class MaterialLaw:
             # per point, to evaluate many parameter sets in one vectorised update).
             setattr(self, f.name, float(array) if array.ndim == 0 else array)
         for f in fields_of(self, "condition"):
-            array = np.asarray(getattr(self, f.name), dtype=float)
+            value = getattr(self, f.name)
+            try:
+                array = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                raise ParameterError(f"{name}: condition {f.name} = {value!r} is not a number") \
+                    from None
             if not np.isfinite(array).all():
                 raise ParameterError(f"{name}: condition {f.name} = {array} is not finite")
             setattr(self, f.name, float(array) if array.ndim == 0 else array)
