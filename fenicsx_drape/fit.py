@@ -50,10 +50,20 @@ COUPON_KINDS = ("tensile", "bias_extension")
 BLOCK_ROLE = {"tensile": "tow", "bias_extension": "shear"}
 # Cross-effect ratio above which the tow and shear blocks are fitted together.
 COUPLING_THRESHOLD = 0.05
+# A parameter whose change by a factor e moves the simulated tests by less than this fraction
+# of their noise (RMS over the rows, averaged over tests) is one no test responds to.
+RESPONSE_FLOOR = 0.05
 # Forward-difference step in the fitting variables (log parameters): 1e-6 relative.
 FD_STEP = 1e-6
 # Bounds: at most this many decades away from the starting value (within physical bounds).
 DECADES = 4.0
+# Stop when an iteration lowers the cost by less than this fraction (the cost is about half
+# the number of tests at the noise floor, so 1e-6 is a change of χ² far below 1), or moves
+# the log parameters by less than XTOL: this ends the slow crawl along directions the data
+# do not determine (e.g. s_inf against eps_v_bar below the lock-up), which the uncertainty
+# analysis then flags.
+FTOL = 1e-6
+XTOL = 1e-6
 
 Progress = Callable[[str], None]
 
@@ -304,8 +314,7 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str],
         effect[kinds.index(t.kind)] += np.sum(J[rows[i]:rows[i + 1]] ** 2, axis=0)
     effect = np.sqrt(effect)
     strongest = effect.max(axis=0)
-    scale = np.max(strongest) if strongest.size else 0.0
-    dead = [n for n, s in zip(names, strongest) if not s > 1e-9 * scale]
+    dead = [n for n, s in zip(names, strongest) if not s > RESPONSE_FLOOR]
     notes = []
     if dead:
         notes.append("no test responds to " + ", ".join(dead) + ": kept at the start value")
@@ -481,7 +490,7 @@ def _fit_block(model, names: Sequence[str], tests: Sequence[Test], max_iteration
         return J
 
     sol = least_squares(fun, x0, jac=jac, bounds=(variables.lower, variables.upper),
-                        method="trf", x_scale=1.0, ftol=1e-10, xtol=1e-10, gtol=1e-10,
+                        method="trf", x_scale=1.0, ftol=FTOL, xtol=XTOL, gtol=1e-10,
                         max_nfev=max_iterations)
     p = variables.to_p(sol.x)
     model = model.with_parameters(**{n: float(v) for n, v in zip(names, p)})

@@ -19,7 +19,6 @@ reported as determined only in combination.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -129,8 +128,8 @@ def uncertainty(model, tests: Sequence[Test], names: Sequence[str],
                     and abs(corr[j, i]) > CORRELATED]
         determined = bool(np.isfinite(sd[j]) and sd[j] <= UNDETERMINED_SD)
         if variables.log[j]:
-            ci = [value * math.exp(-1.96 * sd[j]), value * math.exp(1.96 * sd[j])] \
-                if np.isfinite(sd[j]) else [0.0, math.inf]
+            with np.errstate(over="ignore"):
+                ci = [value * float(np.exp(-1.96 * sd[j])), value * float(np.exp(1.96 * sd[j]))]
         else:
             half = 1.96 * sd[j] * variables.scale[j]
             ci = [value - half, value + half]
@@ -138,7 +137,7 @@ def uncertainty(model, tests: Sequence[Test], names: Sequence[str],
                      "determined": determined, "correlated_with": partners}
         if not determined:
             what = ("the tests do not respond to it" if not np.isfinite(sd[j]) else
-                    f"one standard deviation is a factor {math.exp(sd[j]):.3g}")
+                    f"one standard deviation is a factor {np.exp(min(sd[j], 700.0)):.3g}")
             flags.append(f"{name}: not determined by these tests ({what})"
                          + (f"; correlated with {', '.join(partners)}" if partners else ""))
         elif partners:
