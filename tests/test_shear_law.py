@@ -196,3 +196,18 @@ def test_bad_input_named():
 def test_bad_condition_is_named():
     with pytest.raises(ParameterError, match="temperature_C"):
         shear(conditions={"temperature_C": "hot"})
+
+
+@pytest.mark.parametrize("regime", ["plastic viscous loading", "lock-up", "relaxation"])
+def test_tangent_with_a_softening_viscosity(regime):
+    # s_∞ < s_o: f is concave and the dashpot iteration runs bracketed.
+    law = shear(s_o=60.0, s_inf=2.0, eps_v_bar=0.2, alpha_v=30.0)
+    t, e = history()
+    row, dε, dt = REGIMES[regime]
+    _, states = drive(law, t, e)
+    ε = np.array([e[row] + dε])
+    _, tangent, _ = law.update(ε, dt, states[row])
+    h = 1e-7
+    plus, _, _ = law.update(ε + h, dt, states[row])
+    minus, _, _ = law.update(ε - h, dt, states[row])
+    assert tangent[0] == pytest.approx((plus[0] - minus[0]) / (2 * h), rel=1e-6)

@@ -38,7 +38,8 @@ backward Euler for the dashpot with the viscosity taken at the end of the step,
 The left side is continuous and strictly increasing in ε_v (η ≥ η_o > 0; f(0) = 1 joins the
 branches), so the root is unique for every Δt: the unloading branch has it in closed form,
 the loading branch is solved by a bracketed Newton iteration started from the explicit-η
-estimate (an upper bound; monotone convergence for convex f). The consistent tangent follows
+estimate (an upper bound: monotone convergence when s_∞ ≥ s_o makes f convex; bracketed
+otherwise). The consistent tangent follows
 from the implicit function theorem on that residual:
 dσ_v/dε = E_v D / (D + Δt E_v) with D = η + η' (ε_v − ε_v,n). With Δt = 0 the Maxwell branch
 is elastic (dashpot locked).
@@ -188,16 +189,23 @@ class ShearLaw(MaterialLaw):
         f_lo, _ = self.viscosity_factor(lo)
         hi = np.maximum((η_o * f_lo * b + k * e) / (η_o * f_lo + k), lo)
         y = hi
+        # φ is convex when f is (s_∞ ≥ s_o: lock-up stiffens), and Newton from the upper
+        # bound then converges monotonically; otherwise it is kept inside the bracket.
+        bracketed = not np.all(self.s_inf >= self.s_o)
         for _ in range(_MAX_ITERATIONS):
             f, df = self.viscosity_factor(y)
-            φ = η_o * f * (y - b) + k * (y - e)
-            D_y = η_o * (f + df * (y - b))
+            y_b = y - b
+            φ = η_o * f * y_b + k * (y - e)
+            D_y = η_o * (f + df * y_b)
             step = φ / (D_y + k)
             if np.all(np.abs(step) <= 1e-8 * (1.0 + y)):
                 y = y - step  # Newton converges quadratically: its error is now ~step²
                 break
-            lo = np.where(φ < 0.0, y, lo)
-            hi = np.where(φ > 0.0, y, hi)
-            y_new = y - step
-            y = np.where((y_new >= lo) & (y_new <= hi), y_new, 0.5 * (lo + hi))
+            if bracketed:
+                lo = np.where(φ < 0.0, y, lo)
+                hi = np.where(φ > 0.0, y, hi)
+                y_new = y - step
+                y = np.where((y_new >= lo) & (y_new <= hi), y_new, 0.5 * (lo + hi))
+            else:
+                y = y - step
         return np.where(loading, s * y, x), np.where(loading, D_y, D)
