@@ -94,17 +94,9 @@ def _coupon_noise(test: Test) -> tuple[float, str]:
 
 
 def _coupon_simulate(test: Test, model: Model) -> np.ndarray:
-    from fenicsx_drape import unitcell
+    from fenicsx_drape.fit import simulate as simulate_coupon
 
-    if test.kind == "tensile":
-        curve = unitcell.tensile(model, test.time_s, test.displacement_mm,
-                                 gauge_length_mm=test.gauge_length_mm,
-                                 conditions=test.conditions)
-    else:
-        curve = unitcell.bias_extension(model, test.time_s, test.displacement_mm,
-                                        length_mm=test.length_mm, width_mm=test.width_mm,
-                                        conditions=test.conditions)
-    return np.asarray(curve.force_per_tow_N) * test.tows
+    return simulate_coupon(test, model)
 
 
 def coupon_strain(test: Test) -> tuple[str, np.ndarray]:
