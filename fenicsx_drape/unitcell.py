@@ -142,9 +142,10 @@ def _newton(residual: Callable, x: np.ndarray, lower: np.ndarray, what: str):
     """Root of a non-decreasing residual per point, by bracketed Newton; x > lower.
 
     ``residual(x) -> (r, dr/dx, payload)``. A point is done when the Newton correction
-    r/(dr/dx) is below 1e-13 in strain (the forces are then exact to ~1e-11 relative, since
-    they are computed in forms insensitive to the stiff tows' stress). Returns ``(x,
-    payload)`` of the last evaluation, which is at the returned x for every point.
+    δ = −r/(dr/dx) is below 1e-10 in strain. Returns ``(x, δ, payload)`` of the last
+    evaluation, which is at the returned x for every point: the laws' states are those of x,
+    and the callers correct what they report to x + δ to first order (leaving an error of
+    order δ², and 1e-10 in the strain the states were committed at).
     """
     lo, hi = lower.copy(), np.full_like(x, np.inf)
     grow = np.full_like(x, 1e-4)
@@ -153,9 +154,9 @@ def _newton(residual: Callable, x: np.ndarray, lower: np.ndarray, what: str):
             r, dr, payload = residual(x)
             if not np.isfinite(r).all():
                 raise SolverError(f"unit cell: a law returned a non-finite stress in the {what}")
-            done = np.abs(r) <= 1e-13 * np.abs(dr) + 1e-15
+            done = np.abs(r) <= 1e-10 * np.abs(dr) + 1e-15
             if done.all():
-                return x, payload
+                return x, np.where(dr > 0.0, -r / dr, 0.0), payload
             lo = np.where(r < 0.0, x, lo)
             hi = np.where(r > 0.0, x, hi)
             x_new = x - r / dr
@@ -169,24 +170,31 @@ def _newton(residual: Callable, x: np.ndarray, lower: np.ndarray, what: str):
                 grow = np.where(inside | bracketed, grow, 2.0 * grow)
                 x_new = np.where(inside, x_new, fallback)
             if np.all(done | (np.abs(x_new - x) <= 4e-16 * (1.0 + np.abs(x)))):
-                return x, payload
+                return x, np.where(done & (dr > 0.0), -r / dr, 0.0), payload
             x = np.where(done, x, x_new)
     raise SolverError(f"unit cell: the {what} did not converge in {_MAX_ITERATIONS} "
                       f"iterations (residual {np.max(np.abs(r)):.3g} N/tow)")
 
 
 def _predict(t: np.ndarray, i: int, xs: np.ndarray) -> np.ndarray:
-    """Quadratic extrapolation in time of the unknown of rows i-3..i-1 to row i."""
-    if i == 0:
-        return xs[0]
-    ts = t[max(i - 3, 0):i]
-    if len(ts) < 3 or np.any(np.diff(ts) <= 0.0):
-        return xs[i - 1]
-    (t0, t1, t2), (x0, x1, x2) = ts, xs[i - 3:i]
-    ti = t[i]
-    return (x0 * (ti - t1) * (ti - t2) / ((t0 - t1) * (t0 - t2))
-            + x1 * (ti - t0) * (ti - t2) / ((t1 - t0) * (t1 - t2))
-            + x2 * (ti - t0) * (ti - t1) / ((t2 - t0) * (t2 - t1)))
+    """Cubic (Lagrange) extrapolation in time of the unknown of rows i-4..i-1 to row i.
+
+    Lower order where fewer rows, or rows at one time, are available.
+    """
+    j = i
+    while j > max(i - 4, 0) and t[j - 1] < t[j]:
+        j -= 1
+    ts, values = t[j:i], xs[j:i]
+    if len(ts) < 2:
+        return xs[i - 1] if i else xs[0]
+    guess = np.zeros_like(xs[0])
+    for a, (ta, xa) in enumerate(zip(ts, values)):
+        weight = 1.0
+        for b, tb in enumerate(ts):
+            if b != a:
+                weight *= (t[i] - tb) / (ta - tb)
+        guess = guess + weight * xa
+    return guess
 
 
 def _stacked_laws(model: Model, conditions: Mapping[str, float] | None):
@@ -256,14 +264,18 @@ def tensile(
             dsin_φ = (1.0 + 2.0 * ε1) / (q * q * sin_φ)
             r = σ2 + 2.0 * c * τ * sin_φ
             dr = dσ2 + 2.0 * (c * (0.5 * dτ * sin_φ + τ * dsin_φ) + 0.5 * dc * dσ2 * τ * sin_φ)
+            # Eq. 17, f = G(ε_1) + 2 H cos φ, and the diagonal stress with their derivatives.
             cos_φ = np.sqrt((1.0 + 2.0 * ε1) / q)
-            return r, dr, (s_tows_new, s_d_new, σ1, c * τ, cos_φ)
+            dcτ = 0.5 * (dc * dσ2 * τ + c * dτ)
+            f = σ1 + 2.0 * c * τ * cos_φ
+            df = 2.0 * (dcτ * cos_φ - c * τ * cos_φ / q)
+            return r, dr, (s_tows_new, s_d_new, σ1, f, df, c * τ, dcτ)
 
         guess = np.maximum(_predict(t, i, xs), 0.5 * (xs[i - 1] + lower) if i else lower)
-        xs[i], (s_tows, s_d, σ1, τ, cos_φ) = _newton(residual, guess, lower,
-                                                     f"tensile balance at row {i}")
-        out["force"][i] = σ1 + 2.0 * τ * cos_φ  # eq. 17
-        out["sigma_1"][i], out["tau"][i] = σ1, τ
+        x, δ, (s_tows, s_d, σ1, f, df, τ, dτ) = _newton(residual, guess, lower,
+                                                        f"tensile balance at row {i}")
+        xs[i], out["force"][i] = x + δ, f + df * δ
+        out["sigma_1"][i], out["tau"][i] = σ1, τ + dτ * δ
     return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=out["force"],
                    tow_strain=np.repeat(ε1_rows[:, None], m, axis=1),
                    diagonal_strain=0.5 * (ε1_rows[:, None] + xs), shear_deg=np.zeros((n, m)),
@@ -320,16 +332,20 @@ def bias_extension(
             dsin_θ = 2.0 * (1.0 + 2.0 * εd1) / (q * q * sin_θ)
             r = c * τ2 + σ * sin_θ
             dr = 2.0 * c * dτ2 + dc * dσ * τ2 + dσ * sin_θ + σ * dsin_θ
-            cot_θ = np.sqrt((1.0 + 2.0 * εd1) / (1.0 + 4.0 * εt - 2.0 * εd1))
-            return r, dr, (s_t_new, s_d_new, σ, c * τ1, c * τ2, cot_θ)
+            # Eq. 20 as f = 2(τ_1 − τ_2 cot θ) (insensitive to the stiff tows' stress), the
+            # tow and the major diagonal's stresses, with their derivatives.
+            p = 1.0 + 4.0 * εt - 2.0 * εd1
+            cot_θ = np.sqrt((1.0 + 2.0 * εd1) / p)
+            f = 2.0 * c * (τ1 - τ2 * cot_θ)
+            df = 2.0 * (dc * dσ * (τ1 - τ2 * cot_θ) - c * cot_θ * (2.0 * dτ2 - 2.0 * τ2 / p))
+            return r, dr, (s_t_new, s_d_new, f, df, σ, dσ, c * τ1, dc * dσ * τ1)
 
         guess = np.maximum(_predict(t, i, xs),
                            0.5 * (xs[i - 1] + lower) if i else 0.5 * lower)
-        xs[i], (s_t, s_d, σ, τ1, τ2, cot_θ) = _newton(residual, guess, lower,
-                                                      f"bias-extension balance at row {i}")
-        # Eq. 20 in the form 2(τ_1 − τ_2 cot θ), insensitive to the stiff tows' stress.
-        out["force"][i] = 2.0 * (τ1 - τ2 * cot_θ)
-        out["sigma"][i], out["tau_1"][i] = σ, τ1
+        x, δ, (s_t, s_d, f, df, σ, dσ, τ1, dτ1) = _newton(
+            residual, guess, lower, f"bias-extension balance at row {i}")
+        xs[i], out["force"][i] = x + δ, f + df * δ
+        out["sigma"][i], out["tau_1"][i] = σ + dσ * δ, τ1 + dτ1 * δ
     εd1 = εd1_rows[:, None]
     εd2 = 2.0 * xs - εd1
     shear_deg = np.degrees(np.arcsin(np.clip((εd1 - εd2) / (1.0 + 2.0 * xs), -1.0, 1.0)))
