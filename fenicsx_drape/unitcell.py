@@ -184,17 +184,12 @@ def _predict(t: np.ndarray, i: int, xs: np.ndarray) -> np.ndarray:
     j = i
     while j > max(i - 4, 0) and t[j - 1] < t[j]:
         j -= 1
-    ts, values = t[j:i], xs[j:i]
-    if len(ts) < 2:
+    if i - j < 2:
         return xs[i - 1] if i else xs[0]
-    guess = np.zeros_like(xs[0])
-    for a, (ta, xa) in enumerate(zip(ts, values)):
-        weight = 1.0
-        for b, tb in enumerate(ts):
-            if b != a:
-                weight *= (t[i] - tb) / (ta - tb)
-        guess = guess + weight * xa
-    return guess
+    ts, ti = t[j:i].tolist(), float(t[i])
+    weights = [math.prod((ti - tb) / (ta - tb) for b, tb in enumerate(ts) if b != a)
+               for a, ta in enumerate(ts)]
+    return np.dot(weights, xs[j:i])
 
 
 def _stacked_laws(model: Model, conditions: Mapping[str, float] | None):
