@@ -52,9 +52,13 @@ limit ε_d = 0.5, has slope ε̇_eff = L̇/(L_o − W_o) · (3√2 + 5)/8 (eq. 2
 unloading included); the first row is reached from the virgin state in one step of zero
 length. In each step the unknown strain (ε_2 or ε_t) solves the balance above by a bracketed
 Newton iteration (the residual is non-decreasing in the unknown; bisection where Newton leaves
-the bracket), with the laws' consistent tangents; then the laws' states are committed. All of
-it is vectorised over parameter sets: a :class:`~fenicsx_drape.model.Model` whose parameters
-are arrays of shape (k,) gives curves shaped (n_rows, k).
+the bracket) with the laws' consistent tangents, started from a cubic extrapolation in time;
+a row is accepted once the Newton correction is below 1e-10 in strain, the reported forces
+corrected to first order in it, and the laws' states are committed (usually after one
+update). The two bars of a role are updated in one call (call overhead, not array size, is
+the cost). All of it is vectorised over parameter sets: a
+:class:`~fenicsx_drape.model.Model` whose parameters are arrays of shape (k,) gives curves
+shaped (n_rows, k) at about the cost of one.
 """
 
 from __future__ import annotations
