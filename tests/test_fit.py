@@ -17,7 +17,7 @@ from fenicsx_drape.synthetic import bias_test, standard_tests, synthetic_bundle,
 MATERIALS = {
     "stiff-viscous": dict(sigma_o=0.04, eta_o=2.5, s_o=5.0, s_inf=3000.0, alpha_v=25.0,
                           eps_v_bar=0.45, E_v=12.0, E_p=0.6, E_o=2500.0, E_inf=35000.0,
-                          eps_bar=0.002, alpha=8000.0),
+                          eps_bar=0.0011, alpha=8000.0),
     "soft-fluid": dict(sigma_o=0.015, eta_o=0.8, s_o=10.0, s_inf=8000.0, alpha_v=15.0,
                        eps_v_bar=0.55, E_v=5.0, E_p=0.25, E_o=5000.0, E_inf=22000.0,
                        eps_bar=0.001, alpha=20000.0),
@@ -66,6 +66,20 @@ def test_recovery_of_sensitive_parameters(recovery):
     for name in ("E_o", "E_inf", "eps_bar", "sigma_o", "eta_o", "alpha_v"):
         assert result.uncertainty[name]["determined"], name
     assert determined >= 7
+
+
+@pytest.mark.slow
+def test_recovery_of_the_viscosity_the_tests_see(recovery):
+    """s_inf and eps_v_bar may be determined only together (the data end below the viscosity
+    transition, where eq. 8 depends on s_inf·exp(-alpha_v·eps_v_bar)); the viscosity they
+    give over the strains the tests reach must still be the true one. Tolerance 15 %: twice
+    the largest deviation seen for the two materials; a fit in a wrong valley is off by
+    more than 50 %."""
+    truth, _, result = recovery
+    y = np.linspace(0.05, 0.35, 7)
+    eta = [float(m.parameters["eta_o"]) * m.laws()["shear"].viscosity_factor(y)[0]
+           for m in (truth, result.model)]
+    np.testing.assert_allclose(eta[1], eta[0], rtol=0.15)
 
 
 def test_simulate_vectorised_equals_scalar():
