@@ -112,8 +112,9 @@ def uncertainty(model, tests: Sequence[Test], names: Sequence[str],
     m, n = J.shape
     s2 = max(1.0, float(r @ r) / max(m - n, 1))
     _, sv, Vt = np.linalg.svd(J, full_matrices=False)
-    tiny = sv < sv.max() * 1e-12
-    inv = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, sv) ** 2)
+    tiny = sv <= sv.max() * 1e-12
+    inv = np.zeros_like(sv)
+    inv[~tiny] = 1.0 / sv[~tiny] ** 2
     cov = s2 * (Vt.T * inv) @ Vt
     # directions the data do not see at all count as undetermined
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
