@@ -533,33 +533,42 @@ def safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
 
 
-def plot_residuals(comparison: Comparison, test: Test, path: Path,
-                   shares: Sequence[Mapping[str, Any]] = (), title: str = "") -> Path:
-    """Measured vs simulated (top) and residual with the noise band and regions (bottom)."""
+def plot_residuals(comparisons: Mapping[str, Comparison], test: Test, path: Path,
+                   shares: Sequence[Mapping[str, Any]] = ()) -> Path:
+    """Measured against one or more models (top) and their residuals (bottom).
+
+    Args:
+        comparisons: The models' comparisons with ``test``, by label (e.g. "baseline").
+        test: The test.
+        path: The PNG to write.
+        shares: Regions of the test (entries of :func:`locate`) to shade with their share of
+            the first model's error.
+    """
     import matplotlib.pyplot as plt
 
     from fenicsx_drape.provenance import save_figure
 
-    name, x = KINDS[comparison.kind].abscissa(test)
+    first = next(iter(comparisons.values()))
+    name, x = KINDS[first.kind].abscissa(test)
     fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7, 6),
                                       gridspec_kw={"height_ratios": [2, 1]})
-    top.plot(x, comparison.measured, ".", ms=3, color="0.5", label="measured")
-    top.plot(x, comparison.simulated, "-", color="C0", label="model")
-    top.set_ylabel(f"value ({comparison.unit})")
-    top.legend(loc="best")
-    top.set_title(title or f"{comparison.id}: RMSE {comparison.rmse:.3g} {comparison.unit} = "
-                           f"{comparison.normalised:.2f} × noise")
-    bottom.axhspan(-comparison.noise, comparison.noise, color="C2", alpha=0.2,
-                   label="± noise")
-    bottom.plot(x, comparison.residual, ".", ms=3, color="C3", label="measured − model")
-    for i, entry in enumerate(s for s in shares if s["variable"] == name):
+    top.plot(x, first.measured, ".", ms=3, color="0.5", label="measured")
+    bottom.axhspan(-first.noise, first.noise, color="C2", alpha=0.2, label="± noise")
+    for i, (label, c) in enumerate(comparisons.items()):
+        top.plot(x, c.simulated, "-", color=f"C{i}",
+                 label=f"{label}: RMSE {c.rmse:.3g} {c.unit} = {c.normalised:.2f} × noise")
+        bottom.plot(x, c.residual, ".", ms=3, color=f"C{i}", label=label)
+    top.set_ylabel(f"value ({first.unit})")
+    top.legend(loc="upper left", fontsize=7)
+    top.set_title(f"{first.id} ({first.kind.replace('_', ' ')})")
+    for i, entry in enumerate(e for e in shares if e["variable"] == name):
         lo, hi = entry["range"]
         bottom.axvspan(lo, hi, color=f"C{i % 10}", alpha=0.08)
         bottom.annotate(f"{entry['says']}\n{100 * entry['share_of_error']:.0f} %",
                         xy=(0.5 * (lo + hi), 1.0), xycoords=("data", "axes fraction"),
                         ha="center", va="top", fontsize=7)
     bottom.set_xlabel(name.replace("_", " "))
-    bottom.set_ylabel(f"residual ({comparison.unit})")
+    bottom.set_ylabel(f"measured − model ({first.unit})")
     bottom.legend(loc="lower left", fontsize=7)
     return save_figure(fig, path)
 
@@ -604,7 +613,7 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
     tests = {t.id: t for t in bundle.tests}
     regions = record["regions"]
     for c in result.tests:
-        plot_residuals(c, tests[c.id], out / f"residual_{safe_name(c.id)}.png",
+        plot_residuals({"model": c}, tests[c.id], out / f"residual_{safe_name(c.id)}.png",
                        [e for e in regions if e["tests"] == [c.id]])
     plot_where(record["where"], out / "where.png",
                f"{result.bundle}: normalised error {result.normalised:.2f}")

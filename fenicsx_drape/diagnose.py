@@ -85,6 +85,18 @@ SIGNIFICANCE_RULE = (f"significant when evidence (baseline held-out normalised e
 Progress = Callable[[str], None]
 
 
+class Report(dict):
+    """The diagnosis report: a dict with the contract's fields (JSON-ready).
+
+    It also carries, outside the dict (not written to JSON), the fitted models and their
+    comparisons with the tests: ``models`` and ``comparisons``, keyed by ``"baseline"`` and
+    by each ranked candidate's ``effect``.
+    """
+
+    models: dict[str, Model]
+    comparisons: dict[str, list[Comparison]]
+
+
 @dataclasses.dataclass(frozen=True)
 class Fold:
     """One held-out fit: what it is fitted to and which rows it predicts."""
@@ -217,7 +229,7 @@ def _costs(data: _Data, model: Model) -> np.ndarray:
     return total / len(data.tests)
 
 
-def _best_start(data: _Data, model: Model, names: Sequence[str]) -> Model:
+def _best_start(data: _Data, model: Model, own: Sequence[str], names: Sequence[str]) -> Model:
     """The best of three starts for a candidate's refit, judged in one vectorised call.
 
     The starts: the candidate's parameters at their defaults (its default strength); its own
@@ -227,7 +239,7 @@ def _best_start(data: _Data, model: Model, names: Sequence[str]) -> Model:
     from fenicsx_drape.fit import initial_guess
     from fenicsx_drape.model import parameter_info
 
-    off = {n: 0.0 for n in names if parameter_info(n).bounds[0] == 0.0}
+    off = {n: 0.0 for n in own if parameter_info(n).bounds[0] == 0.0}
     starts = [model, model.with_parameters(**off)]
     try:
         starts.append(initial_guess(model, data.tests, names))
@@ -292,8 +304,7 @@ def _refit_parameters(model: Model, name: str) -> tuple[str, ...]:
 # Diagnosis
 
 
-def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None
-             ) -> dict[str, Any]:
+def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None) -> Report:
     """Find which effect ``model`` misses to explain ``bundle`` (the module doc's procedure).
 
     Args:
@@ -302,8 +313,9 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None
         progress: Called with a line of text at each stage.
 
     Returns:
-        The report, a dict with every field of the diagnosis contract (version 2) plus
-        ``heldout_scheme``, ``significance``, ``trends``, ``conclusion`` and more.
+        The report: a dict with every field of the diagnosis contract (version 2) plus
+        ``add_effects`` (the effects to add), ``heldout_scheme``, ``significance``,
+        ``ranking``, ``trends``, ``conclusion``, ``notes`` and ``seconds``.
     """
     from fenicsx_drape.effects import describe_effect
 
@@ -318,6 +330,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None
     say(f"  held-out normalised error {base_ho:.3g}")
 
     candidates, untestable = [], []
+    base_active = set(baseline.active_parameters())
     for name in candidate_names(model):
         effect = describe_effect(name)
         prerequisites = tuple(p for p in effect.prerequisites if p not in model.effects)
@@ -338,15 +351,16 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None
             continue
         say(f"candidate {label}: refitting")
         names = _refit_parameters(start_model, name)
-        refit = _fit(data.bundle, _best_start(data, start_model, names), parameters=names,
+        # Its own parameters: those it brings that the baseline does not use.
+        own = [p for p in names if p not in base_active
+               and any(p in describe_effect(a).parameters for a in added)]
+        refit = _fit(data.bundle, _best_start(data, start_model, own, names), parameters=names,
                      max_iterations=REFIT_ITERATIONS)
         after = data.compare(simulate(data.tests, refit))
         say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
         heldout = normalised_error(data.compare(_heldout(data, refit, say)))
         evidence = base_ho / heldout if heldout > 0 else math.inf
         say(f"  held-out normalised error {heldout:.3g}, evidence {evidence:.3g}")
-        own = [p for a in added for p in describe_effect(a).parameters
-               if p in refit.active_parameters()]
         candidates.append({
             "effect": label, "effects": list(added), "acts_on": effect.acts_on,
             "summary": effect.summary,
@@ -354,7 +368,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None
             "error_after": error_record(after), "heldout_normalised": heldout,
             "evidence": evidence, "significant": bool(evidence >= EVIDENCE_THRESHOLD),
             "sensitivity": change, "where_after": where(after)[:3],
-            "_n_parameters": len(own), "_after": after,
+            "_n_parameters": len(own), "_after": after, "_model": refit,
         })
     ranked = rank(candidates)
     best = ranked[0] if ranked else None
@@ -362,10 +376,12 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None
     if best and best["significant"] and best["error_after"]["normalised"] <= ADEQUATE:
         missing = best
     pattern = _pattern(base)
+    models, comparisons = {"baseline": baseline}, {"baseline": base}
     for c in ranked:
         c["explanation"] = _explain(c, pattern, normalised_error(base), base_ho)
-        del c["_n_parameters"], c["_after"]
-    report = {
+        models[c["effect"]], comparisons[c["effect"]] = c.pop("_model"), c.pop("_after")
+        del c["_n_parameters"]
+    report = Report({
         "contract": CONTRACT,
         "bundle": bundle.name,
         "baseline": {**model_record(baseline), "error": error_record(base),
@@ -386,7 +402,8 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None
         "conclusion": _conclusion(missing, best, base, pattern),
         "notes": list(data.notes),
         "seconds": time.perf_counter() - start,
-    }
+    })
+    report.models, report.comparisons = models, comparisons
     say(report["conclusion"])
     return report
 
@@ -510,17 +527,58 @@ def plot_candidates(report: dict[str, Any], path: str | Path) -> Path:
     return save_figure(fig, path)
 
 
+def summary(report: dict[str, Any]) -> str:
+    """The report as text: baseline, ranked candidates, untestable effects, conclusion."""
+    base = report["baseline"]
+    lines = [f"baseline ({', '.join(base['effects']) or 'no effects'}): normalised "
+             f"{base['error']['normalised']:.3g}, held-out {base['heldout_normalised']:.3g} "
+             f"(noise floor 1; from {report['noise_floor']['source']})",
+             "where the error sits:"]
+    lines += [f"  {100 * e['share_of_error']:5.1f} %  {e['test']}: {e['says']}"
+              for e in report["where"][:5]]
+    lines.append(f"{'candidate':<44} {'after':>7} {'held-out':>9} {'evidence':>9}  significant")
+    for c in report["candidates"]:
+        lines.append(f"{c['effect']:<44} {c['error_after']['normalised']:>7.3g} "
+                     f"{c['heldout_normalised']:>9.3g} {c['evidence']:>9.3g}  "
+                     f"{'yes' if c['significant'] else 'no'}")
+        lines.append(f"    {c['explanation']}")
+    lines += [f"not testable from these tests: {u['effect']} ({u['reason']})"
+              for u in report["untestable"]]
+    lines.append(f"missing_effect: {report['missing_effect']}")
+    lines.append(report["conclusion"])
+    return "\n".join(lines)
+
+
 def write_diagnosis(report: dict[str, Any], json_path: str | Path,
-                    out_dir: str | Path | None = None) -> Path:
-    """Write ``REPORT.json`` (atomically); with ``out_dir``, the plots and provenance too."""
+                    out_dir: str | Path | None = None, *, bundle: Bundle | None = None) -> Path:
+    """Write ``REPORT.json`` (atomically); with ``out_dir``, the plots and provenance too.
+
+    ``out_dir`` gets ``candidates.png`` (each candidate's fitted and held-out error),
+    ``where.png`` (the baseline's error by region) and, given the ``bundle`` and a
+    :class:`Report`, ``residual_<test>.png`` (the baseline and the best candidate against
+    each test), plus ``report.json`` and ``provenance.json``.
+    """
+    from fenicsx_drape.compare import locate, plot_residuals, plot_where, safe_name
     from fenicsx_drape.provenance import write_json, write_provenance
 
     path = write_json(json_path, report)
-    if out_dir is not None:
-        out = Path(out_dir)
-        plot_candidates(report, out / "candidates.png")
-        write_json(out / "report.json", report)
-        write_provenance(out, bundle=report["bundle"], effects=report["baseline"]["effects"],
-                         parameters=report["baseline"]["parameters"],
-                         missing_effect=report["missing_effect"], seed=None)
+    if out_dir is None:
+        return path
+    out = Path(out_dir)
+    plot_candidates(report, out / "candidates.png")
+    plot_where(report["where"], out / "where.png",
+               f"{report['bundle']}: baseline error by region")
+    comparisons = getattr(report, "comparisons", None)
+    if bundle is not None and comparisons:
+        best = report["candidates"][0]["effect"] if report["candidates"] else None
+        tests = {t.id: t for t in bundle.tests}
+        regions = locate(comparisons["baseline"])
+        for i, base in enumerate(comparisons["baseline"]):
+            shown = {"baseline": base} | ({best: comparisons[best][i]} if best else {})
+            plot_residuals(shown, tests[base.id], out / f"residual_{safe_name(base.id)}.png",
+                           [e for e in regions if e["tests"] == [base.id]])
+    write_json(out / "report.json", report)
+    write_provenance(out, bundle=report["bundle"], effects=report["baseline"]["effects"],
+                     parameters=report["baseline"]["parameters"],
+                     missing_effect=report["missing_effect"], seed=None)
     return path
