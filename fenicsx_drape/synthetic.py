@@ -46,8 +46,9 @@ def ramp(speed_mm_per_min: float, max_displacement_mm: float, n_rows: int,
         knots_d.append(d)
     knots_t.append(knots_t[-1] + (max_displacement_mm - knots_d[-1]) / v)
     knots_d.append(max_displacement_mm)
-    time_s = np.linspace(0.0, knots_t[-1], n_rows)
-    return time_s, np.interp(time_s, knots_t, knots_d)
+    # rows at the resolution of a test machine's log: 1 ms, 0.1 µm
+    time_s = np.round(np.linspace(0.0, knots_t[-1], n_rows), 3)
+    return time_s, np.round(np.interp(time_s, knots_t, knots_d), 4)
 
 
 def tensile_test(test_id: str = "tensile", *, speed_mm_per_min: float = 2.0,
@@ -135,9 +136,10 @@ def synthetic_bundle(model, tests: Sequence[Test], *, noise_sd_N: float | Mappin
             sd = float(noise_sd_N)
         if not (math.isfinite(sd) and sd > 0):
             raise ValueError(f"test {test.id!r}: noise standard deviation {sd} N must be > 0")
+        digits = 2 - math.floor(math.log10(sd))  # a hundredth of the noise
         columns = {"time_s": test.time_s, "displacement_mm": test.displacement_mm,
-                   "force_N": force + rng.normal(0.0, sd, force.shape),
-                   "force_sd_N": np.full(force.shape, sd)}
+                   "force_N": np.round(force + rng.normal(0.0, sd, force.shape), digits),
+                   "force_sd_N": np.full(force.shape, round(sd, digits + 1))}
         made.append(dataclasses.replace(test, columns=columns))
     tows_per_mm = next((t.tows / t.width_mm * (math.sqrt(2) if t.kind == "bias_extension" else 1)
                         for t in made if t.tows and t.width_mm), None)
