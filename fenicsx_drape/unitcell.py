@@ -193,7 +193,17 @@ def _predict(t: np.ndarray, i: int, xs: np.ndarray) -> np.ndarray:
     ts, ti = t[j:i].tolist(), float(t[i])
     weights = [math.prod((ti - tb) / (ta - tb) for b, tb in enumerate(ts) if b != a)
                for a, ta in enumerate(ts)]
-    return np.dot(weights, xs[j:i])
+    # Safeguard against ill-conditioned extrapolation (very uneven steps): move at most a
+    # few times the last changes from the last value.
+    last, reach = xs[i - 1], 4.0 * np.abs(np.diff(xs[j:i], axis=0)).max(axis=0) + 1e-4
+    if not all(map(math.isfinite, weights)):
+        return last
+    return np.clip(np.dot(weights, xs[j:i]), last - reach, last + reach)
+
+
+def _inside(guess: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    """The guess where it is above the lower bound, else a point above it."""
+    return np.where(guess > lower, guess, np.where(lower < 0.0, 0.5 * lower, lower + 1e-3))
 
 
 def _stacked_laws(model: Model, conditions: Mapping[str, float] | None):
@@ -270,7 +280,7 @@ def tensile(
             df = 2.0 * (dcτ * cos_φ - c * τ * cos_φ / q)
             return r, dr, (s_tows_new, s_d_new, σ1, f, df, c * τ, dcτ)
 
-        guess = np.maximum(_predict(t, i, xs), 0.5 * (xs[i - 1] + lower) if i else lower)
+        guess = _inside(_predict(t, i, xs), lower)
         x, δ, (s_tows, s_d, σ1, f, df, τ, dτ) = _newton(residual, guess, lower,
                                                         f"tensile balance at row {i}")
         xs[i], out["force"][i] = x + δ, f + df * δ
@@ -339,8 +349,7 @@ def bias_extension(
             df = 2.0 * (dc * dσ * (τ1 - τ2 * cot_θ) - c * cot_θ * (2.0 * dτ2 - 2.0 * τ2 / p))
             return r, dr, (s_t_new, s_d_new, f, df, σ, dσ, c * τ1, dc * dσ * τ1)
 
-        guess = np.maximum(_predict(t, i, xs),
-                           0.5 * (xs[i - 1] + lower) if i else 0.5 * lower)
+        guess = _inside(_predict(t, i, xs), lower)
         x, δ, (s_t, s_d, f, df, σ, dσ, τ1, dτ1) = _newton(
             residual, guess, lower, f"bias-extension balance at row {i}")
         xs[i], out["force"][i] = x + δ, f + df * δ

@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fenicsx_drape.errors import ParameterError
 from fenicsx_drape.materials import ShearLaw, build_law
@@ -211,3 +213,20 @@ def test_tangent_with_a_softening_viscosity(regime):
     plus, _, _ = law.update(ε + h, dt, states[row])
     minus, _, _ = law.update(ε - h, dt, states[row])
     assert tangent[0] == pytest.approx((plus[0] - minus[0]) / (2 * h), rel=1e-6)
+
+
+@settings(max_examples=40, deadline=None)
+@given(steps=st.lists(st.tuples(st.floats(-0.49, 0.49), st.floats(0.0, 1e3)), min_size=1,
+                      max_size=12),
+       effects=st.sets(st.sampled_from((*PAPER, "temperature_dependence"))),
+       temperature=st.floats(-50.0, 200.0))
+def test_any_history_gives_finite_bounded_output(steps, effects, temperature):
+    law = shear(tuple(effects), {"temperature_C": temperature})
+    state = law.initial_state(1)
+    for strain, dt in steps:
+        σ, tangent, state = law.update(np.array([strain]), dt, state)
+        assert np.isfinite(σ).all() and np.isfinite(tangent).all() and np.all(tangent >= 0)
+        # The elastic-plastic branch never exceeds the yield stress; the dashpot strain lies
+        # between its old value and the total strain.
+        assert abs(TABLE2["E_p"] * (strain - state[0, 0])) <= TABLE2["sigma_o"] * (1 + 1e-12)
+        assert abs(state[0, 1]) <= max(0.49, abs(strain)) + 1e-12

@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fenicsx_drape import unitcell as uc
 from fenicsx_drape.errors import DrapeInputError
@@ -216,3 +218,20 @@ def test_curves_command_writes_tables_and_pictures(tmp_path, capsys):
                                / math.sqrt(2), rtol=1e-8)
     assert main(["curves", "--model", str(tmp_path / "nope.toml"), "--out",
                  str(tmp_path / "x")]) == 2
+
+
+@settings(max_examples=20, deadline=None)
+@given(rows=st.lists(st.tuples(st.floats(0.0, 30.0), st.floats(-10.0, 55.0)), min_size=1,
+                     max_size=15),
+       drop=st.sets(st.sampled_from(("rate_dependence", "strain_dependent_viscosity",
+                                     "decrimping", "tow_buckling"))))
+def test_any_history_gives_finite_forces(rows, drop):
+    model = default_model().without_effects(*drop)
+    t = np.cumsum([dt for dt, _ in rows])
+    u = np.array([d for _, d in rows])
+    c = uc.bias_extension(model, t, u, length_mm=L0, width_mm=W0)
+    ct = uc.tensile(model, t, u / 100.0, gauge_length_mm=100.0)
+    for curve in (c, ct):
+        for column in (curve.force_per_tow_N, curve.tow_strain, curve.transverse_strain,
+                       curve.shear_deg):
+            assert np.isfinite(column).all()
