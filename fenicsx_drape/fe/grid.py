@@ -7,7 +7,9 @@ and halve the shear bars), so every bar is one two-node element.
 
 Frame (the measurement spec's): origin on the punch axis, x along warp, y along weft, the sheet
 in the plane z = 0. A full sheet is centred on the origin; a quarter model covers x, y >= 0 and
-its edges x = 0 and y = 0 are symmetry planes.
+its edges x = 0 and y = 0 are symmetry planes. A grid may be turned in its plane about the
+origin by ``rotation_deg`` (e.g. 45° for a patch loaded in the bias direction along x); grid
+indices and edges are those of the unturned grid.
 
 Node flags are bits, so a corner node can be on two edges at once:
 
@@ -53,6 +55,16 @@ class TrussGrid:
     cell_mm: float  # unit-cell size Δ (mm)
     origin_mm: tuple[float, float]  # position of node (0, 0) (mm)
     quarter: bool  # the edges x = 0 and y = 0 are symmetry planes
+    rotation_deg: float = 0.0  # the grid is turned by this angle about the z axis
+
+    def _rotation(self) -> np.ndarray:
+        c, s = np.cos(np.radians(self.rotation_deg)), np.sin(np.radians(self.rotation_deg))
+        return np.array([[c, -s], [s, c]])
+
+    def grid_coordinates(self, xy: np.ndarray) -> np.ndarray:
+        """Fractional grid indices of reference positions ``xy`` (n, 2) in mm."""
+        return ((np.asarray(xy)[:, :2] @ self._rotation()) - np.asarray(self.origin_mm)) \
+            / self.cell_mm
 
     @property
     def ij(self) -> np.ndarray:
@@ -63,7 +75,7 @@ class TrussGrid:
     @property
     def nodes(self) -> np.ndarray:
         """Node positions (n_nodes, 3) in mm, z = 0."""
-        xy = self.ij * self.cell_mm + np.asarray(self.origin_mm)
+        xy = (self.ij * self.cell_mm + np.asarray(self.origin_mm)) @ self._rotation().T
         return np.column_stack([xy, np.zeros(len(xy))])
 
     def node(self, i: np.ndarray | int, j: np.ndarray | int) -> np.ndarray | int:
@@ -105,7 +117,7 @@ class TrussGrid:
 
 
 def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = False,
-               ) -> TrussGrid:
+               rotation_deg: float = 0.0) -> TrussGrid:
     """The square sheet of side ``size_mm``, or its quarter ``x, y >= 0``.
 
     The number of cells along a half side is ``round(size_mm / 2 / cell_mm)`` (at least 1),
@@ -115,6 +127,7 @@ def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = Fa
         size_mm: Side of the square sheet (mm).
         cell_mm: Requested unit-cell size Δ (mm).
         quarter: Model one quarter with symmetry edges on x = 0 and y = 0.
+        rotation_deg: Turn the sheet about the z axis by this angle (degrees).
     """
     if not (math.isfinite(size_mm) and size_mm > 0):
         raise DrapeInputError(f"sheet size_mm = {size_mm} must be a positive number")
@@ -122,13 +135,16 @@ def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = Fa
         raise DrapeInputError(f"cell_mm = {cell_mm} must be in (0, size_mm / 2 = {size_mm / 2}]")
     n_half = max(1, round(size_mm / 2 / cell_mm))
     Δ = size_mm / 2 / n_half
+    if not math.isfinite(rotation_deg):
+        raise DrapeInputError(f"rotation_deg = {rotation_deg} is not a number")
     if quarter:
-        return TrussGrid(n_half, n_half, Δ, (0.0, 0.0), True)
-    return TrussGrid(2 * n_half, 2 * n_half, Δ, (-size_mm / 2, -size_mm / 2), False)
+        return TrussGrid(n_half, n_half, Δ, (0.0, 0.0), True, rotation_deg)
+    return TrussGrid(2 * n_half, 2 * n_half, Δ, (-size_mm / 2, -size_mm / 2), False,
+                     rotation_deg)
 
 
 def write_grid(grid: TrussGrid, path: str | Path) -> Path:
-    """Write the truss with meshio (``.msh``, ``.xdmf``, ``.vtu``, ... by the file suffix).
+    """Write the truss with meshio (``.msh`` Gmsh 4.1, ``.xdmf`` inline XML, ``.vtu``, ...).
 
     Cell data ``kind`` holds the bar kinds, point data ``flags`` the node flags; a ``.msh``
     file also gets them as physical groups (``gmsh:physical``).
@@ -144,14 +160,20 @@ def write_grid(grid: TrussGrid, path: str | Path) -> Path:
     mesh = meshio.Mesh(grid.nodes, [("line", bars)], point_data={"flags": grid.node_flags},
                        cell_data=cell_data)
     path.parent.mkdir(parents=True, exist_ok=True)
-    mesh.write(path)
+    if path.suffix == ".msh":
+        mesh.write(path, file_format="gmsh")
+    elif path.suffix == ".xdmf":
+        mesh.write(path, data_format="XML")  # inline data: no HDF5 side file, no h5py
+    else:
+        mesh.write(path)
     return path
 
 
 def read_grid(path: str | Path) -> TrussGrid:
     """Read a truss sheet written by :func:`write_grid` (or any structured truss like it).
 
-    The grid is recovered from the node positions and checked against the file's bars.
+    The grid (not turned) is recovered from the node positions and checked against the
+    file's bars.
     """
     import meshio
 
@@ -159,7 +181,7 @@ def read_grid(path: str | Path) -> TrussGrid:
     if not path.exists():
         raise DrapeInputError(f"{path}: no such mesh file")
     try:
-        mesh = meshio.read(path)
+        mesh = meshio.read(path, file_format="gmsh" if path.suffix == ".msh" else None)
     except Exception as err:  # meshio raises many kinds of errors on bad files
         raise DrapeInputError(f"{path}: cannot read the mesh ({err})") from err
     x = np.asarray(mesh.points, dtype=float)

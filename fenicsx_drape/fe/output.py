@@ -38,7 +38,7 @@ def gather_nodes(problem) -> tuple[np.ndarray, np.ndarray]:
     n = problem.num_owned
     X = problem.X[:n]
     x = problem.positions()[:n]
-    ij = np.rint((X[:, :2] - np.asarray(grid.origin_mm)) / grid.cell_mm).astype(int)
+    ij = np.rint(grid.grid_coordinates(X)).astype(int)
     parts = problem.comm.allgather((ij, X, x))
     Xg = np.full((grid.nx + 1, grid.ny + 1, 3), np.nan)
     xg = np.full_like(Xg, np.nan)
@@ -193,8 +193,8 @@ class FieldWriter:
         self._kinds[tags.indices[owned]] = tags.values[owned]
         self.fields["kind"].x.array[self._dofs] = self._kinds
         grid = problem.sheet.grid
-        mid = mesh.geometry.x[mesh.geometry.dofmap[:n]].mean(axis=1)
-        cell = np.floor((mid[:, :2] - np.asarray(grid.origin_mm)) / grid.cell_mm).astype(int)
+        mid = mesh.geometry.x[mesh.geometry.dofmaps[0][:n]].mean(axis=1)
+        cell = np.floor(grid.grid_coordinates(mid)).astype(int)
         self._cell = (np.clip(cell[:, 0], 0, grid.nx - 1), np.clip(cell[:, 1], 0, grid.ny - 1))
 
     def write(self, res: Results | None = None) -> None:

@@ -128,8 +128,8 @@ class TrussProblem:
         kinds, tows = self._bars()
         self.state = MaterialState(self.u, kinds, tows, laws, options.buckled_tow_stiffness_N)
         residual, jacobian = truss_forms(self.u, self.state.S, self.state.dS)
-        self._F = dolfinx.fem.form(residual)
-        self._J = dolfinx.fem.form(jacobian)
+        self.residual_form = dolfinx.fem.form(residual)
+        self.jacobian_form = dolfinx.fem.form(jacobian)
         self._fixes: list[tuple[np.ndarray, tuple[int, ...], Callable]] = []
         self._bcs: list[dolfinx.fem.DirichletBC] = []
         self._bc_values: list[tuple[dolfinx.fem.Function, np.ndarray, np.ndarray]] = []
@@ -152,7 +152,9 @@ class TrussProblem:
         flags = np.zeros(len(self.X), dtype=np.int32)
         tags = self.sheet.node_tags
         if tags is not None:
-            for value in np.unique(tags.values):
+            # locate_dofs_topological is collective: loop over the values of all ranks.
+            values = set().union(*self.comm.allgather(set(np.unique(tags.values).tolist())))
+            for value in sorted(values):
                 vertices = tags.find(value)
                 nodes = dolfinx.fem.locate_dofs_topological(self.V, 0, vertices)
                 flags[nodes] |= int(value)
@@ -172,9 +174,9 @@ class TrussProblem:
         tows = np.full(n, opts.tows_per_mm * self.sheet.cell_mm)
         if grid is None:
             return kinds, tows
-        nodes = mesh.geometry.dofmap[:n]
+        nodes = mesh.geometry.dofmaps[0][:n]
         mid = mesh.geometry.x[nodes].mean(axis=1)
-        ij = (mid[:, :2] - np.asarray(grid.origin_mm)) / grid.cell_mm
+        ij = grid.grid_coordinates(mid)
         j, i = np.round(ij[:, 1]), np.round(ij[:, 0])
         edge = ((kinds == WARP) & ((j == 0) | (j == grid.ny))) | (
             (kinds == WEFT) & ((i == 0) | (i == grid.nx)))
@@ -274,7 +276,7 @@ class TrussProblem:
 
     def _setup_snes(self) -> None:
         opts = self.options
-        self._A = fem_petsc.create_matrix(self._J)
+        self._A = fem_petsc.create_matrix(self.jacobian_form)
         self._b = fem_petsc.create_vector(self.V)
         self._x = fem_petsc.create_vector(self.V)
         snes = PETSc.SNES().create(self.comm)
@@ -341,8 +343,8 @@ class TrussProblem:
             return
         with b.localForm() as bl:
             bl.set(0.0)
-        fem_petsc.assemble_vector(b, self._F)
-        fem_petsc.apply_lifting(b, [self._J], [self._bcs], x0=[x], alpha=-1.0)
+        fem_petsc.assemble_vector(b, self.residual_form)
+        fem_petsc.apply_lifting(b, [self.jacobian_form], [self._bcs], x0=[x], alpha=-1.0)
         b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
         b.array_w[:] -= self._nodal_f[: self.num_owned].ravel()
         fem_petsc.set_bc(b, self._bcs, x, -1.0)
@@ -358,7 +360,7 @@ class TrussProblem:
         if self._stale(x):
             self._evaluate(x)
         A.zeroEntries()
-        fem_petsc.assemble_matrix(A, self._J, bcs=self._bcs)
+        fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self._bcs)
         A.assemble(PETSc.Mat.AssemblyType.FLUSH)
         n = self.num_owned
         if self.nodal_terms or self.options.drag_N_per_mm:
@@ -437,7 +439,7 @@ class TrussProblem:
         the last evaluated state, summed over all ranks.
         """
         mask = self.nodes(where)[: self.num_owned]
-        b = fem_petsc.assemble_vector(self._F)
+        b = fem_petsc.assemble_vector(self.residual_form)
         b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
         r = b.array_r.reshape(-1, 3) - self._nodal_f[: self.num_owned]
         b.destroy()
