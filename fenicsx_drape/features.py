@@ -12,15 +12,16 @@ No parameter table is consulted, so a new material gets a sensible start:
   with it ``E_p``. Beyond the knee the curves at the rates ε̇_i follow
   ``f_i(ε) ≈ σ_o + η(ε) ε̇_i``: at each strain, the line through the curves against the rate
   gives ``σ_o`` (intercept) and the viscosity ``η(ε)`` (slope) -- the paper's "dependence of
-  stress on strain rate at low to intermediate strains". Below its transition, eq. 8 makes
-  ``η ≈ η_o (1 + s_o ε) + C exp(α_v ε)``; a one-dimensional search over ``α_v`` with
-  non-negative least squares for the rest gives ``η_o``, ``s_o``, ``α_v`` and the lock-up
-  amplitude. The transition ``ε̄_v`` is placed at the end of the data and ``s_inf`` follows
-  from the amplitude (the data below ε̄_v only fix the combination s_∞ exp(−α_v ε̄_v); the
-  fit and its flags say how well each is determined). ``E_v`` (the Maxwell spring) cannot be
-  seen without relaxation data: it is started ten times stiffer than ``E_p`` so the Maxwell
-  relaxation time is short against the test. With a single rate, σ_o is taken as 0.8 of the
-  knee and the rise beyond it as viscous.
+  stress on strain rate at low to intermediate strains". There eq. 8 makes
+  ``η ≈ η_o (1 + s_o ε)`` (plus the onset of the lock-up), which gives ``η_o`` and ``s_o``.
+  The lock-up of the slowest curve, the viscosity beyond that line, grows like
+  ``exp(α_v ε)`` below the transition (eq. 8), which gives ``alpha_v``; ``eps_v_bar`` is placed
+  at the end of the data and ``s_inf`` follows from the size of the lock-up there (the data
+  below ε̄_v fix only s_∞ exp(−α_v ε̄_v); the fit and its flags say how well each is
+  determined). ``E_v`` (the Maxwell spring) cannot be seen without relaxation data: it is
+  started ten times stiffer than ``E_p`` so the Maxwell relaxation time is short against the
+  test. With a single rate, σ_o is taken as 0.8 of the knee and the rise beyond it as
+  viscous.
 
 The per-tow force of a coupon is not exactly the bar stress (eqs. 17, 20), so after the
 features the force-like parameters (those in N/tow or N·s/tow) of each law are rescaled
@@ -35,6 +36,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from scipy.optimize import nnls
+from scipy.signal import savgol_filter
 
 from fenicsx_drape.bundle import Test
 
@@ -65,6 +67,11 @@ def _increasing(grid: np.ndarray, n: int):
     for i, b in enumerate(grid):
         for rest in _increasing(grid[i + 2:], n - 1):  # knees at least two cells apart
             yield [b, *rest]
+
+
+def _smooth(y: np.ndarray, window: int = 9) -> np.ndarray:
+    """Local quadratic smoothing (Savitzky-Golay) of a densely sampled curve."""
+    return savgol_filter(y, window, 2) if y.size > 2 * window else y
 
 
 def _loading(test: Test) -> np.ndarray:
@@ -147,7 +154,7 @@ def shear_guess(tests: Sequence[Test], eta_ref: float | None = None) -> dict[str
 
     # beyond the knee f_i(ε) ≈ σ_o + η(ε) ε̇_i: the spread with rate gives η(ε)
     grid = np.linspace(min(1.5 * b1, 0.5 * x_max), 0.98 * x_max, 40)
-    F = np.array([np.interp(grid, xc, fc) for _, xc, fc in curves])
+    F = np.array([np.interp(grid, xc, _smooth(fc)) for _, xc, fc in curves])
     if len(curves) > 1:
         V, intercept = np.polyfit(rates, F, 1)
         sigma_o = float(np.median(intercept[: len(grid) // 2]))
@@ -156,27 +163,35 @@ def shear_guess(tests: Sequence[Test], eta_ref: float | None = None) -> dict[str
     else:
         sigma_o = 0.8 * level
         V = (F[0] - sigma_o) / rate_s
-    # η(ε) ≈ A (1 + s_o ε) + C exp(α_v (ε − ε_max)): eq. 8 below its transition, which is
-    # placed at the end of the data (ε̄_v = ε_max). Only strains where the intercept σ_o
-    # holds are used: at larger strains the Maxwell spring of the fast tests stretches and
-    # their viscous strain lags behind (f is no longer linear in the rate).
+    # Low-intermediate strains, where the intercept σ_o holds (beyond, the Maxwell spring of
+    # the fast tests stretches and their viscous strain lags: f is no longer linear in the
+    # rate): η ≈ A (1 + s_o ε) + C exp(α (ε − ε_max)), eq. 8 below its transition, fitted on
+    # a grid of (s_o, α) with non-negative least squares for the amplitudes A, C.
     steady = np.ones_like(grid, dtype=bool)
     if len(curves) > 1:
         steady = intercept < 1.5 * np.median(intercept[: len(grid) // 4])
         steady[: len(grid) // 4] = True
     g, v = grid[steady], V[steady]
-    best, best_sse = None, math.inf
-    for alpha_v in np.geomspace(2.0, 200.0, 40):
-        basis = np.column_stack([np.ones_like(g), g, np.exp(alpha_v * (g - x_max))])
-        coef, sse = nnls(basis, v)
-        if coef[0] > 0 and sse < best_sse:
-            best, best_sse = (alpha_v, *coef), sse
-    if best is None:
-        A, s_o, s_inf, alpha_v = max(float(np.median(v)), 1e-12), 1.0, 10.0, 10.0 / x_max
-    else:
-        alpha_v, A, As_o, C = best
-        s_o = max(As_o / A, 0.1)
-        s_inf = max(s_o + alpha_v * C / A, 2.0 * s_o)
+    best, best_sse = (1.0, max(float(np.median(v)), 1e-12) / (1.0 + np.median(g))), math.inf
+    for s_o in np.geomspace(0.3, 100.0, 20):
+        for alpha in np.geomspace(2.0, 200.0, 20):
+            basis = np.column_stack([1.0 + s_o * g, np.exp(alpha * (g - x_max))])
+            (A, _), sse = nnls(basis, v)
+            if A > 0 and sse < best_sse:
+                best, best_sse = (s_o, A), sse
+    s_o, A = best
+    # The lock-up, from the slowest curve (its viscous strain lags least): the viscosity
+    # beyond A (1 + s_o ε) grows like exp(α_v ε) below the transition, which is placed at the
+    # end of the data (ε̄_v = ε_max); the data there fix only s_∞ exp(−α_v ε̄_v) (the fit and
+    # its flags say how well each is determined).
+    excess = (np.interp(grid, x, _smooth(f)) - sigma_o) / rate_s - A * (1.0 + s_o * grid)
+    up = (grid > 0.5 * x_max) & (excess > 0.5 * A * (1.0 + s_o * grid))
+    if up.sum() >= 3:
+        alpha_v, ln_c = np.polyfit(grid[up], np.log(excess[up]), 1)
+        alpha_v = float(min(max(alpha_v, 2.0), 200.0))
+        s_inf = s_o + alpha_v * math.exp(ln_c + alpha_v * x_max) / A
+    else:  # no lock-up within the data: a mild one just beyond
+        alpha_v, s_inf = 10.0 / x_max, 10.0 * s_o
     guess = {"sigma_o": sigma_o, "eta_o": A, "s_o": s_o, "s_inf": s_inf,
              "alpha_v": float(alpha_v), "eps_v_bar": x_max, "E_v": 10.0 * level / b1,
              "E_p": level / b1}
