@@ -23,8 +23,8 @@ rate. We take the dashpot's own rate: loading when ε_v ε̇_v > 0, i.e. the das
 from its origin (equivalently σ_v has the sign of ε_v, since ε̇_v = σ_v/η). Reasons: it is
 the strain of the element whose viscosity it is; it is a function of the state, so it is
 defined at ε̇ = 0; and it gives the behaviour of Fig. 2b: during a hold (ε̇ = 0) the dashpot
-keeps extending, so relaxation at large strain proceeds with the high, strain-dependent
-viscosity and the stress decays slowly towards the elastic-plastic level; on reloading the
+keeps extending, so the stress relaxes with the time constant η(ε_v)/E_v of the loading
+branch (long at large strain) towards the elastic-plastic level; on reloading the
 stiff Maxwell spring raises the stress at once; on unloading σ_v changes sign after a short
 elastic stretch, the dashpot then moves back with η_o and the stress falls quickly to the
 compressive yield −σ_o of the elastic-plastic branch.
@@ -37,10 +37,9 @@ backward Euler for the dashpot with the viscosity taken at the end of the step,
 
 The left side is continuous and strictly increasing in ε_v (η ≥ η_o > 0; f(0) = 1 joins the
 branches), so the root is unique for every Δt: the unloading branch has it in closed form,
-the loading branch is solved by a bracketed Newton iteration started from the explicit-η
-estimate (an upper bound: monotone convergence when s_∞ ≥ s_o makes f convex; bracketed
-otherwise). The consistent tangent follows
-from the implicit function theorem on that residual:
+the loading branch is solved by Newton's method started from the explicit-η estimate (an
+upper bound: monotone convergence when s_∞ ≥ s_o makes f convex; bracketed otherwise). The
+consistent tangent follows from the implicit function theorem on that residual:
 dσ_v/dε = E_v D / (D + Δt E_v) with D = η + η' (ε_v − ε_v,n). With Δt = 0 the Maxwell branch
 is elastic (dashpot locked).
 
