@@ -98,6 +98,8 @@ class Test:
     Geometry in mm, speeds in mm/min, forces in N. Keys absent from ``bundle.toml`` are None.
     """
 
+    __test__ = False  # not a pytest test class
+
     id: str  # unique in the bundle
     kind: str  # "tensile" | "bias_extension" | "forming"
     file: str  # CSV table, relative to the bundle folder

@@ -538,7 +538,10 @@ def write_fit(result: FitResult, out_dir: str | Path) -> Path:
                                            result.model.parameters.items()},
                      initial_parameters={k: float(v) for k, v in
                                          result.initial_model.parameters.items()},
-                     seed=None)
+                     fitted=list(result.fitted), blocks=result.blocks,
+                     settings={"ftol": FTOL, "xtol": XTOL, "fd_step": FD_STEP,
+                               "decades": DECADES, "coupling_threshold": COUPLING_THRESHOLD,
+                               "response_floor": RESPONSE_FLOOR}, seed=None)
     return out
 
 

@@ -1,12 +1,13 @@
 """Parameter identification: recovery from synthetic bundles, outputs, command line."""
 
+import dataclasses
 import json
 import math
 
 import numpy as np
 import pytest
 
-from fenicsx_drape.bundle import load_bundle
+from fenicsx_drape.bundle import Test, load_bundle
 from fenicsx_drape.cli import main
 from fenicsx_drape.fit import fit, simulate, write_fit
 from fenicsx_drape.model import Model, default_model, load_model
@@ -148,6 +149,21 @@ def test_write_fit_and_command_line(small_bundle, tmp_path):
     result = fit(bundle, fitted, initial_guess_from_features=False, analyse=False)
     write_fit(result, tmp_path / "again")
     assert (tmp_path / "again" / "model.toml").is_file()
+
+
+def test_forming_tests_are_left_out(small_bundle):
+    bundle = load_bundle(small_bundle)
+    i, j = np.meshgrid(np.arange(3.0), np.arange(3.0))
+    grid = {name: np.ravel(v) for name, v in (("i", i), ("j", j), ("x0_mm", 10 * i),
+                                                ("y0_mm", 10 * j), ("x_mm", 10 * i),
+                                                ("y_mm", 10 * j), ("z_mm", 0 * i))}
+    forming = Test(id="dome", kind="forming", file="dome.csv", columns=grid,
+                   geometry="hemisphere")
+    bundle = dataclasses.replace(bundle, tests=(*bundle.tests, forming))
+    result = fit(bundle, default_model(), initial_guess_from_features=False, analyse=False,
+                 max_iterations=2)
+    assert "dome" not in result.errors
+    assert any("forming test 'dome'" in note for note in result.notes)
 
 
 def test_bad_bundle_exit_status(tmp_path):
