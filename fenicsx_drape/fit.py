@@ -381,7 +381,33 @@ def initial_guess(model, tests: Sequence[Test], names: Sequence[str]):
         if c > 0 and math.isfinite(c):
             model = model.with_parameters(**{n: float(model.parameters[n]) * c
                                              for n in force_like})
-    return model
+    return _best_start(model, bias, names) if bias else model
+
+
+def _best_start(model, tests: Sequence[Test], names: Sequence[str]):
+    """The best of a few variants of the shear guess, judged in one vectorised call per test.
+
+    The features fix η(ε) at low strain and the lock-up seen in the data, not how each splits
+    (η_o against s_o, s_inf against eps_v_bar): the variants move along those two directions
+    keeping what the data fix (η_o (1 + s_o ε) at ε = 0.2; s_∞ exp(−α_v ε̄_v)).
+    """
+    p = {n: float(model.parameters[n]) for n in ("eta_o", "s_o", "s_inf", "alpha_v",
+                                                  "eps_v_bar")}
+    variants = []
+    for k in (1.0, 0.5, 2.0):
+        s_o = max(((1.0 + 0.2 * p["s_o"]) / k - 1.0) / 0.2, 0.1)
+        for shift in (0.0, 0.1):
+            s_inf = p["s_inf"] * math.exp(p["alpha_v"] * shift)
+            variants.append({"eta_o": k * p["eta_o"], "s_o": s_o, "s_inf": s_inf,
+                             "eps_v_bar": p["eps_v_bar"] + shift})
+    varied = [n for n in variants[0] if n in names]
+    if not varied:
+        return model
+    sets = model.with_parameters(**{n: np.array([v[n] for v in variants]) for n in varied})
+    cost = sum(np.sum(((np.atleast_2d(simulate(t, sets)) - t.force_N) / test_noise(t)[0]) ** 2,
+                      axis=1) / t.n_rows for t in tests)
+    best = variants[int(np.nanargmin(cost))]
+    return model.with_parameters(**{n: best[n] for n in varied})
 
 
 # --------------------------------------------------------------------------------------------
