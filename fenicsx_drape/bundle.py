@@ -279,7 +279,7 @@ def load_bundle(path: str | Path) -> Bundle:
     if not toml_path.is_file():
         raise BundleError([f"{fname}:0: no bundle.toml here (a bundle is a folder holding "
                            "bundle.toml and one CSV table per test)"])
-    text = toml_path.read_text(encoding="utf-8", errors="replace")
+    text = toml_path.read_text(encoding="utf-8-sig", errors="replace")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
@@ -466,7 +466,7 @@ def _read_table(path: Path, kind: str, label: str, problems: _Problems):
         problems.add(fname, 0, f"{label}: the table file does not exist")
         return None
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as err:
         problems.add(fname, 0, f"{label}: cannot read the table: {err}")
         return None

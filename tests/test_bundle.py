@@ -114,6 +114,14 @@ def test_valid_bundle_loads(bundle_dir):
         bias.force_N[0] = 1.0  # columns are read-only
 
 
+def test_windows_files_load(bundle_dir):
+    """A byte-order mark and CRLF line ends (spreadsheet exports) are not problems."""
+    for name in ("bundle.toml", "tensile.csv"):
+        path = bundle_dir / name
+        path.write_bytes(b"\xef\xbb\xbf" + path.read_text().replace("\n", "\r\n").encode())
+    assert load_bundle(bundle_dir).tests[0].n_rows == 10
+
+
 def test_paper_tow_counts():
     # section 3.2: 17.8 tows in the 25 mm tensile specimen, 35.3 in the 70 mm bias one
     assert derived_tows("tensile", 0.71, 25.0) == pytest.approx(17.8, rel=0.01)
