@@ -87,7 +87,11 @@ def test_contact_force_is_normal_and_projection_removes_penetration():
     x[:, 2] = 5.0  # the apex is at z = 10 at t = 5 s: most nodes penetrate
     f, _ = term.forces(x, 5.0, 5.0)
     g = punch.gap(x, 5.0)
-    np.testing.assert_allclose(f, 1e3 * np.maximum(-g.phi, 0)[:, None] * g.normal)
+    depth = np.maximum(-g.phi, 0.0)
+    δ = term.δ
+    p = np.where(depth < δ, 0.5e3 / δ * depth**2, 1e3 * (depth - 0.5 * δ))
+    np.testing.assert_allclose(f, p[:, None] * g.normal)
+    assert (depth > δ).any() and ((depth > 0) & (depth < δ)).any()  # both regimes
     y = term.project(x, 5.0)
     assert np.abs(np.minimum(punch.gap(y, 5.0).phi, 0)).max() < 1e-9
     assert term.penetration(y, 5.0).max() < 1e-9
@@ -109,7 +113,17 @@ def test_penetration_falls_as_one_over_the_penalty():
         f, _ = term.forces(x, 0.0, 1.0)
         np.testing.assert_allclose(f[0], [0.0, 0.0, -F], atol=1e-12)  # reaction = load
         depth.append(term.penetration(x, 0.0)[0])
-    np.testing.assert_allclose(depth, 0.8 / np.array([1e2, 1e3, 1e4]), rtol=1e-9)
+    # Below the smoothing force f_s / 2 the law is quadratic: depth = √(2 f_s F) / k.
+    np.testing.assert_allclose(depth, np.sqrt(2 * 100.0 * 0.8) / np.array([1e2, 1e3, 1e4]),
+                               rtol=1e-9)
+    # A load above f_s / 2 is in the linear regime: depth = (F + f_s / 2) / k.
+    term = PenaltyContact(punch, 1e3)
+    x = np.array([[0.0, 0.0, -1e-3]])
+    term.bind(x, np.ones(1, bool), None)
+    for _ in range(30):
+        f, K = term.forces(x, 0.0, 1.0)
+        x[0, 2] += (f[0, 2] - 80.0) / K[0, 2, 2]
+    assert term.penetration(x, 0.0)[0] == pytest.approx((80.0 + 50.0) / 1e3, rel=1e-12)
 
 
 def test_bad_parameters_are_named():

@@ -1,20 +1,26 @@
 """Penalty contact between sheet nodes and a rigid tool, as a nodal term.
 
 With φ the signed gap of a node to the tool surface and n = ∇φ its outward normal
-(:mod:`fenicsx_drape.forming.tools`), a node that penetrates (φ < 0) is pushed out by
+(:mod:`fenicsx_drape.forming.tools`), a node that penetrates (φ < 0) is pushed out along the
+normal by a penalty force p(φ) ≥ 0,
 
-    f_N = −k φ n,          K_N = −∂f_N/∂x = k (n⊗n + φ ∇∇φ),
+    f_N = p(φ) n,          K_N = −∂f_N/∂x = −p'(φ) n⊗n − p(φ) ∇∇φ,
 
-a penalty spring of stiffness ``k`` (N/mm) per node along the normal. The curvature term
-φ ∇∇φ makes the Jacobian consistent on the curved punch (the force turns with the normal).
+where the curvature term p ∇∇φ makes the Jacobian consistent on the curved punch (the force
+turns with the normal). The penalty law is linear, p = k (−φ − δ/2), beyond a penetration
+δ = f_s / k and quadratic, p = k φ² / (2δ), below it: the stiffness grows smoothly from zero
+instead of jumping to k when a node touches, so a node that touches and leaves the tool
+between Newton iterates does not make the residual jump (lightly pressed nodes on the die's
+face did exactly that). Both regimes scale with the stiffness ``k`` (N/mm): the penetration at
+a given force p is √(2 f_s p)/k below f_s/2 and (p + f_s/2)/k above, so it falls as 1/k.
 
 **Choice of k.** The natural scale is the axial stiffness of one tow bar of a unit cell,
 ``n_t E_o / Δ = l_t E_o`` (n_t = l_t Δ tows of modulus E_o per tow over the length Δ), which
 does not depend on Δ: 0.71 tows/mm × 3410 N/tow = 2.42 × 10³ N/mm for Table 2. The default is
 k = l_t E_o, so the contact spring is as stiff as the sheet's own bars (the Newton matrix
-stays as well conditioned as the sheet's) and the penetration f/k is tiny: the nodal contact
-forces of the hemisphere are below about 1 N, i.e. penetration below 1e-3 mm, far under 1 % of
-Δ. ``demos/study_penalty.py`` shows the penetration falling as 1/k.
+stays as well conditioned as the sheet's). The smoothing force f_s = 100 N spreads the onset
+over δ = 0.04 mm; nodal contact forces of the hemisphere are below about 1 N, so penetrations
+stay below 0.01 mm (0.1 % of Δ). ``demos/study_penalty.py`` shows them falling as 1/k.
 
 **Tool friction** (effect ``tool_friction``, beyond the paper, off by default): Coulomb
 friction on the slip of the node relative to the tool over the step, regularised so that it
@@ -22,7 +28,7 @@ is smooth at zero slip,
 
     s = P (x − x_n − Δx_tool),  P = I − n⊗n,   f_T = −μ_t f_N s / √(|s|² + s_ε²),
 
-with f_N = −k φ the normal force and ``s_ε`` (mm) the regularising slip: below it the
+with f_N = p(φ) the normal force and ``s_ε`` (mm) the regularising slip: below it the
 friction force grows linearly with the slip (a stick stiffness μ_t f_N / s_ε).
 """
 
@@ -47,10 +53,11 @@ class PenaltyContact:
         friction: Coulomb coefficient μ_t of ``tool_friction`` (0 switches it off).
         slip_regularisation_mm: ``s_ε``, the slip below which friction is not yet at
             its Coulomb limit.
+        smoothing_force_N: ``f_s``, the force below which the penalty law is quadratic.
     """
 
     def __init__(self, tool: RevolvedTool, stiffness_N_per_mm: float, *, friction: float = 0.0,
-                 slip_regularisation_mm: float = 0.01) -> None:
+                 slip_regularisation_mm: float = 0.01, smoothing_force_N: float = 100.0) -> None:
         if not stiffness_N_per_mm > 0.0:
             raise ParameterError(f"contact with {tool.name}: penalty stiffness "
                                  f"{stiffness_N_per_mm} N/mm must be positive")
@@ -59,8 +66,12 @@ class PenaltyContact:
         if not slip_regularisation_mm > 0.0:
             raise ParameterError(f"contact with {tool.name}: slip regularisation "
                                  f"{slip_regularisation_mm} mm must be positive")
+        if not smoothing_force_N > 0.0:
+            raise ParameterError(f"contact with {tool.name}: smoothing force "
+                                 f"{smoothing_force_N} N must be positive")
         self.tool = tool
         self.k = float(stiffness_N_per_mm)
+        self.δ = float(smoothing_force_N) / self.k
         self.μ = float(friction)
         self.s_ε = float(slip_regularisation_mm)
         self._x_n: np.ndarray | None = None  # positions at the last converged step
@@ -72,24 +83,31 @@ class PenaltyContact:
         self._x_n = np.array(X, dtype=float)
         self._t_n = 0.0
 
+    def penalty(self, φ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The normal force p(φ) ≥ 0 (N) and its slope p'(φ) (N/mm) at signed gaps φ (mm)."""
+        k, δ = self.k, self.δ
+        quadratic = φ > -δ
+        p = np.where(quadratic, 0.5 * k / δ * np.minimum(φ, 0.0) ** 2, -k * (φ + 0.5 * δ))
+        dp = np.where(quadratic, k / δ * np.minimum(φ, 0.0), -k)
+        return p, dp
+
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Contact force (N) and stiffness −∂f/∂x (N/mm) at the positions ``x`` at time ``t``."""
         g = self.tool.gap(x, t)
-        active = g.phi < 0.0
-        φ = np.where(active, g.phi, 0.0)
+        p, dp = self.penalty(g.phi)
         n = g.normal
-        f = (-self.k * φ)[:, None] * n
-        K = self.k * (_outer(n, n) * active[:, None, None] + φ[:, None, None] * g.hessian)
+        f = p[:, None] * n
+        K = -dp[:, None, None] * _outer(n, n) - p[:, None, None] * g.hessian
         self._trial = (np.array(x, dtype=float), t)
+        active = g.phi < 0.0
         if self.μ > 0.0 and active.any():
-            f_t, K_t = self._friction(x, t, g, φ, active)
+            f_t, K_t = self._friction(x, t, g, p, dp, active)
             f += f_t
             K += K_t
         return f, K
 
-    def _friction(self, x, t, g, φ, active):
+    def _friction(self, x, t, g, f_N, dp, active):
         n, H = g.normal, g.hessian
-        f_N = -self.k * φ
         d = x - self._x_n
         d[:, 2] -= self.tool.z_offset(t) - self.tool.z_offset(self._t_n)
         dn = np.einsum("ni,ni->n", d, n)
@@ -97,11 +115,11 @@ class PenaltyContact:
         w = np.sqrt(np.einsum("ni,ni->n", s, s) + self.s_ε**2)
         m = s / w[:, None]
         f = -self.μ * f_N[:, None] * m
-        # ∂s/∂x = P − (n·d) ∇∇φ − n ⊗ (∇∇φ d);  ∂m/∂s = (I − m⊗m) / w;  ∂f_N/∂x = −k n.
+        # ∂s/∂x = P − (n·d) ∇∇φ − n ⊗ (∇∇φ d);  ∂m/∂s = (I − m⊗m) / w;  ∂f_N/∂x = p' n.
         P = np.eye(3) - _outer(n, n)
         ds = P - dn[:, None, None] * H - _outer(n, np.einsum("nij,nj->ni", H, d))
         dm = (np.eye(3) - _outer(m, m)) / w[:, None, None]
-        K = self.μ * (f_N[:, None, None] * dm @ ds - self.k * _outer(m, n))
+        K = self.μ * (f_N[:, None, None] * dm @ ds + dp[:, None, None] * _outer(m, n))
         on = active[:, None]
         return np.where(on, f, 0.0), np.where(on[:, :, None], K, 0.0)
 

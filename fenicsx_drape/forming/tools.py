@@ -55,30 +55,36 @@ class Arc:
         return np.asarray(self.centre) + self.radius * np.array([math.cos(angle), math.sin(angle)])
 
     def closest(self, p: np.ndarray):
-        """Closest points, outward normals and curvatures for points ``p`` shaped (n, 2).
+        """Distance, signed distance, outward normal and curvature for points ``p`` (n, 2).
 
-        Returns ``q`` (n, 2), ``n`` (n, 2) and ``c`` (n,) in 1/mm: the Hessian of φ in the
-        meridian plane is ``c t⊗t`` with ``t`` the tangent.
+        Returns ``d`` (n,) the distance to the arc, ``φ`` (n,) the signed distance (positive
+        on the normal's side), ``n`` (n, 2) the outward normal at the closest point and ``c``
+        (n,) in 1/mm: the Hessian of φ in the meridian plane is ``c t⊗t`` with ``t`` the
+        tangent.
         """
         c = np.asarray(self.centre)
         d = p - c
         ρ = np.maximum(np.hypot(d[:, 0], d[:, 1]), _TINY)
-        sweep = self.end - self.start
-        δ = np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - self.start)))
-        inside = (δ / sweep >= 0.0) & (δ / sweep <= 1.0)
-        radial = d / ρ[:, None]
-        q = np.where(inside[:, None], c + self.radius * radial, 0.0)
         sign = 1.0 if self.material_inside else -1.0
-        n = sign * radial
+        n = (sign / ρ)[:, None] * d
+        φ = sign * (ρ - self.radius)
+        δ = np.mod(np.arctan2(d[:, 1], d[:, 0]) - self.start + math.pi, 2 * math.pi) - math.pi
+        s = δ / (self.end - self.start)
+        inside = (s >= 0.0) & (s <= 1.0)
         curv = np.where(inside, sign / ρ, 0.0)
-        if not inside.all():  # beyond the ends: the nearer end point, with its normal
-            a, b = self.point(self.start), self.point(self.end)
-            use_a = np.linalg.norm(p - a, axis=1) <= np.linalg.norm(p - b, axis=1)
-            end = np.where(use_a[:, None], a, b)
-            n_end = sign * np.where(use_a[:, None], a - c, b - c) / self.radius
-            q = np.where(inside[:, None], q, end)
-            n = np.where(inside[:, None], n, n_end)
-        return q, n, curv
+        if inside.all():
+            return np.abs(φ), φ, n, curv
+        # Beyond the ends: the distance to the nearer end point, with the normal there.
+        a, b = self.point(self.start), self.point(self.end)
+        da, db = np.hypot(*(p - a).T), np.hypot(*(p - b).T)
+        use_a = da <= db
+        end = np.where(use_a[:, None], a, b)
+        n_end = (sign / self.radius) * (end - c)
+        d_end = np.where(use_a, da, db)
+        φ_end = np.copysign(d_end, np.einsum("ij,ij->i", p - end, n_end))
+        out = ~inside
+        n[out] = n_end[out]
+        return np.where(inside, np.abs(φ), d_end), np.where(inside, φ, φ_end), n, curv
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,10 +98,12 @@ class Segment:
         """See :meth:`Arc.closest`; a segment has no curvature."""
         a, b = np.asarray(self.a), np.asarray(self.b)
         τ = b - a
+        n = np.array([-τ[1], τ[0]]) / np.linalg.norm(τ)
         s = np.clip((p - a) @ τ / (τ @ τ), 0.0, 1.0)
-        q = a + s[:, None] * τ
-        n = np.broadcast_to(np.array([-τ[1], τ[0]]) / np.linalg.norm(τ), p.shape)
-        return q, n, np.zeros(len(p))
+        e = p - a - s[:, None] * τ
+        d = np.hypot(e[:, 0], e[:, 1])
+        φ = np.copysign(d, e @ n)
+        return d, φ, np.broadcast_to(n, p.shape), np.zeros(len(p))
 
 
 Piece = Arc | Segment
@@ -135,22 +143,20 @@ class RevolvedTool:
         x = np.asarray(x, dtype=float).reshape(-1, 3)
         r = np.hypot(x[:, 0], x[:, 1])
         p = np.column_stack([r, x[:, 2] - self.z_offset(t)])
-        best = None
+        D, PHI, N, C, HOOP = [], [], [], [], []
         for piece in self.profile:
-            q, n, c = piece.closest(p)
-            d = np.linalg.norm(p - q, axis=1)
-            on_axis = isinstance(piece, Arc) and abs(piece.centre[0]) < _TINY
+            d, φ, n, c = piece.closest(p)
+            D.append(d)
+            PHI.append(φ)
+            N.append(n)
+            C.append(c)
             # φ_r / r: for arcs centred on the axis this is c itself (finite on the axis).
-            hoop = c if on_axis else n[:, 0] / np.maximum(r, _TINY)
-            if best is None:
-                best = [d, q, n, c, hoop]
-                continue
-            closer = d < best[0]
-            for k, v in enumerate((d, q, n, c, hoop)):
-                best[k] = np.where(closer[:, None] if v.ndim == 2 else closer, v, best[k])
-        d, q, n, c, hoop = best
-        side = np.einsum("ij,ij->i", p - q, n)
-        phi = np.where(side < 0.0, -d, d)
+            on_axis = isinstance(piece, Arc) and abs(piece.centre[0]) < _TINY
+            HOOP.append(c if on_axis else n[:, 0] / np.maximum(r, _TINY))
+        k = np.argmin(np.stack(D), axis=0)
+        i = np.arange(len(x))
+        phi, n = np.stack(PHI)[k, i], np.stack(N)[k, i]
+        c, hoop = np.stack(C)[k, i], np.stack(HOOP)[k, i]
         # The meridian-plane basis: e_r (radial, any unit vector on the axis) and e_z.
         e_r = np.zeros_like(x)
         e_r[:, 0] = 1.0

@@ -1,0 +1,96 @@
+"""Pictures of a formed sheet, as the paper's Figs. 10-11 (Matplotlib, written atomically)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.provenance import save_figure
+
+
+def _cells(x: np.ndarray) -> np.ndarray:
+    """The corners of every cell of a grid (n_i, n_j, 3) as polygons (n_cells, 4, 3)."""
+    return np.stack([x[:-1, :-1], x[1:, :-1], x[1:, 1:], x[:-1, 1:]], axis=2).reshape(-1, 4, 3)
+
+
+def plot_shear(grid: FormedGrid, path: str | os.PathLike, title: str = "") -> Path:
+    """The formed sheet coloured by the cells' shear angle: a 3D view and a top view."""
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    full = grid.full()
+    γ = np.abs(full.shear_deg()).ravel()
+    cells = _cells(full.x)
+    norm = plt.Normalize(0.0, max(γ.max(), 1.0))
+    cmap = plt.get_cmap("viridis")
+    fig = plt.figure(figsize=(11, 4.8))
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    ax.add_collection3d(Poly3DCollection(cells, facecolors=cmap(norm(γ)), edgecolors="k",
+                                         linewidths=0.15))
+    lim = np.abs(full.x[..., :2]).max()
+    top = max(full.x[..., 2].max(), 1.0)
+    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(0, top), xlabel="x (warp), mm",
+           ylabel="y (weft), mm", zticks=np.linspace(0, top, 3).round())
+    ax.set_box_aspect((1, 1, max(top / (2 * lim), 0.15)))
+    ax.view_init(elev=28, azim=-60)
+    ax2 = fig.add_subplot(1, 2, 2)
+    ax2.add_collection(PolyCollection(cells[:, :, :2], facecolors=cmap(norm(γ)),
+                                      edgecolors="k", linewidths=0.15))
+    ax2.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel="x (warp), mm",
+            ylabel="y (weft), mm", title="top view")
+    fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax2,
+                 label="shear angle (deg)")
+    fig.suptitle(title or f"shear angle, max {γ.max():.1f}°")
+    return save_figure(fig, path)
+
+
+def plot_wrinkling(grid: FormedGrid, path: str | os.PathLike, title: str = "") -> Path:
+    """Top view of the formed tows, the buckled ones coloured by their wrinkling strain."""
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    full = grid.full()
+    warp, weft = full.tow_strains()
+    x = full.x
+    bars = np.concatenate([np.stack([x[:-1, :, :2], x[1:, :, :2]], axis=2).reshape(-1, 2, 2),
+                           np.stack([x[:, :-1, :2], x[:, 1:, :2]], axis=2).reshape(-1, 2, 2)])
+    ε = np.minimum(np.concatenate([warp.ravel(), weft.ravel()]), 0.0)
+    low = min(ε.min(), -1e-4)
+    fig, ax = plt.subplots(figsize=(6.4, 5.2))
+    ax.add_collection(PolyCollection(_cells(x)[:, :, :2], facecolors="0.95", edgecolors="none"))
+    ax.add_collection(LineCollection(bars[ε >= 0], colors="0.7", linewidths=0.4))
+    lines = LineCollection(bars[ε < 0], array=ε[ε < 0], cmap="inferno",
+                           norm=plt.Normalize(low, 0.0), linewidths=1.6)
+    ax.add_collection(lines)
+    lim = np.abs(x[..., :2]).max()
+    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel="x (warp), mm",
+           ylabel="y (weft), mm")
+    fig.colorbar(lines, ax=ax, label="Green-Lagrange wrinkling strain")
+    ax.set_title(title or f"wrinkled tows (min {ε.min():.3f}, total "
+                          f"{100 * grid.total_wrinkling_strain():.2f} %)")
+    return save_figure(fig, path)
+
+
+def plot_paths(grids: Mapping[str, FormedGrid], path: str | os.PathLike) -> Path:
+    """Shear along the diagonal path and wrinkling along the normal path (Fig. 11)."""
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for label, grid in grids.items():
+        s, γ = grid.diagonal_path()
+        a.plot(s, np.abs(γ), "o-", ms=3, label=label)
+        s, w = grid.normal_path()
+        b.plot(s, w, "o-", ms=3, label=label)
+    a.set(xlabel="distance from the apex on the flat sheet, diagonal path (mm)",
+          ylabel="shear angle (deg)", title="(a) shear, corner to apex")
+    b.set(xlabel="distance from the apex on the flat sheet, normal path (mm)",
+          ylabel="Green-Lagrange wrinkling strain", title="(b) wrinkling, mid-side to apex")
+    for ax in (a, b):
+        ax.grid(alpha=0.3)
+        ax.legend()
+    return save_figure(fig, path)

@@ -1,0 +1,65 @@
+"""Numerical stabilisation of the flat, slack sheet: a spring to the extrapolated motion.
+
+A flat pin-jointed net has no stiffness out of its plane, and where tows buckle (eq. 4) or the
+sheet hangs slack between punch and holder it has mechanisms; a static Newton solve then
+stalls (``shared/NUMERICS.md``: a probe stalled at 13-25 mm of travel). A pseudo-viscous drag
+``c (x − x_n)`` towards the last converged positions cures it, but the drag resists *all*
+motion: with the sheet drawn in by ~1 mm per step it is a force of c × 1 mm per node, larger
+than the holder friction (≈ 0.1 N per node), and it set the wrinkling results.
+
+This term ties each node instead to its *extrapolated* position,
+
+    f = −c (x − x̂),   x̂ = x_n + (x_n − x_{n−1}) (t − t_n) / (t_n − t_{n−1}),   K = c I,
+
+(x̂ = x_n in the first step). It adds the same stiffness c to the Newton matrix as the drag,
+which is what makes the solve robust, but the force vanishes for motion at constant velocity
+and is of order c a Δt² for accelerating nodes (a pseudo-inertia of mass c Δt²). It is part of
+the model: ``demos/study_stabilisation.py`` halves c and reports the change.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fenicsx_drape.errors import ParameterError
+
+
+class ExtrapolationSpring:
+    """Spring of stiffness ``c`` (N/mm) per node to its extrapolated position (a NodalTerm)."""
+
+    def __init__(self, stiffness_N_per_mm: float, components: tuple[int, ...] = (0, 1, 2)) -> None:
+        if not (np.isfinite(stiffness_N_per_mm) and stiffness_N_per_mm >= 0.0):
+            raise ParameterError(f"stabilisation stiffness {stiffness_N_per_mm} N/mm must be "
+                                 ">= 0")
+        self.c = float(stiffness_N_per_mm)
+        self.mask = np.isin(np.arange(3), components).astype(float)
+
+    def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
+        """Start from rest at the reference positions."""
+        self._x = [np.array(X, dtype=float)] * 2  # x_{n-1}, x_n
+        self._t = [None, 0.0]
+        self._trial: tuple[np.ndarray, float] | None = None
+
+    def predicted(self, t: float) -> np.ndarray:
+        """The extrapolated positions x̂ at time ``t``."""
+        (x_m, x_n), (t_m, t_n) = self._x, self._t
+        if t_m is None or t_n <= t_m:
+            return x_n
+        return x_n + (x_n - x_m) * ((t - t_n) / (t_n - t_m))
+
+    def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Spring force (N) towards x̂ and its stiffness c I (N/mm)."""
+        self._trial = (np.array(x, dtype=float), t)
+        f = -self.c * self.mask * (x - self.predicted(t))
+        return f, np.broadcast_to(self.c * np.diag(self.mask), (len(x), 3, 3))
+
+    def commit(self) -> None:
+        """The converged step becomes the last one of the extrapolation."""
+        if self._trial is not None:
+            self._x = [self._x[1], self._trial[0]]
+            self._t = [self._t[1], self._trial[1]]
+            self._trial = None
+
+    def revert(self) -> None:
+        """Forget the trial of a step that is cut back."""
+        self._trial = None
