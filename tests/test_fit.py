@@ -151,6 +151,25 @@ def test_write_fit_and_command_line(small_bundle, tmp_path):
     assert (tmp_path / "again" / "model.toml").is_file()
 
 
+def test_synthetic_bundle(tmp_path):
+    """Stated noise, reproducible by seed, any history (a relaxation hold) and conditions,
+    written as a bundle the loader reads back unchanged."""
+    model = default_model()
+    tests = [bias_test("hold", 40.0, n_rows=60, holds=[(20.0, 30.0)],
+                       conditions={"temperature_C": 35.0})]
+    a = synthetic_bundle(model, tests, noise_sd_N=0.5, seed=7, out_dir=tmp_path)
+    b = synthetic_bundle(model, tests, noise_sd_N=0.5, seed=7)
+    np.testing.assert_array_equal(a.tests[0].force_N, b.tests[0].force_N)
+    test = load_bundle(tmp_path).test("hold")
+    assert test.conditions == {"temperature_C": 35.0}
+    np.testing.assert_array_equal(test.force_N, a.tests[0].force_N)
+    assert np.all(test.force_sd_N == 0.5)
+    residual = test.force_N - simulate(test, model)
+    assert abs(np.std(residual) / 0.5 - 1.0) < 0.3  # 60 rows: 1 ± 3 standard errors
+    held = test.displacement_mm == 20.0
+    assert held.sum() >= 5  # the crosshead stops during the hold
+
+
 def test_forming_tests_are_left_out(small_bundle):
     bundle = load_bundle(small_bundle)
     i, j = np.meshgrid(np.arange(3.0), np.arange(3.0))
