@@ -1,0 +1,155 @@
+"""Everything a hemisphere run writes: summary, fields, forming bundle, tools, pictures.
+
+:func:`form_hemisphere` is the Python twin of ``drape form hemisphere``: it runs the case
+(:func:`~fenicsx_drape.forming.hemisphere.run_hemisphere`) and writes into one folder
+
+- ``summary.json``: max shear angle, total and minimum wrinkling strain, draw-in, nodes,
+  steps, Newton (SNES) iterations, wall time, penetration, and the kinematic drape's max shear;
+- ``fields.xdmf`` (+ ``.h5``): displacement, bar strain and stress, wrinkling strain and
+  shear angle every 5 mm of travel, for ParaView; ``tools/*.vtk``: the tools at full travel;
+- ``bundle/``: the formed sheet as a forming bundle (``bundle.toml`` and the node positions on
+  the 10 mm drawn grid, ``shared/spec/measurements.md``), to compare with a measured part;
+- ``shear.png``, ``wrinkling.png``, ``paths.png``: the formed sheet coloured by shear angle,
+  the wrinkled tows, shear along the diagonal path and wrinkling along the normal path
+  (the paper's Figs. 10-11), the last with the kinematic drape beside the FE result;
+- ``provenance.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from fenicsx_drape.bundle import Bundle, Test, write_bundle
+from fenicsx_drape.forming.hemisphere import HemisphereCase, HemisphereRun, run_hemisphere
+from fenicsx_drape.forming.kinematic import kinematic_drape
+from fenicsx_drape.forming.plots import plot_paths, plot_shear, plot_wrinkling
+from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.provenance import write_json, write_provenance
+
+FRAME_MM = 5.0  # punch travel between two frames of the field output
+
+# The paper's numbers for the default case (section 4.3).
+PAPER = {"max_shear_deg": {"model": 51.4, "experiment": 50.2, "kinematic": 61.0},
+         "total_wrinkling_strain": {"model": -0.0055},
+         "min_wrinkling_strain": {"model": -0.21, "experiment": -0.31}}
+
+
+def summary(run: HemisphereRun, kinematic: FormedGrid | None = None) -> dict:
+    """The numbers of a run (the content of ``summary.json``)."""
+    g = run.grid
+    warp, weft = g.tow_strains()
+    out = {
+        "max_shear_deg": float(np.abs(g.shear_deg()).max()),
+        "total_wrinkling_strain": g.total_wrinkling_strain(),
+        "min_wrinkling_strain": float(min(warp.min(), weft.min(), 0.0)),
+        "draw_in_mm": run.draw_in_mm,
+        "nodes": int(g.X[..., 0].size),
+        "steps": run.steps,
+        "cutbacks": run.cutbacks,
+        "snes_iterations": run.iterations,
+        "wall_time_s": run.wall_time_s,
+        "ranks": run.problem.comm.size,
+        "max_penetration_mm": run.max_penetration_mm,
+        "case": dataclasses.asdict(run.case),
+        "paper": PAPER,
+    }
+    if kinematic is not None:
+        out["kinematic_max_shear_deg"] = float(np.abs(kinematic.shear_deg()).max())
+    return out
+
+
+def forming_bundle(run: HemisphereRun, grid_mm: float = 10.0, name: str = "") -> Bundle:
+    """The formed sheet as a one-test forming bundle (node positions on the drawn grid)."""
+    case, tools = run.case, run.case.tools
+    table = run.grid.drawn_grid(grid_mm)
+    columns = {k: np.asarray(v, dtype=float) for k, v in table.items()}
+    setup = {"punch_radius_mm": tools.punch_radius_mm, "fillet_radius_mm": tools.fillet_radius_mm,
+             "holder_opening_mm": tools.holder_opening_mm, "sheet_mm": tools.sheet_mm,
+             "travel_mm": tools.travel_mm, "duration_s": case.duration_s,
+             "holder_force_N": case.holder_force_N, "grid_mm": grid_mm}
+    test_id = f"hemisphere-{case.holder_force_N:g}N-{case.duration_s:g}s"
+    test = Test(id=test_id, kind="forming", file="hemisphere_grid.csv", columns=columns,
+                geometry="hemisphere", forming=setup,
+                conditions={"cell_mm": case.cell_mm},
+                notes={"source": "fenicsx_drape simulation",
+                       "model": "quarter" if case.quarter else "full sheet"})
+    return Bundle(name=name or f"simulated-{test_id}", tests=(test,),
+                  material="4x4 twill 3k carbon/epoxy (Table 2), simulated")
+
+
+def form_hemisphere(out_dir: str | os.PathLike, case: HemisphereCase | None = None, model=None,
+                    options=None, *, grid_mm: float = 10.0, fields: bool = True,
+                    pictures: bool = True, progress: Callable[[str], None] | None = None,
+                    comm=None) -> tuple[HemisphereRun, dict]:
+    """Run the hemisphere case and write all its outputs into ``out_dir``.
+
+    Args:
+        out_dir: Output folder (created).
+        case: The forming conditions (default: the paper's, quarter model, Δ = 10 mm).
+        model: The material model (default: the paper's).
+        options: Solver options of the truss.
+        grid_mm: Spacing of the drawn grid of the bundle.
+        fields: Write the XDMF fields and the tool meshes.
+        pictures: Write the PNG pictures.
+        progress: Called with a line per load step (rank 0).
+        comm: MPI communicator (default ``COMM_WORLD``).
+
+    Returns:
+        The run and its summary.
+    """
+    from mpi4py import MPI
+
+    from fenicsx_drape.model import default_model
+
+    comm = comm or MPI.COMM_WORLD
+    case = case or HemisphereCase()
+    model = model or default_model()
+    out = Path(out_dir)
+    writer = {}
+
+    def frame(problem) -> None:
+        from fenicsx_drape.fe.output import FieldWriter
+
+        if "file" not in writer:
+            writer["file"] = FieldWriter(problem, out / "fields.xdmf")
+            writer["next"] = 0.0
+        travel = case.speed_mm_per_s * problem.t
+        if travel >= writer["next"] - 1e-9 or travel >= case.tools.travel_mm - 1e-9:
+            writer["file"].write()
+            writer["next"] = (np.floor(travel / FRAME_MM + 1e-9) + 1.0) * FRAME_MM
+
+    try:
+        run = run_hemisphere(case, model, options, progress=progress,
+                             on_step=frame if fields else None, comm=comm)
+    finally:
+        if "file" in writer:
+            writer["file"].close()
+    kin = kinematic_drape(case.tools, grid_mm)
+    result = summary(run, kin)
+    if comm.rank == 0:
+        write_json(out / "summary.json", result)
+        write_bundle(forming_bundle(run, grid_mm), out / "bundle",
+                     comment="simulated by fenicsx_drape (drape form hemisphere)")
+        if pictures:
+            plot_shear(run.grid, out / "shear.png",
+                       f"formed sheet, shear angle (max {result['max_shear_deg']:.1f}°)")
+            plot_wrinkling(run.grid, out / "wrinkling.png")
+            plot_paths({"FE truss": run.grid, "kinematic (PjN)": kin}, out / "paths.png")
+        if fields:
+            from fenicsx_drape.forming.tool_models import write_tool_meshes
+
+            write_tool_meshes(case.tools, out / "tools")
+        write_provenance(out, model={"effects": list(model.effects),
+                                     "parameters": _plain(model.parameters)},
+                         case=dataclasses.asdict(case), solver=_plain(vars(run.problem.options)))
+    comm.Barrier()
+    return run, result
+
+
+def _plain(d: dict) -> dict:
+    return {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in d.items()}
