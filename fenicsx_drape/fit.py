@@ -154,8 +154,12 @@ class FitResult:
     seconds: float  # wall time of the fit
 
     def report(self) -> dict[str, Any]:
-        """A JSON-ready report (errors per test, sensitivities, uncertainties, flags)."""
-        return {
+        """A JSON-ready report (errors per test, sensitivities, uncertainties, flags).
+
+        Infinite or undefined numbers (the uncertainty of a parameter no test responds to)
+        are written as null, so the file is strict JSON.
+        """
+        return _strict({
             "bundle": self.bundle.name,
             "effects": list(self.model.effects),
             "parameters": {k: float(v) for k, v in self.model.parameters.items()},
@@ -171,7 +175,7 @@ class FitResult:
             "flags": self.flags,
             "notes": self.notes,
             "seconds": self.seconds,
-        }
+        })
 
     def errors_per_kind(self) -> dict[str, dict[str, float]]:
         """The paper's summary: mean absolute error per test kind, in N and in %."""
@@ -185,6 +189,17 @@ class FitResult:
             out[kind] = {"mean_abs_N": float(diff.mean()),
                          "mean_abs_pct": float(100 * diff.mean() / force.mean())}
         return out
+
+
+def _strict(obj: Any) -> Any:
+    """``obj`` with non-finite floats replaced by None (JSON has no inf or NaN)."""
+    if isinstance(obj, dict):
+        return {k: _strict(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_strict(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
 
 
 def test_errors(tests: Sequence[Test], simulated: Mapping[str, np.ndarray]

@@ -4,7 +4,8 @@
 fitting error (the mean absolute force error) and of the mean force over all tests of a kind,
 divided by the relative change of the parameter, are that parameter's error and force
 sensitivities for that kind. All perturbed parameter sets run in one vectorised unit-cell call
-per test.
+per test. The fit minimises squared errors, not the paper's mean absolute error, so at its
+optimum a parameter the data barely determine can show a small negative error sensitivity.
 
 **Uncertainty** (beyond the paper): with residuals ``r_i = (simulated - measured)/σ_i`` and
 their Jacobian ``J`` in the log parameters at the optimum, the covariance of the log

@@ -133,7 +133,8 @@ def test_fixed_parameter_and_subset(small_bundle):
 def test_write_fit_and_command_line(small_bundle, tmp_path):
     out = tmp_path / "fit"
     assert main(["fit", str(small_bundle), "--out", str(out), "--warm-start"]) == 0
-    report = json.loads((out / "report.json").read_text())
+    report = json.loads((out / "report.json").read_text(),
+                        parse_constant=lambda c: pytest.fail(f"{c} in strict JSON"))
     assert set(report["error"]["per_test"]) == {"tensile", "bias-10", "bias-160"}
     assert report["sensitivity"]["eps_bar"]["tensile"]["force"] < 0
     fitted = load_model(out / "model.toml")
