@@ -287,20 +287,13 @@ class _Residuals:
         return np.concatenate([(f - t.force_N) * w for f, t, w
                                in zip(forces, self.tests, self.weights)], axis=1)
 
-    def jacobian(self, x: np.ndarray, r0: np.ndarray | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+    def jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residuals at ``x`` and their forward-difference Jacobian (one vectorised call)."""
-        n = x.size
         h = FD_STEP * np.maximum(1.0, np.abs(x))
-        # step inwards at an upper bound
-        h = np.where(x + h > self.v.upper, -h, h)
-        X = np.vstack([x] * (n + 1) if r0 is None else [x] * n)
-        offset = 0 if r0 is not None else 1
-        X[offset:offset + n] += np.diag(h)
+        h = np.where(x + h > self.v.upper, -h, h)  # step inwards at an upper bound
+        X = np.vstack([x, x + np.diag(h)])
         R = self.residuals_sets(X)
-        r = R[0] if r0 is None else r0
-        J = (R[offset:] - r) / h[:, None]
-        return r, J.T
+        return R[0], ((R[1:] - R[0]) / h[:, None]).T
 
 
 # --------------------------------------------------------------------------------------------
@@ -313,10 +306,8 @@ def _laws_parameters(model) -> dict[str, tuple[str, ...]]:
             for role, cls in model.law_classes().items()}
 
 
-def plan_blocks(model, tests: Sequence[Test], names: Sequence[str],
-                progress: Progress | None = None) -> tuple[list[tuple[tuple[str, ...],
-                                                                 tuple[Test, ...]]],
-                                                           list[str], list[str]]:
+def plan_blocks(model, tests: Sequence[Test], names: Sequence[str]
+                ) -> tuple[list[tuple[tuple[str, ...], tuple[Test, ...]]], list[str], list[str]]:
     """Decide what is fitted to what (see the module docstring).
 
     Returns:
@@ -477,7 +468,7 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
         say("initial guess from curve features (section 3.2)")
         model = initial_guess(model, coupons, names)
     initial = model
-    blocks, dead, block_notes = plan_blocks(model, coupons, names, say)
+    blocks, dead, block_notes = plan_blocks(model, coupons, names)
     notes += block_notes
     records = []
     for block_names, block_tests in blocks:
