@@ -14,7 +14,8 @@ force of every coupon test of a bundle by ``scipy.optimize.least_squares``:
   start, so the optimiser can neither leave the physical range nor run away along a
   direction the data do not determine.
 - **Jacobian**: forward differences, all perturbed parameter sets in one vectorised unit-cell
-  call per test (the laws accept parameter arrays).
+  call per test (the laws accept parameter arrays); as that call costs about the same as one
+  parameter set, every residual evaluation brings its Jacobian along.
 - **blocks**: as in the paper, tow parameters are fitted to the tensile tests and shear
   parameters to the bias tests when the laws are decoupled. Coupling is judged from the
   data, not assumed: at the start, each parameter's effect (a Jacobian column in noise units)
@@ -22,8 +23,10 @@ force of every coupon test of a bundle by ``scipy.optimize.least_squares``:
   to its own kind alone costs the other kind at most a fifth of its noise); otherwise all
   parameters are fitted to all tests together. Parameters no test responds to keep their
   starting value and are flagged.
-- **start**: curve features (:mod:`fenicsx_drape.features`), unless ``initial_guess=False``
-  (warm start from the given model, e.g. a baseline being extended by one effect).
+- **start**: curve features (:mod:`fenicsx_drape.features`), then the best of six variants
+  along the two directions the features leave open (η_o against s_o, s_inf against
+  eps_v_bar), judged in one vectorised call; or, with ``initial_guess_from_features=False``,
+  the given model's values (a warm start, e.g. a baseline being extended by one effect).
 
 After the fit, :mod:`fenicsx_drape.sensitivity` gives the Table 2 sensitivities and the
 parameter uncertainties from the Jacobian at the optimum, with flags on parameters the data
