@@ -13,9 +13,11 @@ ghosts); that is the order of every nodal array this module hands out or takes.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import inspect
 import itertools
+import time
 from collections.abc import Callable, Mapping, Sequence
 
 from mpi4py import MPI
@@ -141,6 +143,8 @@ class TrussProblem:
         self.t = 0.0
         self.dt = 0.0
         self.steps: list[StepReport] = []
+        # Wall time (s) spent in the parts of the solve, summed over all steps.
+        self.timings = dict.fromkeys(("material", "nodal", "residual", "jacobian", "solve"), 0.0)
         self._evaluated_at: np.ndarray | None = None
         self._nodal_f = np.zeros((len(self.X), 3))
         self._nodal_K = np.zeros((len(self.X), 3, 3))
@@ -313,41 +317,52 @@ class TrussProblem:
         with x.localForm() as xl:
             self.u.x.array[:] = xl.array_r
         self._evaluated_at = self.u.x.array.copy()
-        try:
-            self.state.evaluate(self.dt)
-            ok = True
-        except (StrainError, ValueError):
-            ok = False
+        with self._timed("material"):
+            try:
+                self.state.evaluate(self.dt)
+                ok = True
+            except (StrainError, ValueError):
+                ok = False
         if not self.comm.allreduce(ok, op=MPI.LAND):
             self._evaluated_at = None
             return False
-        n = len(self.X)
-        f, K = np.zeros((n, 3)), np.zeros((n, 3, 3))
-        xpos = self.positions()
-        for term in self.nodal_terms:
-            ft, Kt = term.forces(xpos, self.t + self.dt, self.dt)
-            f += ft
-            K += Kt
-        c = self.options.drag_N_per_mm
-        if c:
-            f -= c * (self.u.x.array - self._u_n).reshape(-1, 3)
-            K += c * np.eye(3)
-        free = ~self.constrained
-        self._nodal_f = f * free
-        self._nodal_K = K * free[:, :, None] * free[:, None, :]
+        with self._timed("nodal"):
+            n = len(self.X)
+            f, K = np.zeros((n, 3)), np.zeros((n, 3, 3))
+            xpos = self.positions()
+            for term in self.nodal_terms:
+                ft, Kt = term.forces(xpos, self.t + self.dt, self.dt)
+                f += ft
+                K += Kt
+            c = self.options.drag_N_per_mm
+            if c:
+                f -= c * (self.u.x.array - self._u_n).reshape(-1, 3)
+                K += c * np.eye(3)
+            free = ~self.constrained
+            self._nodal_f = f * free
+            self._nodal_K = K * free[:, :, None] * free[:, None, :]
         return True
+
+    @contextlib.contextmanager
+    def _timed(self, part: str):
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.timings[part] += time.perf_counter() - start
 
     def _residual(self, snes, x, b) -> None:
         if not self._evaluate(x):
             snes.setFunctionDomainError()
             return
-        with b.localForm() as bl:
-            bl.set(0.0)
-        fem_petsc.assemble_vector(b, self.residual_form)
-        fem_petsc.apply_lifting(b, [self.jacobian_form], [self._bcs], x0=[x], alpha=-1.0)
-        b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
-        b.array_w[:] -= self._nodal_f[: self.num_owned].ravel()
-        fem_petsc.set_bc(b, self._bcs, x, -1.0)
+        with self._timed("residual"):
+            with b.localForm() as bl:
+                bl.set(0.0)
+            fem_petsc.assemble_vector(b, self.residual_form)
+            fem_petsc.apply_lifting(b, [self.jacobian_form], [self._bcs], x0=[x], alpha=-1.0)
+            b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
+            b.array_w[:] -= self._nodal_f[: self.num_owned].ravel()
+            fem_petsc.set_bc(b, self._bcs, x, -1.0)
 
     def _stale(self, x: PETSc.Vec) -> bool:
         """Whether ``x`` differs from the last evaluated iterate on any rank."""
@@ -359,15 +374,17 @@ class TrussProblem:
     def _jacobian(self, snes, x, A, P) -> None:
         if self._stale(x):
             self._evaluate(x)
-        A.zeroEntries()
-        fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self._bcs)
-        A.assemble(PETSc.Mat.AssemblyType.FLUSH)
-        n = self.num_owned
-        if self.nodal_terms or self.options.drag_N_per_mm:
-            A.setValuesBlockedLocalCSR(np.arange(n + 1, dtype=PETSc.IntType),
-                                       np.arange(n, dtype=PETSc.IntType),
-                                       self._nodal_K[:n].ravel(), PETSc.InsertMode.ADD_VALUES)
-        A.assemble()
+        with self._timed("jacobian"):
+            A.zeroEntries()
+            fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self._bcs)
+            A.assemble(PETSc.Mat.AssemblyType.FLUSH)
+            n = self.num_owned
+            if self.nodal_terms or self.options.drag_N_per_mm:
+                A.setValuesBlockedLocalCSR(np.arange(n + 1, dtype=PETSc.IntType),
+                                           np.arange(n, dtype=PETSc.IntType),
+                                           self._nodal_K[:n].ravel(),
+                                           PETSc.InsertMode.ADD_VALUES)
+            A.assemble()
 
     # -- stepping -----------------------------------------------------------------------
 
@@ -394,7 +411,8 @@ class TrussProblem:
         with self._x.localForm() as xl:
             xl.array_w[:] = u
         try:
-            self.snes.solve(None, self._x)
+            with self._timed("solve"):
+                self.snes.solve(None, self._x)
             reason = self.snes.getConvergedReason()
         except PETSc.Error:
             reason = PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
