@@ -426,20 +426,20 @@ def rank(candidates: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def _untestable_reason(effect, data: _Data, change: float, per_test: dict[str, float]) -> str:
     kinds = sorted({t.kind for t in data.tests})
-    exercised = [k for k in kinds if k in effect.test_kinds]
-    largest = max(per_test, key=per_test.get)
-    text = (f"adding it at its default strength changes the simulated tests by "
-            f"{change:.2g} × their noise (largest in {largest}: {per_test[largest]:.2g}), "
-            f"below {UNTESTABLE_BELOW}: these tests cannot exercise it")
-    if not exercised:
-        text += (f"; it acts on {effect.acts_on} in {' and '.join(effect.test_kinds)} tests, "
-                 f"and the bundle has only {' and '.join(kinds)} tests")
+    if change == 0.0:
+        text = "adding it at its default strength changes none of the simulated tests"
     else:
-        conditions = [c for c in effect.conditions
-                      if len({t.conditions.get(c) for t in data.tests}) < 2]
-        if conditions:
-            text += f"; {', '.join(conditions)} does not vary across the tests"
-    return text
+        largest = max(per_test, key=per_test.get)
+        text = (f"adding it at its default strength changes the simulated tests by only "
+                f"{change:.2g} × their noise (at most {per_test[largest]:.2g} in {largest}; "
+                f"testable from {UNTESTABLE_BELOW})")
+    if not set(kinds) & set(effect.test_kinds):
+        return (f"{text}: it acts on the {effect.acts_on} in {' and '.join(effect.test_kinds)} "
+                f"tests, and the bundle has only {' and '.join(kinds)} tests")
+    fixed = [c for c in effect.conditions if len({t.conditions.get(c) for t in data.tests}) < 2]
+    if fixed:
+        return f"{text}: {', '.join(fixed)} does not vary across the tests"
+    return f"{text}: these tests do not exercise it"
 
 
 def _pattern(base: list[Comparison]) -> str:
@@ -464,28 +464,39 @@ def _pattern(base: list[Comparison]) -> str:
             f"the {kind.replace('_', ' ')} tests")
 
 
+def _addition(c: dict[str, Any]) -> str:
+    """How a candidate changes the model, in words."""
+    from fenicsx_drape.effects import EFFECTS
+
+    if all(e in EFFECTS for e in c["effects"]):
+        return f"the model gets {c['effect']} ({c['summary']})"
+    summary = c["summary"].rstrip(".")
+    return (f"the user law {c['effect']} replaces the {c['acts_on']} law "
+            f"({summary[:1].lower() + summary[1:]})")
+
+
 def _explain(c: dict[str, Any], pattern: str, base_norm: float, base_ho: float) -> str:
     after = c["error_after"]["normalised"]
     gain = (f"error {base_norm:.3g} → {after:.3g} × noise, held-out {base_ho:.3g} → "
             f"{c['heldout_normalised']:.3g} (evidence {c['evidence']:.3g})")
-    what = f"the model gets {c['summary']} ({c['effect']})"
+    what = _addition(c)
     if c["significant"] and after <= ADEQUATE:
-        return f"{pattern.capitalize()}, and it vanishes when {what}: {gain}."
+        return f"{pattern[:1].upper() + pattern[1:]}, and it vanishes when {what}: {gain}."
     if c["significant"]:
         remains = c["where_after"][0] if c["where_after"] else None
         rest = (f"; what remains sits in {remains['test']} ({remains['says']})"
                 if remains else "")
-        return (f"{pattern.capitalize()}; it shrinks but stays above {ADEQUATE} × noise when "
-                f"{what}: {gain}{rest}.")
-    return (f"{pattern.capitalize()}; no real gain when {what}: {gain}, evidence below "
-            f"{EVIDENCE_THRESHOLD}.")
+        return (f"{pattern[:1].upper() + pattern[1:]}; it shrinks but stays above {ADEQUATE} × "
+                f"noise when {what}: {gain}{rest}.")
+    return (f"{pattern[:1].upper() + pattern[1:]}; no real gain when {what}: {gain}, "
+            f"evidence below {EVIDENCE_THRESHOLD}.")
 
 
 def _conclusion(missing, best, base: list[Comparison], pattern: str) -> str:
     normalised = normalised_error(base)
     if missing:
-        return (f"Missing effect: {missing['effect']} ({missing['summary']}); adding it "
-                f"brings the normalised error from {normalised:.3g} to "
+        return (f"Missing effect: {missing['effect']} ({missing['summary'].rstrip('.')}); adding "
+                f"it brings the normalised error from {normalised:.3g} to "
                 f"{missing['error_after']['normalised']:.3g}.")
     if normalised <= ADEQUATE:
         return (f"No effect is missing: the model is at {normalised:.3g} × the noise "

@@ -85,20 +85,18 @@ def read(dirs: Iterable[str | Path]) -> list[dict[str, Any]]:
 class Version:
     """One model version in the history."""
 
-    label: str  # "v1", "v2", ... per bundle
-    change: str  # what changed from the previous version of the same bundle
+    label: str  # "v1", "v2", ... in time order
+    change: str  # what changed from the previous version (effects, plugins, bundle)
     entry: dict[str, Any]  # the ledger entry
 
 
 def versions(entries: Sequence[dict[str, Any]]) -> list[Version]:
-    """Label the entries version by version (per bundle) with what changed."""
+    """Label the entries (oldest first) version by version, with what changed."""
     out: list[Version] = []
-    last: dict[str, dict[str, Any]] = {}
-    for entry in entries:
-        previous = last.get(entry["bundle"])
-        count = sum(1 for v in out if v.entry["bundle"] == entry["bundle"]) + 1
-        out.append(Version(f"v{count}", _change(previous, entry), entry))
-        last[entry["bundle"]] = entry
+    previous = None
+    for k, entry in enumerate(entries, start=1):
+        out.append(Version(f"v{k}", _change(previous, entry), entry))
+        previous = entry
     return out
 
 
@@ -109,7 +107,9 @@ def _change(previous: dict[str, Any] | None, entry: dict[str, Any]) -> str:
     parts = [f"+{e}" for e in sorted(after - before)] + [f"-{e}" for e in sorted(before - after)]
     new_plugins = sorted(set(entry.get("plugins", [])) - set(previous.get("plugins", [])))
     parts += [f"plugin {Path(p).name}" for p in new_plugins]
-    return ", ".join(parts) if parts else "same effects (refit)"
+    if entry["bundle"] != previous["bundle"]:
+        parts.append(f"bundle {entry['bundle']}")
+    return ", ".join(parts) if parts else "same model (refit)"
 
 
 def table(history: Sequence[Version]) -> str:
@@ -131,15 +131,17 @@ def plot(history: Sequence[Version], path: str | Path) -> Path:
 
     from fenicsx_drape.provenance import save_figure
 
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.2 * len(history)), 4.5))
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.3 * len(history)), 4.5))
+    errors = [v.entry["normalised"] for v in history]
+    ax.plot(range(len(history)), errors, "-", color="0.6", lw=1)
     bundles = list(dict.fromkeys(v.entry["bundle"] for v in history))
     for i, name in enumerate(bundles):
-        points = [(k, v) for k, v in enumerate(history) if v.entry["bundle"] == name]
-        ax.plot([k for k, _ in points], [v.entry["normalised"] for _, v in points], "o-",
-                color=f"C{i}", label=name)
-        for k, v in points:
-            ax.annotate(f"{v.entry['normalised']:.2f}", (k, v.entry["normalised"]),
-                        textcoords="offset points", xytext=(0, 7), ha="center", fontsize=8)
+        points = [(k, v.entry["normalised"]) for k, v in enumerate(history)
+                  if v.entry["bundle"] == name]
+        ax.plot(*zip(*points), "o", color=f"C{i}", label=f"bundle {name}")
+    for k, error in enumerate(errors):
+        ax.annotate(f"{error:.2f}", (k, error), textcoords="offset points", xytext=(0, 7),
+                    ha="center", fontsize=8)
     ax.axhline(1.0, color="k", ls="--", lw=1, label="noise floor")
     ax.axhline(1.5, color="0.5", ls=":", lw=1, label="adequate (1.5 × noise)")
     ax.set_yscale("log")

@@ -8,7 +8,7 @@ import pytest
 from fenicsx_drape import ledger
 from fenicsx_drape.bundle import Bundle
 from fenicsx_drape.cli import main
-from fenicsx_drape.compare import Comparison, CompareResult
+from fenicsx_drape.compare import CompareResult, Comparison
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.model import Model
 
@@ -36,7 +36,7 @@ def test_ledger_records_versions_in_order_with_changes(tmp_path):
     history = ledger.history(dirs, out_dir=tmp_path / "history")
     assert [v.label for v in history] == ["v1", "v2", "v3", "v4"]
     assert [v.change for v in history] == ["first version", "+rate_dependence",
-                                           "same effects (refit)", "-rate_dependence"]
+                                           "same model (refit)", "-rate_dependence"]
     # normalised = sqrt(mean((RMSE / noise)²)) of the recorded comparison
     assert history[0].entry["normalised"] == pytest.approx(np.sqrt((16 + 64) / 2))
     assert history[2].entry["normalised"] == pytest.approx(np.sqrt((1 + 1.44) / 2))
@@ -49,7 +49,7 @@ def test_ledger_records_versions_in_order_with_changes(tmp_path):
 
 
 def test_history_rejects_folders_without_a_ledger_and_bad_lines(tmp_path):
-    with pytest.raises(DrapeInputError, match="no ledger.jsonl"):
+    with pytest.raises(DrapeInputError, match=r"no ledger\.jsonl"):
         ledger.read([tmp_path])
     (tmp_path / "ledger.jsonl").write_text('{"id": "x"}\n')
     with pytest.raises(DrapeInputError, match=r"ledger.jsonl:1: not a ledger entry"):
