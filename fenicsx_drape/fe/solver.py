@@ -29,6 +29,7 @@ import numpy as np
 
 from fenicsx_drape import nodal
 from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.fe.bending import TowBending
 from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
@@ -42,7 +43,7 @@ _ids = itertools.count()
 class SolverOptions:
     """Options of the truss model and of its solver.
 
-    The first four are part of the *model* (they change results); halving the last two and
+    The first five are part of the *model* (they change results); halving the last three and
     reporting the change is how their effect is stated (see ``benchmarks/bench_fe.py``).
     """
 
@@ -51,6 +52,7 @@ class SolverOptions:
     # of width W holds l_t·W tows (a patch pulled along the tows gives the tensile force).
     edge_tow_factor: float = 0.5
     buckled_tow_stiffness_N: float = 0.04  # residual stiffness of buckled tows (N/tow), state.py
+    tow_bending_EI_Nmm2: float = 2.0  # bending stiffness of one tow (N·mm²), bending.py
     drag_N_per_mm: float = 0.0  # pseudo-viscous drag c (u - u_n) per node: numerical damping
     snes_atol: float = 1e-8  # absolute residual tolerance (N)
     snes_rtol: float = 1e-9  # relative residual tolerance
@@ -64,7 +66,8 @@ class SolverOptions:
         for name in ("tows_per_mm", "snes_atol"):
             if not getattr(self, name) > 0:
                 raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be > 0")
-        for name in ("edge_tow_factor", "buckled_tow_stiffness_N", "drag_N_per_mm"):
+        for name in ("edge_tow_factor", "buckled_tow_stiffness_N", "tow_bending_EI_Nmm2",
+                     "drag_N_per_mm"):
             if not getattr(self, name) >= 0:
                 raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be "
                                       ">= 0")
@@ -149,6 +152,11 @@ class TrussProblem:
         self._nodal_f = np.zeros((len(self.X), 3))
         self._nodal_K = np.zeros((len(self.X), 3, 3))
         self._setup_snes()
+        self._bending = None
+        if options.tow_bending_EI_Nmm2 > 0 and sheet.grid is not None:  # tow lines known
+            self._bending = TowBending(self, options.tow_bending_EI_Nmm2)
+            # Its stencils couple nodes two apart along a line: outside the form's sparsity.
+            self._A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
 
     # -- geometry and selections -------------------------------------------------------
 
@@ -264,6 +272,8 @@ class TrussProblem:
             dofs = [3 * nodes_c + c, to_collapsed[nodes_c]]
             self._bcs.append(dolfinx.fem.dirichletbc(g, dofs, self.V.sub(c)))
             self._bc_values.append((g, nodes_c, to_collapsed))
+        if self._bending is not None:
+            self._bending.constrain(self)
 
     def _set_bc_values(self, t: float) -> None:
         """Write the prescribed displacements at time ``t`` into the conditions and ``u``."""
@@ -362,6 +372,8 @@ class TrussProblem:
             fem_petsc.apply_lifting(b, [self.jacobian_form], [self._bcs], x0=[x], alpha=-1.0)
             b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
             b.array_w[:] -= self._nodal_f[: self.num_owned].ravel()
+            if self._bending is not None:
+                b.array_w[:] += self._bending.force(x)
             fem_petsc.set_bc(b, self._bcs, x, -1.0)
 
     def _stale(self, x: PETSc.Vec) -> bool:
@@ -379,6 +391,8 @@ class TrussProblem:
             fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self._bcs)
             A.assemble(PETSc.Mat.AssemblyType.FLUSH)
             n = self.num_owned
+            if self._bending is not None:
+                self._bending.add_to(A)
             if self.nodal_terms or self.options.drag_N_per_mm:
                 A.setValuesBlockedLocalCSR(np.arange(n + 1, dtype=PETSc.IntType),
                                            np.arange(n, dtype=PETSc.IntType),
@@ -460,6 +474,8 @@ class TrussProblem:
         b = fem_petsc.assemble_vector(self.residual_form)
         b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
         r = b.array_r.reshape(-1, 3) - self._nodal_f[: self.num_owned]
+        if self._bending is not None:
+            r = r + self._bending.force(self.u.x.petsc_vec).reshape(-1, 3)
         b.destroy()
         return self.comm.allreduce(r[mask].sum(axis=0), op=MPI.SUM)
 

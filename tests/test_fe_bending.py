@@ -1,0 +1,94 @@
+"""The tow bending term: its energy on a curved sheet, and consistency of its Jacobian."""
+
+import dataclasses
+
+import pytest
+
+pytest.importorskip("dolfinx")
+
+import dolfinx.fem.petsc as fem_petsc
+import numpy as np
+
+from fenicsx_drape.fe import SolverOptions, TrussProblem, truss_sheet
+from fenicsx_drape.materials.base import MaterialLaw, parameter
+
+EI = 3.0  # N·mm² per tow
+
+
+@dataclasses.dataclass
+class Linear(MaterialLaw):
+    """σ = E ε: smooth, so finite differences test the bending term alone."""
+
+    role = "tow"
+    E: float = parameter(unit="N/tow")
+
+    def _update(self, strain, dt, state):
+        return self.E * strain, np.full_like(strain, self.E), state
+
+
+LAWS = {"tow": Linear(3000.0), "shear": Linear(1.0)}
+
+
+def _problem(quarter, EI=EI, sheet=None):
+    sheet = sheet or truss_sheet(80.0, 10.0, quarter=quarter)
+    return TrussProblem(sheet, LAWS, options=SolverOptions(tow_bending_EI_Nmm2=EI))
+
+
+@pytest.mark.parallel
+@pytest.mark.parametrize("quarter", [False, True])
+def test_energy_of_a_doubly_curved_sheet(quarter):
+    """u_z = a x² + b y²: every triplet of a warp line has second difference 2aΔ², weft 2bΔ²."""
+    problem = _problem(quarter)
+    a, b = 1e-3, -3e-3
+    problem.u.interpolate(lambda X: np.vstack([0 * X[0], 0 * X[0], a * X[0] ** 2 + b * X[1] ** 2]))
+    u = problem.u.x.petsc_vec
+    Ku = u.duplicate()
+    Ku.array_w[:] = problem._bending.force(u)
+    energy = 0.5 * Ku.dot(u)
+    grid = problem.sheet.grid
+    Δ, n = grid.cell_mm, grid.nx
+    k = 0.71 * Δ * EI / Δ**3
+    strips = (n - 1) + 2 * 0.5  # per direction: n + 1 lines, the two edge ones are half
+    expected = 0.5 * k * (n - 1) * strips * ((2 * a * Δ**2) ** 2 + (2 * b * Δ**2) ** 2)
+    assert energy == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parallel
+def test_bending_adds_a_consistent_stiffness():
+    """Residual differences along a random direction equal the Jacobian's product with it."""
+    problem = _problem(quarter=True)
+    problem.symmetry()
+    # A state on the symmetry constraints (u_x = 0 on x = 0, u_y = 0 on y = 0).
+    problem.u.interpolate(lambda X: np.vstack([1e-4 * X[0] * X[1], 2e-4 * X[0] * X[1],
+                                               1e-3 * (X[0] ** 2 + X[1] ** 2)]))
+    rng = np.random.default_rng(0)
+    direction = problem.u.x.petsc_vec.duplicate()
+    direction.array_w[:] = rng.standard_normal(direction.getLocalSize())
+    for bc in problem._bcs:  # stay on the constraints
+        bc.set(direction.array_w, alpha=0.0)
+    x = problem.u.x.petsc_vec.copy()
+
+    def residual(s):
+        y = x.copy()
+        y.axpy(s, direction)
+        b = fem_petsc.create_vector(problem.V)
+        problem._residual(problem.snes, y, b)
+        return b
+
+    h = 1e-6
+    fd = residual(h)
+    fd.axpy(-1.0, residual(-h))
+    fd.scale(1 / (2 * h))
+    problem._jacobian(problem.snes, x, problem._A, problem._A)
+    Jd = fd.duplicate()
+    problem._A.mult(direction, Jd)
+    Jd.axpy(-1.0, fd)
+    assert Jd.norm() <= 1e-7 * fd.norm()
+    # Without the bending term the product differs: the test can fail.
+    plain = _problem(True, EI=0.0, sheet=problem.sheet)
+    plain.symmetry()
+    plain._jacobian(plain.snes, x, plain._A, plain._A)
+    Jd_plain = fd.duplicate()
+    plain._A.mult(direction, Jd_plain)
+    Jd_plain.axpy(-1.0, fd)
+    assert Jd_plain.norm() > 1e-5 * fd.norm()
