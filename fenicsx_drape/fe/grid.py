@@ -143,27 +143,74 @@ def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = Fa
                      rotation_deg)
 
 
-def write_grid(grid: TrussGrid, path: str | Path) -> Path:
-    """Write the truss with meshio (``.msh`` Gmsh 4.1, ``.xdmf`` inline XML, ``.vtu``, ...).
+def gmsh_model(nodes: np.ndarray, bars: np.ndarray, kinds: np.ndarray, flags: np.ndarray):
+    """The current Gmsh model filled with a truss as discrete entities.
 
-    Cell data ``kind`` holds the bar kinds, point data ``flags`` the node flags; a ``.msh``
-    file also gets them as physical groups (``gmsh:physical``).
+    No geometry is meshed: nodes and two-node line elements are added as they are, so the
+    crossing diagonals are neither fragmented nor joined. Bars form one physical group per
+    kind (tag = kind), flagged nodes one point group per flag value (tag = value). Gmsh must
+    be initialised.
     """
+    import gmsh
+
+    model = gmsh.model
+    model.add("truss")
+    # All nodes on the first curve; the other curves use them (node tags start at 1).
+    for kind in BAR_KINDS:
+        model.addDiscreteEntity(1, kind)
+    model.mesh.addNodes(1, 1, np.arange(1, len(nodes) + 1), nodes.ravel())
+    first = 1
+    for kind, name in BAR_KINDS.items():
+        sel = bars[kinds == kind] + 1
+        tags = np.arange(first, first + len(sel))
+        first += len(sel)
+        model.mesh.addElementsByType(kind, 1, tags, sel.ravel())  # type 1: 2-node line
+        if len(sel):
+            model.addPhysicalGroup(1, [kind], kind, name=name)
+    # One point entity per flagged node, grouped by flag value.
+    for value in np.unique(flags[flags > 0]):
+        points = []
+        for node in np.flatnonzero(flags == value):
+            tag = model.addDiscreteEntity(0)
+            model.mesh.addElementsByType(tag, 15, [first], [node + 1])  # type 15: point
+            first += 1
+            points.append(tag)
+        model.addPhysicalGroup(0, points, int(value), name=flag_name(int(value)))
+    return model
+
+
+def write_grid(grid: TrussGrid, path: str | Path) -> Path:
+    """Write the truss: ``.msh`` with Gmsh, other formats (``.xdmf``, ``.vtu``) with meshio.
+
+    The ``.msh`` file (Gmsh 4.1) holds the bars in physical groups ``warp``, ``weft``,
+    ``diagonal_plus``, ``diagonal_minus`` and the flagged nodes in point groups such as
+    ``symmetry_x`` or ``border``; meshio formats get cell data ``kind`` and point data
+    ``flags``. Both read back with :func:`read_grid` (meshio).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    bars, kinds = grid.bars
+    if path.suffix == ".msh":
+        import gmsh
+
+        initialised = gmsh.isInitialized()
+        if not initialised:
+            gmsh.initialize(interruptible=False)
+        gmsh.option.setNumber("General.Terminal", 0)
+        try:
+            gmsh_model(grid.nodes, bars, kinds, grid.node_flags)
+            gmsh.write(str(path))
+            gmsh.model.remove()
+        finally:
+            if not initialised:
+                gmsh.finalize()
+        return path
     import meshio
 
-    path = Path(path)
-    bars, kinds = grid.bars
-    cell_data = {"kind": [kinds]}
-    if path.suffix == ".msh":
-        cell_data["gmsh:physical"] = [kinds]
-        cell_data["gmsh:geometrical"] = [kinds]
     mesh = meshio.Mesh(grid.nodes, [("line", bars)], point_data={"flags": grid.node_flags},
-                       cell_data=cell_data)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix == ".msh":
-        mesh.write(path, file_format="gmsh")
-    elif path.suffix == ".xdmf":
-        mesh.write(path, data_format="XML")  # inline data: no HDF5 side file, no h5py
+                       cell_data={"kind": [kinds]})
+    if path.suffix == ".xdmf":
+        mesh.write(path, data_format="XML")  # inline data: no HDF5 side file
     else:
         mesh.write(path)
     return path

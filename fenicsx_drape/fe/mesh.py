@@ -17,7 +17,7 @@ import dolfinx
 import numpy as np
 from dolfinx.io import gmsh as gmshio
 
-from fenicsx_drape.fe.grid import BAR_KINDS, TrussGrid, flag_name, read_grid, sheet_grid
+from fenicsx_drape.fe.grid import TrussGrid, gmsh_model, read_grid, sheet_grid
 
 MAX_BARS_AT_NODE = 8
 
@@ -36,36 +36,6 @@ class Sheet:
     def num_nodes_global(self) -> int:
         """Number of nodes of the whole sheet (all ranks)."""
         return self.mesh.topology.index_map(0).size_global
-
-
-def _gmsh_model(nodes: np.ndarray, bars: np.ndarray, kinds: np.ndarray, flags: np.ndarray):
-    """A Gmsh model holding the truss as discrete entities (no fragmenting, no new nodes)."""
-    import gmsh
-
-    model = gmsh.model
-    model.add("truss")
-    # All nodes on the first curve; the other curves use them (node tags start at 1).
-    for kind in BAR_KINDS:
-        model.addDiscreteEntity(1, kind)
-    model.mesh.addNodes(1, 1, np.arange(1, len(nodes) + 1), nodes.ravel())
-    first = 1
-    for kind, name in BAR_KINDS.items():
-        sel = bars[kinds == kind] + 1
-        tags = np.arange(first, first + len(sel))
-        first += len(sel)
-        model.mesh.addElementsByType(kind, 1, tags, sel.ravel())  # type 1: 2-node line
-        if len(sel):
-            model.addPhysicalGroup(1, [kind], kind, name=name)
-    # One point entity per flagged node, grouped by flag value.
-    for value in np.unique(flags[flags > 0]):
-        points = []
-        for node in np.flatnonzero(flags == value):
-            tag = model.addDiscreteEntity(0)
-            model.mesh.addElementsByType(tag, 15, [first], [node + 1])  # type 15: point
-            first += 1
-            points.append(tag)
-        model.addPhysicalGroup(0, points, int(value), name=flag_name(int(value)))
-    return model
 
 
 def _partitioner():
@@ -112,7 +82,7 @@ def _distribute(data, comm: MPI.Comm):
         if not initialised:
             gmsh.initialize(interruptible=False)
         gmsh.option.setNumber("General.Terminal", 0)
-        model = _gmsh_model(*data)
+        model = gmsh_model(*data)
     try:
         data = gmshio.model_to_mesh(model, comm, 0, gdim=3, partitioner=_partitioner(),
                                     max_facet_to_cell_links=MAX_BARS_AT_NODE)
