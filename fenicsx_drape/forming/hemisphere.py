@@ -131,7 +131,7 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
     sheet = truss_sheet(tools.sheet_mm, case.cell_mm, quarter=case.quarter, comm=comm)
     terms = [*contact, holder]
     if case.stabilisation_N_per_mm:
-        terms.append(ExtrapolationSpring(case.stabilisation_N_per_mm, (2,)))
+        terms.append(ExtrapolationSpring(case.stabilisation_N_per_mm, sheet_normal(contact)))
     problem = TrussProblem(sheet, model, terms, options)
     if case.quarter:
         problem.symmetry()
@@ -156,6 +156,27 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
         iterations=run.iterations, wall_time_s=time.perf_counter() - start,
         max_penetration_mm=comm.allreduce(depth, op=MPI.MAX), draw_in_mm=draw_in(grid),
         contact=contact, holder=holder)
+
+
+def sheet_normal(contact: list[PenaltyContact], near_mm: float = 3.0):
+    """An estimate of the sheet's normal at every node, for the out-of-plane stabilisation.
+
+    The normal of the nearest tool surface where a tool is within ``near_mm`` (the sheet
+    lies on it, or will), else the z axis (the flat sheet and the holder).
+    """
+
+    def direction(x: np.ndarray, t: float) -> np.ndarray:
+        d = np.zeros_like(x)
+        d[:, 2] = 1.0
+        best = np.full(len(x), near_mm)
+        for c in contact:
+            g = c.tool.gap(x, t)
+            closer = np.abs(g.phi) < best
+            d[closer] = g.normal[closer]
+            best = np.where(closer, np.abs(g.phi), best)
+        return d
+
+    return direction
 
 
 def draw_in(grid: FormedGrid) -> dict[str, float]:

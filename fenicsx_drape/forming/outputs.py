@@ -63,8 +63,13 @@ def summary(run: HemisphereRun, kinematic: FormedGrid | None = None) -> dict:
     return out
 
 
-def forming_bundle(run: HemisphereRun, grid_mm: float = 10.0, name: str = "") -> Bundle:
-    """The formed sheet as a one-test forming bundle (node positions on the drawn grid)."""
+def forming_bundle(run: HemisphereRun, friction: float, grid_mm: float = 10.0,
+                   name: str = "") -> Bundle:
+    """The formed sheet as a one-test forming bundle (node positions on the drawn grid).
+
+    The friction coefficient μ of the run is written as the test condition
+    ``friction_coefficient``.
+    """
     case, tools = run.case, run.case.tools
     table = run.grid.drawn_grid(grid_mm)
     columns = {k: np.asarray(v, dtype=float) for k, v in table.items()}
@@ -75,9 +80,7 @@ def forming_bundle(run: HemisphereRun, grid_mm: float = 10.0, name: str = "") ->
     test_id = f"hemisphere-{case.holder_force_N:g}N-{case.duration_s:g}s"
     test = Test(id=test_id, kind="forming", file="hemisphere_grid.csv", columns=columns,
                 geometry="hemisphere", forming=setup,
-                conditions={"cell_mm": case.cell_mm},
-                notes={"source": "fenicsx_drape simulation",
-                       "model": "quarter" if case.quarter else "full sheet"})
+                conditions={"friction_coefficient": friction})
     return Bundle(name=name or f"simulated-{test_id}", tests=(test,),
                   material="4x4 twill 3k carbon/epoxy (Table 2), simulated")
 
@@ -133,8 +136,11 @@ def form_hemisphere(out_dir: str | os.PathLike, case: HemisphereCase | None = No
     result = summary(run, kin)
     if comm.rank == 0:
         write_json(out / "summary.json", result)
-        write_bundle(forming_bundle(run, grid_mm), out / "bundle",
-                     comment="simulated by fenicsx_drape (drape form hemisphere)")
+        μ = float(np.max(model.parameters.get("mu", 0.0)))
+        write_bundle(forming_bundle(run, μ, grid_mm), out / "bundle",
+                     comment=f"simulated by fenicsx_drape (drape form hemisphere): "
+                             f"{'quarter' if case.quarter else 'full sheet'}, "
+                             f"cell {case.cell_mm:g} mm")
         if pictures:
             plot_shear(run.grid, out / "shear.png",
                        f"formed sheet, shear angle (max {result['max_shear_deg']:.1f}°)")

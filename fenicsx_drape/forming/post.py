@@ -185,6 +185,7 @@ class FormedGrid:
         i = np.arange(np.ceil(lo[0] / grid_mm - 1e-9), np.floor(hi[0] / grid_mm + 1e-9) + 1)
         j = np.arange(np.ceil(lo[1] / grid_mm - 1e-9), np.floor(hi[1] / grid_mm + 1e-9) + 1)
         ii, jj = (a.ravel() for a in np.meshgrid(i, j, indexing="ij"))
+        ii, jj = ii + 0.0, jj + 0.0  # no negative zeros in the table
         P = np.column_stack([ii, jj]) * grid_mm
         x = self.sample(P)
         table = {"i": ii, "j": jj, "x0_mm": P[:, 0], "y0_mm": P[:, 1],

@@ -19,20 +19,31 @@ the model: ``demos/study_stabilisation.py`` halves c and reports the change.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from fenicsx_drape.errors import ParameterError
 
 
 class ExtrapolationSpring:
-    """Spring of stiffness ``c`` (N/mm) per node to its extrapolated position (a NodalTerm)."""
+    """Spring of stiffness ``c`` (N/mm) per node to its extrapolated position (a NodalTerm).
 
-    def __init__(self, stiffness_N_per_mm: float, components: tuple[int, ...] = (0, 1, 2)) -> None:
+    Args:
+        stiffness_N_per_mm: The spring stiffness ``c``.
+        direction: Optional map ``(x̂, t) -> d`` of unit vectors (n, 3): the spring then acts
+            along ``d`` only (f = −c d (d·(x − x̂))), e.g. out of the sheet's plane. It is
+            evaluated at the extrapolated positions, so it is fixed within a step and the
+            force stays linear in ``x``. Default: all three directions.
+    """
+
+    def __init__(self, stiffness_N_per_mm: float,
+                 direction: Callable[[np.ndarray, float], np.ndarray] | None = None) -> None:
         if not (np.isfinite(stiffness_N_per_mm) and stiffness_N_per_mm >= 0.0):
             raise ParameterError(f"stabilisation stiffness {stiffness_N_per_mm} N/mm must be "
                                  ">= 0")
         self.c = float(stiffness_N_per_mm)
-        self.mask = np.isin(np.arange(3), components).astype(float)
+        self.direction = direction
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
         """Start from rest at the reference positions."""
@@ -50,8 +61,12 @@ class ExtrapolationSpring:
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Spring force (N) towards x̂ and its stiffness c I (N/mm)."""
         self._trial = (np.array(x, dtype=float), t)
-        f = -self.c * self.mask * (x - self.predicted(t))
-        return f, np.broadcast_to(self.c * np.diag(self.mask), (len(x), 3, 3))
+        x̂ = self.predicted(t)
+        if self.direction is None:
+            return -self.c * (x - x̂), np.broadcast_to(self.c * np.eye(3), (len(x), 3, 3))
+        d = self.direction(x̂, t)
+        f = -self.c * np.einsum("ni,ni->n", d, x - x̂)[:, None] * d
+        return f, self.c * np.einsum("ni,nj->nij", d, d)
 
     def commit(self) -> None:
         """The converged step becomes the last one of the extrapolation."""
