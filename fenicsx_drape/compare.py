@@ -520,7 +520,7 @@ def compare(bundle: Bundle, model: Model, *, fit: bool = True,
     if fit:
         from fenicsx_drape.fit import fit as fit_model
 
-        model = fit_model(bundle, model, progress=progress).model
+        model = fit_model(bundle, model, progress=progress, analyse=False).model
     return evaluate(bundle, model)
 
 
@@ -583,7 +583,8 @@ def plot_where(entries: Sequence[Mapping[str, Any]], path: Path, title: str = ""
     fig, ax = plt.subplots(figsize=(8, 0.4 * len(entries) + 1.2))
     labels = [f"{e['test']}: {e['says']}  [{e['range'][0]:.3g}, {e['range'][1]:.3g}]"
               if e["variable"] not in e["says"] else e["says"] for e in entries]
-    ax.barh(range(len(entries)), [100 * e["share_of_error"] for e in entries], color="C3")
+    ax.barh(range(len(entries)), [100 * e["share_of_error"] for e in entries], color="C3",
+            label="share of the error")
     ax.barh(range(len(entries)), [100 * e["share_of_rows"] for e in entries], height=0.25,
             color="0.3", label="share of the rows")
     ax.set_yticks(range(len(entries)), labels, fontsize=8)

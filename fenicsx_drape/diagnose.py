@@ -567,7 +567,7 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     ``out_dir`` gets ``candidates.png`` (each candidate's fitted and held-out error),
     ``where.png`` (the baseline's error by region) and, given the ``bundle`` and a
     :class:`Report`, ``residual_<test>.png`` (the baseline and the best candidate against
-    each test), plus ``report.json`` and ``provenance.json``.
+    each test), plus ``provenance.json``.
     """
     from fenicsx_drape.compare import locate, plot_residuals, plot_where, safe_name
     from fenicsx_drape.provenance import write_json, write_provenance
@@ -588,8 +588,8 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
             shown = {"baseline": base} | ({best: comparisons[best][i]} if best else {})
             plot_residuals(shown, tests[base.id], out / f"residual_{safe_name(base.id)}.png",
                            [e for e in regions if e["tests"] == [base.id]])
-    write_json(out / "report.json", report)
-    write_provenance(out, bundle=report["bundle"], effects=report["baseline"]["effects"],
+    write_provenance(out, bundle=report["bundle"], report=str(Path(json_path).resolve()),
+                     effects=report["baseline"]["effects"],
                      parameters=report["baseline"]["parameters"],
                      missing_effect=report["missing_effect"], seed=None)
     return path

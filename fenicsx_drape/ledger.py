@@ -128,23 +128,25 @@ def table(history: Sequence[Version]) -> str:
 def plot(history: Sequence[Version], path: str | Path) -> Path:
     """``history.png``: normalised error version by version, the noise floor at 1."""
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import LogFormatter
 
     from fenicsx_drape.provenance import save_figure
 
     fig, ax = plt.subplots(figsize=(max(6.0, 1.3 * len(history)), 4.5))
     errors = [v.entry["normalised"] for v in history]
-    ax.plot(range(len(history)), errors, "-", color="0.6", lw=1)
     bundles = list(dict.fromkeys(v.entry["bundle"] for v in history))
     for i, name in enumerate(bundles):
         points = [(k, v.entry["normalised"]) for k, v in enumerate(history)
                   if v.entry["bundle"] == name]
-        ax.plot(*zip(*points), "o", color=f"C{i}", label=f"bundle {name}")
+        ax.plot(*zip(*points), "o-", color=f"C{i}", label=f"bundle {name}")
     for k, error in enumerate(errors):
         ax.annotate(f"{error:.2f}", (k, error), textcoords="offset points", xytext=(0, 7),
                     ha="center", fontsize=8)
     ax.axhline(1.0, color="k", ls="--", lw=1, label="noise floor")
     ax.axhline(1.5, color="0.5", ls=":", lw=1, label="adequate (1.5 × noise)")
     ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(LogFormatter(labelOnlyBase=False))
+    ax.yaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
     ax.set_xticks(range(len(history)),
                   [f"{v.label}\n{v.change}".replace(", ", "\n") for v in history], fontsize=7)
     ax.set_ylabel("normalised error (RMSE / noise)")

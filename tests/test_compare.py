@@ -1,19 +1,26 @@
 """compare: noise floor, errors, regions and their shares of the error."""
 
+import dataclasses
+import json
+
 import numpy as np
 import pytest
 
+from fenicsx_drape.cli import main
 from fenicsx_drape.compare import (
     Comparison,
     Region,
     _knees,
     _loading_phases,
+    evaluate,
     locate,
     normalised_error,
     trends,
     where,
 )
+from fenicsx_drape.model import Model, default_parameters, load_model
 from fenicsx_drape.noise import noise_from_sd, noise_from_second_differences
+from fenicsx_drape.synthetic import bias_test, synthetic_bundle, tensile_test
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
@@ -106,3 +113,47 @@ def test_trend_says_the_error_grows_with_speed():
     flat = [_comparison(f"bias-{v}", rng.normal(0, 1.0, 80), 1.0, [],
                         {"speed_mm_per_min": float(v)}) for v in (10, 40, 160)]
     assert trends(flat)[0]["says"] == ""
+
+
+def test_compare_command_writes_every_output(tmp_path, capsys):
+    model = Model(("rate_dependence", "strain_dependent_viscosity", "decrimping",
+                   "tow_buckling"), default_parameters())
+    tests = [tensile_test("tensile", n_rows=40), bias_test("bias-10", 10.0, n_rows=50),
+             bias_test("bias-160", 160.0, n_rows=50)]
+    synthetic_bundle(model, tests, noise_rel=0.02, seed=3, out_dir=tmp_path / "bundle")
+    (tmp_path / "model.toml").write_text(model.to_toml())
+    out = tmp_path / "out"
+    assert main(["compare", str(tmp_path / "bundle"), "--model", str(tmp_path / "model.toml"),
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "normalised error" in printed and "where the error sits" in printed
+    record = json.loads((out / "compare.json").read_text())
+    assert set(record["per_test"]) == {"tensile", "bias-10", "bias-160"}
+    for entry in record["per_test"].values():
+        assert entry["noise_source"] == "force_sd_N" and entry["unit"] == "N"
+        assert entry["normalised"] == pytest.approx(entry["rmse"] / entry["noise"])
+    # The model made the data: after the fit it sits at the noise floor.
+    assert record["error"]["normalised"] < 1.3
+    assert record["model"]["effects"] == list(model.effects)
+    assert sum(e["share_of_error"] for e in record["regions"]
+               if e["variable"] in ("tow_strain", "diagonal_strain")) == pytest.approx(1.0)
+    for name in ("residual_tensile.png", "residual_bias-10.png", "where.png"):
+        assert (out / name).stat().st_size > 1000
+    assert load_model(out / "model.toml").effects == model.effects
+    assert json.loads((out / "provenance.json").read_text())["effects"] == list(model.effects)
+    (entry,) = [json.loads(line) for line in (out / "ledger.jsonl").read_text().splitlines()]
+    assert entry["normalised"] == pytest.approx(record["error"]["normalised"])
+
+
+def test_compare_without_sd_uses_the_model_free_noise(tmp_path):
+    model = Model(("decrimping",), default_parameters())
+    bundle = synthetic_bundle(model, [tensile_test("tensile", n_rows=120)], noise_sd_N=5.0,
+                              seed=4)
+    (test,) = bundle.tests
+    columns = {k: v for k, v in test.columns.items() if k != "force_sd_N"}
+    bundle = dataclasses.replace(bundle, tests=(dataclasses.replace(test, columns=columns),))
+    result = evaluate(bundle, model)
+    (c,) = result.tests
+    assert c.noise_source == "second_differences"
+    assert c.noise == pytest.approx(5.0, rel=0.2)
+    assert result.to_dict()["noise_floor"]["source"] == "second_differences"

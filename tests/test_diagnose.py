@@ -135,3 +135,21 @@ def test_diagnose_command_bad_input_exits_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "m.toml:1" in err and "no_such_effect" in err
     assert not (tmp_path / "r.json").exists()
+
+
+def test_diagnose_command_writes_the_report(tmp_path, capsys):
+    model = Model((*COUPON, "holder_friction"), default_parameters())
+    tests = [tensile_test("tensile", n_rows=30), bias_test("bias-40", 40.0, n_rows=40)]
+    synthetic_bundle(model, tests, noise_rel=0.02, seed=2, out_dir=tmp_path / "b")
+    (tmp_path / "m.toml").write_text(model.to_toml())
+    report_path, out = tmp_path / "REPORT.json", tmp_path / "out"
+    assert main(["diagnose", str(tmp_path / "b"), "--model", str(tmp_path / "m.toml"),
+                 "--json", str(report_path), "--out", str(out), "--quiet"]) == 0
+    report = json.loads(report_path.read_text())
+    assert set(report) >= CONTRACT_FIELDS and report["missing_effect"] is None
+    assert "leave-every-third-row-out" in report["heldout_scheme"]
+    # One bias speed and one temperature: neither rate nor temperature can be judged.
+    assert "temperature_dependence" in {u["effect"] for u in report["untestable"]}
+    assert (out / "candidates.png").is_file() and (out / "where.png").is_file()
+    assert (out / "residual_bias-40.png").is_file() and (out / "provenance.json").is_file()
+    assert "missing_effect: None" in capsys.readouterr().out
