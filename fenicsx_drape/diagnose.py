@@ -15,9 +15,9 @@ The procedure follows the diagnosis contract of ``shared/spec/measurements.md``:
    exercise the effect: it is reported with the reason and not ranked.
 4. **Refit.** A testable candidate is refitted, warm-started from the baseline's fit, over its
    own parameters and those of the law it acts on, from the best (in one vectorised
-   evaluation) of three starts: the effect at its default strength, its own parameters at
-   zero where they may be (for most effects the baseline itself), and the curve-feature
-   guess. ``error_after`` is the refit's error.
+   evaluation) of three starts: the effect at its default strength, the effect weak (its own
+   parameters that may vanish at 1 % of their defaults: for most effects nearly the
+   baseline), and the curve-feature guess. ``error_after`` is the refit's error.
 5. **Held-out error.** Baseline and candidates are judged on rows their fit did not see. The
    scheme (stated in the report): for a test kind with several tests, *leave one test out*
    (fit on all other tests, predict the one left out: an unseen speed or temperature); for a
@@ -69,15 +69,16 @@ if TYPE_CHECKING:
     from fenicsx_drape.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
-CONTRACT = 2
-EVIDENCE_THRESHOLD = 1.2
-ADEQUATE = 1.5
-UNTESTABLE_BELOW = 0.3
-PARSIMONY = 0.05
+CONTRACT = 2  # version of the diagnosis contract the report follows
+EVIDENCE_THRESHOLD = 1.2  # significant: evidence at least this (fixed for every bundle)
+ADEQUATE = 1.5  # a model within this many times the noise floor explains the data
+UNTESTABLE_BELOW = 0.3  # an effect changing the tests by less (× noise) is untestable
+PARSIMONY = 0.05  # candidates this close to the best held-out error count as ties
 BLOCKS = 3  # interleaved folds of a kind with a single test
-BASELINE_ITERATIONS = 100
+BASELINE_ITERATIONS = 100  # iteration caps of the fits: baseline, candidates, folds
 REFIT_ITERATIONS = 40
 FOLD_ITERATIONS = 8
+WEAK = 0.01  # a candidate's weak start: its own vanishing parameters at 1 % of default
 
 SIGNIFICANCE_RULE = (f"significant when evidence (baseline held-out normalised error / "
                      f"candidate held-out normalised error) >= {EVIDENCE_THRESHOLD}")
@@ -132,12 +133,11 @@ def _prepare(bundle: Bundle) -> _Data:
     canonical = dataclasses.replace(bundle, tests=tests)
     noise = {t.id: KINDS[t.kind].noise(t) for t in tests}
     regions = {t.id: KINDS[t.kind].regions(t) for t in tests}
-    folds, scheme = make_folds(canonical, noise)
+    folds, scheme = make_folds(canonical)
     return _Data(canonical, tests, noise, regions, folds, scheme, tuple(skipped))
 
 
-def make_folds(bundle: Bundle, noise: dict[str, tuple[float, str]] | None = None
-               ) -> tuple[tuple[Fold, ...], str]:
+def make_folds(bundle: Bundle) -> tuple[tuple[Fold, ...], str]:
     """The held-out folds of a bundle and the description of the scheme (module doc, 5.)."""
     by_kind: dict[str, list[Test]] = {}
     for test in bundle.tests:
@@ -155,10 +155,9 @@ def make_folds(bundle: Bundle, noise: dict[str, tuple[float, str]] | None = None
         (test,) = tests
         parts.append(f"leave-every-{_ordinal(BLOCKS)}-row-out ({BLOCKS} interleaved folds) "
                      f"for the single {kind} test {test.id!r}")
-        level = noise[test.id][0] if noise else None
         for b in range(BLOCKS):
             mask = np.arange(test.n_rows) % BLOCKS == b
-            held = _without_rows(test, mask, level)
+            held = _without_rows(test, mask)
             tests_b = tuple(held if t.id == test.id else t for t in bundle.tests)
             folds.append(Fold(f"{test.id} rows {b + 1}::{BLOCKS}",
                               dataclasses.replace(bundle, tests=tests_b), (test.id,), test.id,
@@ -174,15 +173,17 @@ def _ordinal(n: int) -> str:
     return {2: "second", 3: "third", 4: "fourth", 5: "fifth"}.get(n, f"{n}th")
 
 
-def _without_rows(test: Test, rows: np.ndarray, noise: float | None) -> Test:
-    """``test`` with the given rows at infinite standard deviation (no weight in a fit)."""
+def _without_rows(test: Test, rows: np.ndarray) -> Test:
+    """``test`` with the given rows at infinite standard deviation (no weight in a fit).
+
+    The other rows keep their ``force_sd_N``, or get the test's model-free noise estimate,
+    so that they weigh in the fit exactly as they do without a ``force_sd_N`` column.
+    """
+    from fenicsx_drape.compare import KINDS
+
     sd = test.force_sd_N
     if sd is None:
-        if noise is None:
-            from fenicsx_drape.compare import KINDS
-
-            noise = KINDS[test.kind].noise(test)[0]
-        sd = np.full(test.n_rows, noise)
+        sd = np.full(test.n_rows, KINDS[test.kind].noise(test)[0])
     columns = dict(test.columns)
     columns["force_sd_N"] = np.where(rows, np.inf, sd)
     return dataclasses.replace(test, columns=columns)
@@ -232,15 +233,17 @@ def _costs(data: _Data, model: Model) -> np.ndarray:
 def _best_start(data: _Data, model: Model, own: Sequence[str], names: Sequence[str]) -> Model:
     """The best of three starts for a candidate's refit, judged in one vectorised call.
 
-    The starts: the candidate's parameters at their defaults (its default strength); its own
-    parameters that may be zero at zero (for most effects, the baseline itself: no coupling,
-    no Arrhenius factor, constant viscosity); the curve-feature guess of section 3.2.
+    The starts: the candidate at its default strength; the candidate weak, its own
+    parameters that may vanish at 1 % of their defaults (for most effects nearly the
+    baseline, while the fit still feels them: exactly zero can leave it no gradient, e.g.
+    a Maxwell branch without spring); the curve-feature guess of section 3.2.
     """
     from fenicsx_drape.fit import initial_guess
     from fenicsx_drape.model import parameter_info
 
-    off = {n: 0.0 for n in own if parameter_info(n).bounds[0] == 0.0}
-    starts = [model, model.with_parameters(**off)]
+    weak = {n: WEAK * float(model.parameters[n]) for n in own
+            if parameter_info(n).bounds[0] == 0.0}
+    starts = [model, model.with_parameters(**weak)]
     try:
         starts.append(initial_guess(model, data.tests, names))
     except (ValueError, FloatingPointError, ArithmeticError):
@@ -501,6 +504,12 @@ def _conclusion(missing, best, base: list[Comparison], pattern: str) -> str:
     if normalised <= ADEQUATE:
         return (f"No effect is missing: the model is at {normalised:.3g} × the noise "
                 f"(adequate at ≤ {ADEQUATE}).")
+    if best and best["significant"]:
+        return (f"No single candidate brings the error ({normalised:.3g} × the noise) to the "
+                f"noise floor: the best, {best['effect']}, is a real gain (evidence "
+                f"{best['evidence']:.3g}) but reaches only "
+                f"{best['error_after']['normalised']:.3g} × noise. More than one effect may be "
+                f"missing: add it and diagnose again.")
     closest = (f" The closest candidate, {best['effect']}, reaches "
                f"{best['error_after']['normalised']:.3g} × noise (evidence "
                f"{best['evidence']:.3g}).") if best else ""
