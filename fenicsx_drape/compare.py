@@ -34,7 +34,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.noise import noise_from_sd, noise_from_second_differences
 
 if TYPE_CHECKING:
     from fenicsx_drape.bundle import Bundle, Test
@@ -81,16 +80,10 @@ def register_kind(name: str, kind: Kind) -> None:
 
 
 def _coupon_noise(test: Test) -> tuple[float, str]:
-    if test.force_sd_N is not None:
-        return noise_from_sd(test.force_sd_N), "force_sd_N"
-    try:
-        noise = noise_from_second_differences(test.time_s, test.force_N)
-    except ValueError as err:
-        raise DrapeInputError(f"test {test.id!r}: {err}; give a force_sd_N column") from None
-    if noise <= 0:
-        raise DrapeInputError(f"test {test.id!r}: the force has no detectable noise to set a "
-                              "noise floor; give a force_sd_N column")
-    return noise, "second_differences"
+    from fenicsx_drape.fit import test_noise
+
+    _, noise, source = test_noise(test)  # the same noise the fit weighs the rows with
+    return noise, source
 
 
 def _coupon_simulate(test: Test, model: Model) -> np.ndarray:
@@ -322,29 +315,48 @@ def _contributions(comparisons: Sequence[Comparison]) -> dict[str, np.ndarray]:
 
 
 def locate(comparisons: Sequence[Comparison]) -> list[dict[str, Any]]:
-    """Every region of every test, and every condition group, with its share of the error.
+    """Every region with its share of the error, largest first.
 
-    Sorted by share, largest first. Each entry: ``test`` (id, or ids joined by ", " for a
-    condition group), ``tests``, ``variable``, ``range``, ``share_of_error``,
-    ``share_of_rows`` (of the rows it covers, within its test or tests) and ``says``.
+    The regions: each region of each test; each strain range or phase summed over the tests
+    of a kind (when several tests have it); each value of a condition that varies across the
+    tests of a kind. Each entry: ``test`` (an id, or ids joined by ", "), ``tests``, ``kind``,
+    ``variable``, ``range``, ``share_of_error``, ``share_of_rows`` (of the rows of its
+    test(s), or of its kind for a condition), ``says`` and, for strain ranges and phases,
+    ``region`` (its name).
     """
     parts = _contributions(comparisons)
     total = sum(float(p.sum()) for p in parts.values()) or 1.0
     entries: list[dict[str, Any]] = []
+    summed: dict[tuple[str, str, str], list[tuple[Comparison, Region]]] = {}
     for c in comparisons:
         for region in c.regions:
             entries.append({
-                "test": c.id, "tests": [c.id], "variable": region.variable,
+                "test": c.id, "tests": [c.id], "kind": c.kind, "variable": region.variable,
                 "range": [round(region.range[0], 6), round(region.range[1], 6)],
                 "share_of_error": float(parts[c.id][region.rows].sum()) / total,
                 "share_of_rows": float(region.rows.mean()), "says": region.says,
+                "region": region.says,
             })
+            summed.setdefault((c.kind, region.variable, region.says), []).append((c, region))
+    for (kind, variable, says), members in summed.items():
+        if len(members) < 2:
+            continue
+        ids = [c.id for c, _ in members]
+        entries.append({
+            "test": ", ".join(ids), "tests": ids, "kind": kind, "variable": variable,
+            "range": [round(min(r.range[0] for _, r in members), 6),
+                      round(max(r.range[1] for _, r in members), 6)],
+            "share_of_error": sum(float(parts[c.id][r.rows].sum()) for c, r in members) / total,
+            "share_of_rows": sum(int(r.rows.sum()) for _, r in members)
+            / sum(c.residual.size for c, _ in members),
+            "says": f"{says}, all {kind.replace('_', ' ')} tests", "region": says,
+        })
     for kind, variable, groups in _condition_groups(comparisons):
         rows_total = sum(c.residual.size for group in groups.values() for c in group)
         for value, group in sorted(groups.items()):
             ids = [c.id for c in group]
             entries.append({
-                "test": ", ".join(ids), "tests": ids, "variable": variable,
+                "test": ", ".join(ids), "tests": ids, "kind": kind, "variable": variable,
                 "range": [value, value],
                 "share_of_error": sum(float(parts[i].sum()) for i in ids) / total,
                 "share_of_rows": sum(c.residual.size for c in group) / rows_total,
@@ -581,8 +593,9 @@ def plot_where(entries: Sequence[Mapping[str, Any]], path: Path, title: str = ""
 
     entries = list(entries)[::-1]
     fig, ax = plt.subplots(figsize=(8, 0.4 * len(entries) + 1.2))
-    labels = [f"{e['test']}: {e['says']}  [{e['range'][0]:.3g}, {e['range'][1]:.3g}]"
-              if e["variable"] not in e["says"] else e["says"] for e in entries]
+    labels = [e["says"] if e["variable"] in e["says"] else
+              f"{e['says'] if len(e['tests']) > 1 else e['test'] + ': ' + e['says']}  "
+              f"[{e['range'][0]:.3g}, {e['range'][1]:.3g}]" for e in entries]
     ax.barh(range(len(entries)), [100 * e["share_of_error"] for e in entries], color="C3",
             label="share of the error")
     ax.barh(range(len(entries)), [100 * e["share_of_rows"] for e in entries], height=0.25,

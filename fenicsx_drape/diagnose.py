@@ -453,18 +453,14 @@ def _pattern(base: list[Comparison]) -> str:
     for trend in trends(base):
         if trend["says"]:
             return trend["says"]
-    kinds = {c.id: c.kind for c in base}
-    conditions = {name for c in base for name in c.conditions}
-    shares: dict[tuple[str, str], float] = {}
-    for entry in locate(base):
-        if entry["variable"] not in conditions:
-            key = (kinds[entry["test"]], entry["says"])
-            shares[key] = shares.get(key, 0.0) + entry["share_of_error"]
-    if not shares:
+    regions = [e for e in locate(base) if "region" in e]
+    if not regions:
         return f"the residual is {normalised:.3g} × the noise"
-    kind, says = max(shares, key=shares.get)
-    return (f"{100 * shares[kind, says]:.0f} % of the residual sits in the {says} region of "
-            f"the {kind.replace('_', ' ')} tests")
+    top = max(regions, key=lambda e: e["share_of_error"])  # a kind's sum beats its parts
+    tests = (f"the {top['kind'].replace('_', ' ')} tests" if len(top["tests"]) > 1
+             else f"test {top['test']}")
+    return (f"{100 * top['share_of_error']:.0f} % of the residual sits in the {top['region']} "
+            f"region of {tests}")
 
 
 def _addition(c: dict[str, Any]) -> str:

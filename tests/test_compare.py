@@ -102,6 +102,22 @@ def test_normalised_error_and_shares_follow_the_contract():
     assert all(e["share_of_error"] >= 0.05 for e in where([c1, c2]))
 
 
+def test_regions_of_a_kind_are_summed_over_its_tests():
+    rng = np.random.default_rng(3)
+    low = np.arange(60) < 20
+    comps = [_comparison(i, rng.normal(0, 1, 60), 1.0,
+                         [Region("diagonal_strain", (0.0, 0.1), "plateau", low),
+                          Region("diagonal_strain", (0.1, 0.4 + k), "lock-up", ~low)])
+             for k, i in enumerate(("a", "b"))]
+    entries = locate(comps)
+    (summed,) = [e for e in entries if e["tests"] == ["a", "b"] and e["region"] == "lock-up"]
+    parts = [e["share_of_error"] for e in entries
+             if len(e["tests"]) == 1 and e["region"] == "lock-up"]
+    assert summed["share_of_error"] == pytest.approx(sum(parts))
+    assert summed["range"] == [0.1, 1.4] and summed["share_of_rows"] == pytest.approx(2 / 3)
+    assert summed["says"] == "lock-up, all bias extension tests"
+
+
 def test_trend_says_the_error_grows_with_speed():
     rng = np.random.default_rng(2)
     comps = [_comparison(f"bias-{v}", rng.normal(0, s, 80), 1.0, [],
