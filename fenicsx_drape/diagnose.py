@@ -332,7 +332,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None) 
     base_ho = normalised_error(data.compare(_heldout(data, baseline, say)))
     say(f"  held-out normalised error {base_ho:.3g}")
 
-    candidates, untestable = [], []
+    tried, untestable = [], []
     base_active = set(baseline.active_parameters())
     for name in candidate_names(model):
         effect = describe_effect(name)
@@ -364,7 +364,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None) 
         heldout = normalised_error(data.compare(_heldout(data, refit, say)))
         evidence = base_ho / heldout if heldout > 0 else math.inf
         say(f"  held-out normalised error {heldout:.3g}, evidence {evidence:.3g}")
-        candidates.append({
+        tried.append({
             "effect": label, "effects": list(added), "acts_on": effect.acts_on,
             "summary": effect.summary,
             "parameters": {p: float(refit.parameters[p]) for p in own},
@@ -373,7 +373,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None) 
             "sensitivity": change, "where_after": where(after)[:3],
             "_n_parameters": len(own), "_after": after, "_model": refit,
         })
-    ranked = rank(candidates)
+    ranked = rank(tried)
     best = ranked[0] if ranked else None
     missing = None
     if best and best["significant"] and best["error_after"]["normalised"] <= ADEQUATE:
