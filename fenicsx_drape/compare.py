@@ -65,6 +65,10 @@ class Kind:
     simulate: Callable[[Test, Model], np.ndarray]  # the model's values, one per row
     regions: Callable[[Test], list[Region]]  # physically meaningful regions of the rows
     abscissa: Callable[[Test], tuple[str, np.ndarray]]  # (name, values) to plot against
+    # Optional: the kind's own measures of a comparison (test, simulated values, model) and
+    # its own picture (as :func:`plot_residuals`).
+    metrics: Callable[[Test, np.ndarray, Model], dict[str, Any]] | None = None
+    plot: Callable[..., Path] | None = None
 
 
 KINDS: dict[str, Kind] = {}
@@ -446,6 +450,7 @@ class CompareResult:
     model: Model  # the model compared (fitted when ``compare`` fitted it)
     tests: tuple[Comparison, ...]
     skipped: tuple[str, ...] = ()  # tests left out, with the reason
+    metrics: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
 
     @property
     def normalised(self) -> float:
@@ -471,7 +476,8 @@ class CompareResult:
             "per_test": {c.id: {"kind": c.kind, "unit": c.unit, "rmse": c.rmse,
                                 "mean_abs": c.mean_abs, "percent": c.percent,
                                 "noise": c.noise, "noise_source": c.noise_source,
-                                "normalised": c.normalised, "rows": int(c.measured.size)}
+                                "normalised": c.normalised, "rows": int(c.measured.size),
+                                **self.metrics.get(c.id, {})}
                          for c in self.tests},
             "where": self.where(),
             "regions": locate(self.tests),
@@ -504,6 +510,14 @@ def noise_record(comparisons: Sequence[Comparison]) -> dict[str, Any]:
             "sources": {c.id: c.noise_source for c in comparisons}}
 
 
+def kind_metrics(tests: Iterable[Test], comparisons: Sequence[Comparison],
+                 model: Model) -> dict[str, dict[str, Any]]:
+    """The kinds' own measures (e.g. forming: mean distance), by test id, where defined."""
+    by_id = {c.id: c for c in comparisons}
+    return {t.id: KINDS[t.kind].metrics(t, by_id[t.id].simulated, model) for t in tests
+            if KINDS[t.kind].metrics is not None and t.id in by_id}
+
+
 def simulate(tests: Iterable[Test], model: Model) -> dict[str, np.ndarray]:
     """The model's values for each test (N per row for coupons), by test id."""
     return {test.id: KINDS[test.kind].simulate(test, model) for test in tests}
@@ -512,8 +526,9 @@ def simulate(tests: Iterable[Test], model: Model) -> dict[str, np.ndarray]:
 def evaluate(bundle: Bundle, model: Model) -> CompareResult:
     """Compare ``model`` as it is (no fit) with the comparable tests of ``bundle``."""
     tests, skipped = prepare(bundle)
-    return CompareResult(bundle.name, model, tuple(compare_tests(tests, simulate(tests, model))),
-                         tuple(skipped))
+    comparisons = compare_tests(tests, simulate(tests, model))
+    return CompareResult(bundle.name, model, tuple(comparisons), tuple(skipped),
+                         kind_metrics(tests, comparisons, model))
 
 
 def compare(bundle: Bundle, model: Model, *, fit: bool = True,
@@ -523,16 +538,17 @@ def compare(bundle: Bundle, model: Model, *, fit: bool = True,
     Args:
         bundle: The measurements.
         model: The model (effects and starting parameters).
-        fit: Fit the model's parameters first (:func:`fenicsx_drape.fit.fit`).
+        fit: Fit the model's parameters first (coupons: :func:`fenicsx_drape.fit.fit`, then
+            forming: :func:`fenicsx_drape.forming_compare.fit_bundle`).
         progress: Called with a line of text as the fit proceeds.
 
     Returns:
         How far the model is from each test and where it fails.
     """
     if fit:
-        from fenicsx_drape.fit import fit as fit_model
+        from fenicsx_drape.forming_compare import fit_bundle
 
-        model = fit_model(bundle, model, progress=progress, analyse=False).model
+        model = fit_bundle(bundle, model, progress=progress)
     return evaluate(bundle, model)
 
 
@@ -627,8 +643,9 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
     tests = {t.id: t for t in bundle.tests}
     regions = record["regions"]
     for c in result.tests:
-        plot_residuals({"model": c}, tests[c.id], out / f"residual_{safe_name(c.id)}.png",
-                       [e for e in regions if e["tests"] == [c.id]])
+        plot = KINDS[c.kind].plot or plot_residuals
+        plot({"model": c}, tests[c.id], out / f"residual_{safe_name(c.id)}.png",
+             [e for e in regions if e["tests"] == [c.id]])
     plot_where(record["where"], out / "where.png",
                f"{result.bundle}: normalised error {result.normalised:.2f}")
     ledger.record(out, result, bundle=bundle, model_path=model_path)
@@ -637,3 +654,7 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
                      effects=list(result.model.effects),
                      parameters=record["model"]["parameters"], seed=None)
     return path
+
+
+# Forming tests register their kind (after this module's names exist: it imports them).
+import fenicsx_drape.forming_compare  # noqa: E402, F401

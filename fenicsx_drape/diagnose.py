@@ -181,11 +181,12 @@ def _without_rows(test: Test, rows: np.ndarray) -> Test:
     """
     from fenicsx_drape.compare import KINDS
 
-    sd = test.force_sd_N
+    column = "position_sd_mm" if test.kind == "forming" else "force_sd_N"
+    sd = test.column(column)
     if sd is None:
         sd = np.full(test.n_rows, KINDS[test.kind].noise(test)[0])
     columns = dict(test.columns)
-    columns["force_sd_N"] = np.where(rows, np.inf, sd)
+    columns[column] = np.where(rows, np.inf, sd)
     return dataclasses.replace(test, columns=columns)
 
 
@@ -196,16 +197,17 @@ def _without_rows(test: Test, rows: np.ndarray) -> Test:
 def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
          parameters: Sequence[str] | None = None, max_iterations: int,
          from_features: bool = False) -> Model:
-    from fenicsx_drape.fit import fit
+    from fenicsx_drape.forming_compare import fit_bundle
 
-    return fit(bundle, model, tests=tests, parameters=parameters,
-               initial_guess_from_features=from_features, max_iterations=max_iterations,
-               analyse=False).model
+    return fit_bundle(bundle, model, tests=tests, parameters=parameters,
+                      from_features=from_features, max_iterations=max_iterations)
 
 
 def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
     """Every row predicted by the fold that held it out (module doc, 5.)."""
-    predicted = {t.id: np.full(t.n_rows, np.nan) for t in data.tests}
+    from fenicsx_drape.compare import KINDS
+
+    predicted = {t.id: np.full(np.shape(KINDS[t.kind].measured(t)), np.nan) for t in data.tests}
     tests = {t.id: t for t in data.tests}
     for i, fold in enumerate(data.folds):
         say(f"    held-out fold {i + 1}/{len(data.folds)}: {fold.label}")
@@ -214,7 +216,8 @@ def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
                       parameters=_kind_parameters(model, test.kind),
                       max_iterations=FOLD_ITERATIONS)
         values = simulate([test], fitted)[test.id]
-        predicted[test.id][fold.rows] = values[fold.rows]
+        rows = np.repeat(fold.rows, values.size // fold.rows.size)  # forming: x, y, z per row
+        predicted[test.id][rows] = values[rows]
     return predicted
 
 
@@ -307,19 +310,22 @@ def _refit_parameters(model: Model, name: str) -> tuple[str, ...]:
 # Diagnosis
 
 
-def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None) -> Report:
+def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
+             candidates: Sequence[str] | None = None) -> Report:
     """Find which effect ``model`` misses to explain ``bundle`` (the module doc's procedure).
 
     Args:
         bundle: The measurements.
         model: The current model (effects, plugins, starting parameters).
         progress: Called with a line of text at each stage.
+        candidates: Only try these effects (default: every one not in the model).
 
     Returns:
         The report: a dict with every field of the diagnosis contract (version 2) plus
         ``add_effects`` (the effects to add), ``heldout_scheme``, ``significance``,
         ``ranking``, ``trends``, ``conclusion``, ``notes`` and ``seconds``.
     """
+    from fenicsx_drape.compare import KINDS, kind_metrics
     from fenicsx_drape.effects import describe_effect
 
     start = time.perf_counter()
@@ -335,6 +341,8 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None) 
     tried, untestable = [], []
     base_active = set(baseline.active_parameters())
     for name in candidate_names(model):
+        if candidates is not None and name not in candidates:
+            continue
         effect = describe_effect(name)
         prerequisites = tuple(p for p in effect.prerequisites if p not in model.effects)
         added = (*prerequisites, name)
@@ -403,6 +411,9 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None) 
         "missing_rule": (f"the first candidate if significant and its refit reaches "
                          f"normalised <= {ADEQUATE}"),
         "conclusion": _conclusion(missing, best, base, pattern),
+        "metrics": {label: kind_metrics(data.tests, comparisons[label], models[label])
+                    for label in models} if any(KINDS[t.kind].metrics for t in data.tests)
+        else {},
         "notes": list(data.notes),
         "seconds": time.perf_counter() - start,
     })
@@ -574,7 +585,7 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     :class:`Report`, ``residual_<test>.png`` (the baseline and the best candidate against
     each test), plus ``provenance.json``.
     """
-    from fenicsx_drape.compare import locate, plot_residuals, plot_where, safe_name
+    from fenicsx_drape.compare import KINDS, locate, plot_residuals, plot_where, safe_name
     from fenicsx_drape.provenance import write_json, write_provenance
 
     path = write_json(json_path, report)
@@ -591,8 +602,9 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
         regions = locate(comparisons["baseline"])
         for i, base in enumerate(comparisons["baseline"]):
             shown = {"baseline": base} | ({best: comparisons[best][i]} if best else {})
-            plot_residuals(shown, tests[base.id], out / f"residual_{safe_name(base.id)}.png",
-                           [e for e in regions if e["tests"] == [base.id]])
+            plot = KINDS[base.kind].plot or plot_residuals
+            plot(shown, tests[base.id], out / f"residual_{safe_name(base.id)}.png",
+                 [e for e in regions if e["tests"] == [base.id]])
     write_provenance(out, bundle=report["bundle"], report=str(Path(json_path).resolve()),
                      effects=report["baseline"]["effects"],
                      parameters=report["baseline"]["parameters"],
