@@ -473,6 +473,34 @@ def synthetic_forming_test(model: Model, *, test_id: str = "hemisphere",
                 geometry="hemisphere", forming=setup)
 
 
+def confirm(bundle: Bundle, report, cell_mm: float = FULL_CELL_MM,
+            progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """The screening's baseline and best candidate again on the full mesh (module doc, cost).
+
+    Each model of a diagnosis :class:`~fenicsx_drape.diagnose.Report` keeps its material;
+    its forming parameters are refitted on cells of ``cell_mm`` and it is compared with the
+    forming tests there.
+
+    Returns:
+        ``{"cell_mm", label: {"error", "metrics", "forming_parameters"}}`` for the baseline
+        and the first-ranked candidate.
+    """
+    from fenicsx_drape.compare import compare_tests, error_record
+
+    tests = [t for t in bundle.tests if t.kind == "forming"]
+    labels = ["baseline"] + [c["effect"] for c in report["candidates"][:1]]
+    out: dict[str, Any] = {"cell_mm": cell_mm}
+    with resolution(cell_mm):
+        for label in labels:
+            model = fit_forming(bundle, report.models[label], progress=progress)
+            values = {t.id: simulate(t, model) for t in tests}
+            out[label] = {"error": error_record(compare_tests(tests, values)),
+                          "metrics": {t.id: metrics(t, values[t.id], model) for t in tests},
+                          "forming_parameters": {n: float(model.parameters[n])
+                                                 for n in forming_parameters(model)}}
+    return out
+
+
 # --------------------------------------------------------------------------------------------
 # Pictures
 
