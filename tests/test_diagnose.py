@@ -29,6 +29,7 @@ CONTRACT_FIELDS = {"contract", "baseline", "noise_floor", "where", "candidates",
 CANDIDATE_FIELDS = {"effect", "error_after", "heldout_normalised", "evidence", "significant",
                     "explanation"}
 WHERE_FIELDS = {"test", "variable", "range", "share_of_error", "says"}
+ERROR_FIELDS = {"rmse_N", "normalised", "per_test"}
 
 
 def small_tests(speeds=(10.0, 40.0, 160.0)):
@@ -101,6 +102,10 @@ def test_null_bundle_gives_no_missing_effect(null_case):
     _, _, report = null_case
     assert set(report) >= CONTRACT_FIELDS
     assert report["contract"] == 2
+    assert set(report["baseline"]) >= {"effects", "error"}
+    assert set(report["baseline"]["error"]) >= ERROR_FIELDS
+    assert set(report["noise_floor"]) >= {"rmse_N", "per_test", "source"}
+    assert all(set(u) >= {"effect", "reason"} for u in report["untestable"])
     assert report["missing_effect"] is None
     assert report["baseline"]["error"]["normalised"] < 1.2
     assert not any(c["significant"] for c in report["candidates"])
@@ -110,7 +115,7 @@ def test_null_bundle_gives_no_missing_effect(null_case):
     assert {"holder_friction", "tool_friction", "tow_buckling"} <= untestable
     assert untestable.isdisjoint(c["effect"] for c in report["candidates"])
     for c in report["candidates"]:
-        assert set(c) >= CANDIDATE_FIELDS
+        assert set(c) >= CANDIDATE_FIELDS and set(c["error_after"]) >= ERROR_FIELDS
         assert c["evidence"] == pytest.approx(report["baseline"]["heldout_normalised"]
                                               / c["heldout_normalised"])
         assert c["significant"] == (c["evidence"] >= EVIDENCE_THRESHOLD)
