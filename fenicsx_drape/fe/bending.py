@@ -92,8 +92,9 @@ class TowBending:
         self.rows, self.cols = rows[starts], cols[starts]
         self.scalars = np.add.reduceat(vals, starts) if len(vals) else vals
         self.indptr = np.searchsorted(self.rows, np.arange(n + 1)).astype(PETSc.IntType)
-        self.matrix = self._matrix(problem, np.ones((len(self.global_index), 3), dtype=bool))
-        self.bc_values = self.matrix_values(np.ones((len(self.global_index), 3), dtype=bool))
+        free = np.ones((len(self.global_index), 3), dtype=bool)
+        self.matrix = self._matrix(problem, free)  # K, for the force K u
+        self.constrained_matrix = self._matrix(problem, free)  # K, constraints zeroed
 
     def matrix_values(self, free: np.ndarray) -> np.ndarray:
         """Block values (3×3 per block, flattened) with constrained rows and columns zeroed.
@@ -126,15 +127,17 @@ class TowBending:
         """Zero the rows and columns of the problem's constrained dofs in :meth:`add_to`."""
         n = problem.num_owned
         free = np.ones((len(self.global_index), 3), dtype=bool)
-        parts = problem.comm.allgather((self.flat, ~problem.constrained[:n]))
-        for f, fr in parts:
+        for f, fr in problem.comm.allgather((self.flat, ~problem.constrained[:n])):
             free[f] = fr
-        self.bc_values = self.matrix_values(free)
+        self.constrained_matrix.destroy()
+        self.constrained_matrix = self._matrix(problem, free)
 
     def add_to(self, A: PETSc.Mat) -> None:
-        """Add K (constrained rows and columns zeroed) to the Jacobian ``A`` (not assembled)."""
-        A.setValuesBlockedCSR(self.indptr, self.cols.astype(PETSc.IntType), self.bc_values,
-                              PETSc.InsertMode.ADD_VALUES)
+        """Add K (constrained rows and columns zeroed) to the assembled Jacobian ``A``.
+
+        ``A``'s pattern must hold K's (see :class:`~fenicsx_drape.fe.solver.TrussProblem`).
+        """
+        A.axpy(1.0, self.constrained_matrix, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
 
     def force(self, u: PETSc.Vec) -> np.ndarray:
         """The internal bending force ``K u`` at the owned dofs (flat array)."""

@@ -56,6 +56,7 @@ class MaterialState:
         self.space = Q
         n = len(kinds)
         self.dofs = Q.dofmap.list[:n, 0]  # one point per cell, in cell order
+        self.kinds = np.asarray(kinds)
         self.tows = np.asarray(tows, dtype=float)
         self.buckled_tow_stiffness_N = float(buckled_tow_stiffness_N)
 
@@ -121,14 +122,30 @@ class MaterialState:
                 stress = stress + self.buckled_tow_stiffness_N * np.minimum(ε[points], 0.0)
                 tangent = tangent + self.buckled_tow_stiffness_N * compressed
             σ[points], C[points] = stress, tangent
-        λ = np.sqrt(λ2)
-        n_t = self.tows
-        dofs = self.dofs
-        self.strain.x.array[dofs] = ε
+        self.strain.x.array[self.dofs] = ε
+        self._write(np.arange(len(ε)), σ, C)
+
+    def _write(self, points: np.ndarray, σ: np.ndarray, C: np.ndarray) -> None:
+        """Store σ, dσ/dε of ``points`` and their work-conjugate S = n_t σ/λ and dS/dε."""
+        dofs = self.dofs[points]
+        λ = np.sqrt(1.0 + 2.0 * self.strain.x.array[dofs])
+        n_t = self.tows[points]
         self.stress.x.array[dofs] = σ
         self.tangent.x.array[dofs] = C
         self.S.x.array[dofs] = n_t * σ / λ
         self.dS.x.array[dofs] = n_t * (C / λ - σ / λ**3)
+
+    def scale_shear(self, factor: np.ndarray) -> None:
+        """Multiply the stress and tangent of the shear diagonals by ``factor`` (per point).
+
+        The cell-level ``shear_tension_coupling`` (see :mod:`fenicsx_drape.effects`): the
+        shear law's own state is unchanged. The tangent is scaled at fixed factor (the
+        factor's dependence on the tow strains is left out of the Jacobian).
+        """
+        points, _ = self.groups["shear"]
+        dofs = self.dofs[points]
+        self._write(points, factor * self.stress.x.array[dofs],
+                    factor * self.tangent.x.array[dofs])
 
     def commit(self) -> None:
         """Accept the state of the last evaluation (a converged step)."""
