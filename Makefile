@@ -1,7 +1,10 @@
 # fenicsx_drape: everything runs through ./drape, natively where DOLFINx >= 0.10 is installed,
 # otherwise in the project's image (built from the Dockerfile on first use).
 DRAPE := ./drape
-PYTEST := python3 -m pytest -q
+# A test that runs 5 min prints the stacks of its threads (a hung collective shows where), and
+# a run stuck for 20 min is stopped (exit status 124), so that CI fails instead of stalling.
+PYTEST_ARGS := -q -o faulthandler_timeout=300
+LIMIT := timeout 1200
 
 .PHONY: test test-serial test-parallel lint demo
 
@@ -9,13 +12,14 @@ PYTEST := python3 -m pytest -q
 test: test-serial test-parallel lint
 
 test-serial:
-	$(DRAPE) exec $(PYTEST)
+	$(DRAPE) exec $(LIMIT) python3 -m pytest $(PYTEST_ARGS)
 
 # pytest exits with 5 when no test is marked parallel: that is not a failure.
 test-parallel:
 	@for n in 2 3; do \
-	  echo "$(DRAPE) exec mpirun -n $$n python3 -m mpi4py -m pytest -q -m parallel"; \
-	  $(DRAPE) exec mpirun -n $$n python3 -m mpi4py -m $(PYTEST) -m parallel; rc=$$?; \
+	  echo "$(DRAPE) exec mpirun -n $$n python3 -m mpi4py -m pytest $(PYTEST_ARGS) -m parallel"; \
+	  $(DRAPE) exec $(LIMIT) mpirun -n $$n python3 -m mpi4py -m pytest $(PYTEST_ARGS) \
+	    -m parallel; rc=$$?; \
 	  if [ $$rc -eq 5 ]; then echo "no test is marked parallel"; \
 	  elif [ $$rc -ne 0 ]; then exit $$rc; fi; \
 	done
