@@ -43,7 +43,7 @@ class HemisphereCase:
     quarter: bool = True  # model one symmetric quarter (else the full sheet)
     die: bool = True  # the matched die closes on the sheet (else the punch alone)
     penalty_factor: float = 1.0  # contact stiffness k in units of l_t E_o
-    step_mm: float = 2.0  # punch travel per load step at the start (mm); steps adapt
+    step_mm: float = 1.0  # punch travel per load step (mm); cut back when Newton fails
     stabilisation_N_per_mm: float = 1.25  # out-of-plane spring to the extrapolated motion
     tools: HemisphereTools = dataclasses.field(default_factory=HemisphereTools)
 

@@ -50,6 +50,7 @@ class ExtrapolationSpring:
         self._x = [np.array(X, dtype=float)] * 2  # x_{n-1}, x_n
         self._t = [None, 0.0]
         self._trial: tuple[np.ndarray, float] | None = None
+        self._d: tuple[float, np.ndarray] | None = None
 
     def predicted(self, t: float) -> np.ndarray:
         """The extrapolated positions x̂ at time ``t``."""
@@ -64,7 +65,9 @@ class ExtrapolationSpring:
         x̂ = self.predicted(t)
         if self.direction is None:
             return -self.c * (x - x̂), np.broadcast_to(self.c * np.eye(3), (len(x), 3, 3))
-        d = self.direction(x̂, t)
+        if self._d is None or self._d[0] != t:  # the direction is fixed within a step
+            self._d = (t, self.direction(x̂, t))
+        d = self._d[1]
         f = -self.c * np.einsum("ni,ni->n", d, x - x̂)[:, None] * d
         return f, self.c * np.einsum("ni,nj->nij", d, d)
 
