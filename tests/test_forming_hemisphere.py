@@ -15,8 +15,9 @@ from fenicsx_drape.forming.stabilisation import ExtrapolationSpring
 from fenicsx_drape.forming.tools import RevolvedTool, Segment
 from fenicsx_drape.model import default_model
 
-# A coarse case: 20 mm cells, 8 s of forming (larger steps, fewer of them).
+# A coarse case: 20 mm cells, 8 s of forming; coarser still for the parallel comparison.
 COARSE = {"cell_mm": 20.0, "duration_s": 8.0}
+COARSER = {"cell_mm": 30.0, "duration_s": 8.0}
 
 
 class DeadLoad:
@@ -77,15 +78,15 @@ def test_contact_patch_reaction_equals_load_and_penetration_falls_as_1_over_k():
 
 @pytest.fixture(scope="module")
 def quarter():
-    return run_hemisphere(HemisphereCase(**COARSE, quarter=True), comm=MPI.COMM_WORLD)
+    return run_hemisphere(HemisphereCase(**COARSE, quarter=True), comm=MPI.COMM_SELF)
 
 
 @pytest.fixture(scope="module")
 def full():
-    return run_hemisphere(HemisphereCase(**COARSE, quarter=False), comm=MPI.COMM_WORLD)
+    return run_hemisphere(HemisphereCase(**COARSE, quarter=False), comm=MPI.COMM_SELF)
 
 
-@pytest.mark.parallel
+@pytest.mark.skip_in_parallel
 @pytest.mark.slow
 def test_quarter_and_full_sheet_agree_and_the_full_sheet_is_symmetric(quarter, full):
     g = full.grid
@@ -101,7 +102,7 @@ def test_quarter_and_full_sheet_agree_and_the_full_sheet_is_symmetric(quarter, f
     assert abs(np.abs(q.shear_deg()).max() - np.abs(quarter.grid.shear_deg()).max()) < 1.0
 
 
-@pytest.mark.parallel
+@pytest.mark.skip_in_parallel
 @pytest.mark.slow
 def test_formed_quarter_zero_shear_at_apex_and_wrinkling_on_the_tow_axes(quarter):
     g = quarter.grid
@@ -130,7 +131,11 @@ def test_formed_quarter_zero_shear_at_apex_and_wrinkling_on_the_tow_axes(quarter
 
 @pytest.mark.parallel
 @pytest.mark.slow
-def test_serial_and_parallel_runs_agree(quarter):
+def test_serial_and_parallel_runs_agree():
     """The coarse quarter on all ranks equals the same run on one process."""
-    serial = run_hemisphere(HemisphereCase(**COARSE, quarter=True), comm=MPI.COMM_SELF)
-    np.testing.assert_allclose(quarter.grid.x, serial.grid.x, atol=1e-3)
+    case = HemisphereCase(**COARSER, quarter=True)
+    parallel = run_hemisphere(case, comm=MPI.COMM_WORLD)
+    serial = run_hemisphere(case, comm=MPI.COMM_SELF)
+    assert parallel.problem.sheet.num_nodes_global == serial.grid.X[..., 0].size
+    np.testing.assert_allclose(parallel.grid.x, serial.grid.x, atol=1e-3)
+    assert parallel.max_penetration_mm == pytest.approx(serial.max_penetration_mm, rel=1e-3)
