@@ -119,4 +119,5 @@ def save_state(problem: TrussProblem, folder: str | os.PathLike | None = None) -
         buf = io.BytesIO()
         np.savez(buf, time_s=problem.t, X=X, x=x)
         atomic_write_bytes(path, buf.getvalue())
+    problem.comm.Barrier()  # the file exists on return, on every rank
     return path
