@@ -144,7 +144,7 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
                      f"{travel:6.2f} mm  Newton {step.iterations:2d}  {state}")
 
     dt = case.step_mm / case.speed_mm_per_s
-    run = problem.run(case.duration_s, dt, dt_max_s=dt, easy_iterations=10, progress=report,
+    run = problem.run(case.duration_s, dt, dt_max_s=dt, easy_iterations=15, progress=report,
                       on_step=on_step)
     res = problem.results()
     grid = FormedGrid(res.X, res.x, case.quarter)

@@ -34,8 +34,9 @@ def plot_shear(grid: FormedGrid, path: str | os.PathLike, title: str = "") -> Pa
                                          linewidths=0.15))
     lim = np.abs(full.x[..., :2]).max()
     top = max(full.x[..., 2].max(), 1.0)
-    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(0, top), xlabel="x (warp), mm",
-           ylabel="y (weft), mm", zticks=np.linspace(0, top, 3).round())
+    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(0, top), zticks=np.linspace(0, top, 3).round())
+    ax.set_xlabel("x (warp), mm", labelpad=8)
+    ax.set_ylabel("y (weft), mm", labelpad=8)
     ax.set_box_aspect((1, 1, max(top / (2 * lim), 0.15)))
     ax.view_init(elev=28, azim=-60)
     ax2 = fig.add_subplot(1, 2, 2)
