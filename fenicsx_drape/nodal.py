@@ -23,12 +23,21 @@ class NodalTerm(Protocol):
     """
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
-        """Called once: reference positions ``X`` (n, 3) of the local nodes, a boolean mask of
-        the nodes this rank owns, and the MPI communicator (for global counts such as n_s)."""
+        """Set up once with the reference configuration.
+
+        Args:
+            X: reference positions (n, 3) of the local nodes in mm.
+            owned: boolean mask of the nodes this rank owns.
+            comm: the MPI communicator (for global counts such as n_s).
+        """
 
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """External force on each node ``f`` (n, 3) in N and its stiffness ``K = -∂f/∂x``
-        (n, 3, 3) in N/mm, at the current positions ``x`` at the end of a step to time ``t``."""
+        """External force on each node and its stiffness at the end of a step to time ``t``.
+
+        Returns:
+            ``f`` (n, 3) in N at the current positions ``x``, and ``K = -∂f/∂x`` (n, 3, 3)
+            in N/mm.
+        """
 
     def commit(self) -> None:
         """Accept the state of the last converged step."""
