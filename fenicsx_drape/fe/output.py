@@ -127,10 +127,10 @@ def results(problem) -> Results:
 def grid_points(res: Results, grid_mm: float = 10.0) -> dict[str, np.ndarray]:
     """Positions of the points of a drawn grid of spacing ``grid_mm`` on the sheet.
 
-    Drawn-grid points are at multiples of ``grid_mm`` from the punch axis; their current
-    positions are interpolated bilinearly in the deformed unit cell that holds them (exact at
-    the nodes when Δ divides ``grid_mm``). Returns the columns of the spec's forming grid:
-    ``i, j, x0_mm, y0_mm, x_mm, y_mm, z_mm``.
+    Drawn-grid points are at multiples of ``grid_mm`` from the punch axis along the tows;
+    their current positions are interpolated bilinearly in the deformed unit cell that holds
+    them (exact at the nodes when Δ divides ``grid_mm``, and for any affine deformation).
+    Returns the columns of the spec's forming grid: ``i, j, x0_mm, y0_mm, x_mm, y_mm, z_mm``.
     """
     g = res.grid
     lo = np.asarray(g.origin_mm)
@@ -145,10 +145,13 @@ def grid_points(res: Results, grid_mm: float = 10.0) -> dict[str, np.ndarray]:
     ci = np.clip(np.floor(s + 1e-9).astype(int), 0, g.nx - 1)
     cj = np.clip(np.floor(t + 1e-9).astype(int), 0, g.ny - 1)
     ξ, η = (s - ci)[:, None], (t - cj)[:, None]
-    x = res.x
-    pos = ((1 - ξ) * (1 - η) * x[ci, cj] + ξ * (1 - η) * x[ci + 1, cj]
-           + (1 - ξ) * η * x[ci, cj + 1] + ξ * η * x[ci + 1, cj + 1])
-    return {"i": i, "j": j, "x0_mm": x0.astype(float), "y0_mm": y0.astype(float),
+
+    def interpolate(x):
+        return ((1 - ξ) * (1 - η) * x[ci, cj] + ξ * (1 - η) * x[ci + 1, cj]
+                + (1 - ξ) * η * x[ci, cj + 1] + ξ * η * x[ci + 1, cj + 1])
+
+    ref, pos = interpolate(res.X), interpolate(res.x)  # ref: x0, y0 of a turned sheet too
+    return {"i": i, "j": j, "x0_mm": ref[:, 0], "y0_mm": ref[:, 1],
             "x_mm": pos[:, 0], "y_mm": pos[:, 1], "z_mm": pos[:, 2]}
 
 
