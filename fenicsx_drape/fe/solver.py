@@ -161,18 +161,7 @@ class TrussProblem:
         self._setup_snes()
         self._bending = None
         if options.tow_bending_EI_Nmm2 > 0 and sheet.grid is not None:  # tow lines known
-            self._bending = TowBending(self, options.tow_bending_EI_Nmm2)
-            # Its stencils couple nodes two apart along a line, outside the form's sparsity:
-            # the Jacobian gets the union of both patterns, allocated once.
-            fem_petsc.assemble_matrix(self._A, self.jacobian_form)
-            self._A.assemble()
-            A = self._A.duplicate(copy=True)
-            A.axpy(1.0, self._bending.matrix, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-            A.setLGMap(*self._A.getLGMap())
-            A.zeroEntries()
-            self._A.destroy()
-            self._A = A
-            self.snes.setJacobian(self._jacobian, A)
+            self._setup_bending()
 
     # -- geometry and selections -------------------------------------------------------
 
@@ -333,6 +322,23 @@ class TrussProblem:
         snes.setFunction(self._residual, self._b)
         snes.setJacobian(self._jacobian, self._A)
         self.snes = snes
+
+    def _setup_bending(self) -> None:
+        """The tow bending term, and a Jacobian whose pattern also holds its stencils.
+
+        The stencils couple nodes two apart along a tow line, outside the form's sparsity:
+        the Jacobian gets the union of both patterns, allocated once.
+        """
+        self._bending = TowBending(self, self.options.tow_bending_EI_Nmm2)
+        fem_petsc.assemble_matrix(self._A, self.jacobian_form)
+        self._A.assemble()
+        A = self._A.duplicate(copy=True)
+        A.axpy(1.0, self._bending.matrix, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        A.setLGMap(*self._A.getLGMap())
+        A.zeroEntries()
+        self._A.destroy()
+        self._A = A
+        self.snes.setJacobian(self._jacobian, A)
 
     def _evaluate(self, x: PETSc.Vec) -> bool:
         """Displacement, material state and nodal terms at the iterate ``x``.
