@@ -64,7 +64,7 @@ def test_bending_adds_a_consistent_stiffness():
     rng = np.random.default_rng(0)
     direction = problem.u.x.petsc_vec.duplicate()
     direction.array_w[:] = rng.standard_normal(direction.getLocalSize())
-    for bc in problem._bcs:  # stay on the constraints
+    for bc in problem.constraints.bcs:  # stay on the constraints
         bc.set(direction.array_w, alpha=0.0)
     x = problem.u.x.petsc_vec.copy()
 

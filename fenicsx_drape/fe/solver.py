@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import inspect
 import itertools
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -30,6 +29,7 @@ import numpy as np
 from fenicsx_drape import nodal
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.fe.bending import TowBending
+from fenicsx_drape.fe.constraints import Constraints
 from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
@@ -142,10 +142,7 @@ class TrussProblem:
         residual, jacobian = truss_forms(self.u, self.state.S, self.state.dS)
         self.residual_form = dolfinx.fem.form(residual)
         self.jacobian_form = dolfinx.fem.form(jacobian)
-        self._fixes: list[tuple[np.ndarray, tuple[int, ...], Callable]] = []
-        self._bcs: list[dolfinx.fem.DirichletBC] = []
-        self._bc_values: list[tuple[dolfinx.fem.Function, np.ndarray, np.ndarray]] = []
-        self.constrained = np.zeros((len(self.X), 3), dtype=bool)
+        self.constraints = Constraints(V, self.X)
 
         self.nodal_terms = list(nodal_terms)
         for term in self.nodal_terms:
@@ -238,58 +235,19 @@ class TrussProblem:
                 ``value(t)``, or of time and reference positions ``value(t, X)`` returning an
                 array broadcastable to (n_selected, len(components)).
         """
-        components = tuple(int(c) for c in components)
-        if not components or any(c not in (0, 1, 2) for c in components):
-            raise DrapeInputError(f"components {components} must be among 0, 1, 2 (x, y, z)")
-        mask = self.nodes(where)
-        if callable(value):
-            f = value
-            if len(inspect.signature(f).parameters) == 1:
-                def f(t, X, g=value):
-                    return g(t)
-        else:
-            constant = np.asarray(value, dtype=float)
-
-            def f(t, X, c=constant):
-                return c
-        self._fixes.append((mask, components, f))
-        self._build_bcs()
+        self.constraints.add(self.nodes(where), components, value)
+        if self._bending is not None:
+            self._bending.constrain(self)
 
     def symmetry(self) -> None:
         """The symmetry conditions of a quarter model: u_x = 0 on x = 0, u_y = 0 on y = 0."""
         self.fix("symmetry_x", (0,))
         self.fix("symmetry_y", (1,))
 
-    def _build_bcs(self) -> None:
-        constrained = np.zeros((len(self.X), 3), dtype=bool)
-        for mask, components, _ in self._fixes:
-            for c in components:
-                constrained[mask, c] = True
-        self.constrained = constrained
-        self._bcs, self._bc_values = [], []
-        for c in range(3):
-            Vc, parent = self.V.sub(c).collapse()
-            to_collapsed = np.empty(len(self.X), dtype=np.int32)
-            parent = np.asarray(parent).ravel()
-            to_collapsed[(parent - c) // 3] = np.arange(len(parent))
-            nodes_c = np.flatnonzero(constrained[:, c]).astype(np.int32)
-            g = dolfinx.fem.Function(Vc)
-            dofs = [3 * nodes_c + c, to_collapsed[nodes_c]]
-            self._bcs.append(dolfinx.fem.dirichletbc(g, dofs, self.V.sub(c)))
-            self._bc_values.append((g, nodes_c, to_collapsed))
-        if self._bending is not None:
-            self._bending.constrain(self)
-
-    def _set_bc_values(self, t: float) -> None:
-        """Write the prescribed displacements at time ``t`` into the conditions and ``u``."""
-        for c, (g, _, to_collapsed) in enumerate(self._bc_values):
-            for mask, components, f in self._fixes:
-                if c in components:
-                    nodes = np.flatnonzero(mask)
-                    values = np.broadcast_to(f(t, self.X[nodes]), (len(nodes), len(components)))
-                    g.x.array[to_collapsed[nodes]] = values[:, components.index(c)]
-        for bc in self._bcs:
-            bc.set(self.u.x.array)
+    @property
+    def constrained(self) -> np.ndarray:
+        """Which displacement components of the local nodes are prescribed, (n, 3)."""
+        return self.constraints.constrained
 
     # -- SNES ---------------------------------------------------------------------------
 
@@ -431,12 +389,13 @@ class TrussProblem:
             with b.localForm() as bl:
                 bl.set(0.0)
             fem_petsc.assemble_vector(b, self.residual_form)
-            fem_petsc.apply_lifting(b, [self.jacobian_form], [self._bcs], x0=[x], alpha=-1.0)
+            bcs = self.constraints.bcs
+            fem_petsc.apply_lifting(b, [self.jacobian_form], [bcs], x0=[x], alpha=-1.0)
             b.ghostUpdate(PETSc.InsertMode.ADD, PETSc.ScatterMode.REVERSE)
             b.array_w[:] -= self._nodal_f[: self.num_owned].ravel()
             if self._bending is not None:
                 b.array_w[:] += self._bending.force(x)
-            fem_petsc.set_bc(b, self._bcs, x, -1.0)
+            fem_petsc.set_bc(b, bcs, x, -1.0)
 
     def _stale(self, x: PETSc.Vec) -> bool:
         """Whether ``x`` differs from the last evaluated iterate on any rank."""
@@ -450,7 +409,7 @@ class TrussProblem:
             self._evaluate(x)
         with self._timed("jacobian"):
             A.zeroEntries()
-            fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self._bcs)
+            fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self.constraints.bcs)
             A.assemble()
             n = self.num_owned
             if self._bending is not None:
@@ -478,7 +437,7 @@ class TrussProblem:
         u[:] = self._u_n
         if self.options.predictor and self._du_n is not None:
             u += self._du_n * (dt / self._dt_n)
-        self._set_bc_values(t)
+        self.constraints.apply(t, self.u.x.array)
         if self.options.predictor and self.nodal_terms:
             projected = nodal.predict(self.nodal_terms, self.positions(), t) - self.X
             free = ~self.constrained.ravel()
