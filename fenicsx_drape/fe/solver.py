@@ -30,6 +30,7 @@ from fenicsx_drape import nodal
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.fe.bending import TowBending
 from fenicsx_drape.fe.constraints import Constraints
+from fenicsx_drape.fe.coupling import ShearTensionCoupling
 from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
@@ -132,13 +133,12 @@ class TrussProblem:
 
         kinds, tows = self._bars()
         self.state = MaterialState(self.u, kinds, tows, laws, options.buckled_tow_stiffness_N)
-        effects = getattr(model, "effects", ())
-        self._k_st = model.parameters["k_st"] if "shear_tension_coupling" in effects else 0.0
-        self._cells_of = None  # grid positions of the bars, for the coupling
-        self._shear_factor = [np.ones(len(self.state.groups["shear"][0]))] * 2  # steps n-1, n
-        if self._k_st and sheet.grid is None:
-            raise DrapeInputError("shear_tension_coupling needs the unit cells of a structured "
-                                  "sheet (truss_sheet)")
+        self._coupling = None
+        if "shear_tension_coupling" in getattr(model, "effects", ()):
+            if sheet.grid is None:
+                raise DrapeInputError("shear_tension_coupling needs the unit cells of a "
+                                      "structured sheet (truss_sheet)")
+            self._coupling = ShearTensionCoupling(self, model.parameters["k_st"])
         residual, jacobian = truss_forms(self.u, self.state.S, self.state.dS)
         self.residual_form = dolfinx.fem.form(residual)
         self.jacobian_form = dolfinx.fem.form(jacobian)
@@ -316,10 +316,9 @@ class TrussProblem:
         if not self.comm.allreduce(ok, op=MPI.LAND):
             self._evaluated_at = None
             return False
-        if self._k_st:  # the factor extrapolated from the last two converged steps
-            f_m, f_n = self._shear_factor
-            growth = (f_n - f_m) * (self.dt / self._dt_n) if self._du_n is not None else 0.0
-            self.state.scale_shear(np.maximum(f_n + growth, 1.0))
+        if self._coupling is not None:
+            ratio = self.dt / self._dt_n if self._du_n is not None else 0.0
+            self.state.scale_shear(self._coupling.predict(ratio))
         with self._timed("nodal"):
             n = len(self.X)
             f, K = np.zeros((n, 3)), np.zeros((n, 3, 3))
@@ -336,42 +335,6 @@ class TrussProblem:
             self._nodal_f = f * free
             self._nodal_K = K * free[:, :, None] * free[:, None, :]
         return True
-
-    def _shear_tension_factor(self) -> np.ndarray:
-        """The factor of ``shear_tension_coupling`` on every owned diagonal (collective).
-
-        It is 1 + k_st max(σ̄_t, 0), with σ̄_t the mean stress of the four tow bars of the
-        diagonal's unit cell (:func:`fenicsx_drape.effects.shear_tension_factor`). The solver
-        applies it staggered in time: a step uses the factor extrapolated linearly from the
-        last two converged steps (second order in dt), so each Newton solve keeps its exact
-        Jacobian. (Implicit
-        coupling would need Jacobian terms between a diagonal and the four tows of its cell,
-        which are stiff: a tow's E_o is 10⁵ times the shear stiffness.)
-        """
-        from fenicsx_drape.effects import shear_tension_factor
-
-        grid, state = self.sheet.grid, self.state
-        if self._cells_of is None:
-            n = len(state.dofs)
-            mid = self.sheet.mesh.geometry.x[self.sheet.mesh.geometry.dofmaps[0][:n]]
-            g = grid.grid_coordinates(mid.mean(axis=1))
-            tow = state.groups["tow"][0]
-            kinds = state.kinds[tow]
-            warp = kinds == WARP
-            # Warp bar (i, j) spans nodes (i, j)-(i+1, j); weft bar (i, j): (i, j)-(i, j+1).
-            i = np.where(warp, np.floor(g[tow, 0]), np.rint(g[tow, 0])).astype(int)
-            j = np.where(warp, np.rint(g[tow, 1]), np.floor(g[tow, 1])).astype(int)
-            shear = state.groups["shear"][0]
-            self._cells_of = (warp, i, j, np.floor(g[shear]).astype(int))
-        warp, i, j, cells = self._cells_of
-        σ = state.stress.x.array[state.dofs[state.groups["tow"][0]]]
-        σ_warp = np.zeros((grid.nx, grid.ny + 1))
-        σ_weft = np.zeros((grid.nx + 1, grid.ny))
-        for w, ii, jj, s in self.comm.allgather((warp, i, j, σ)):
-            σ_warp[ii[w], jj[w]] = s[w]
-            σ_weft[ii[~w], jj[~w]] = s[~w]
-        mean = (σ_warp[:, :-1] + σ_warp[:, 1:] + σ_weft[:-1, :] + σ_weft[1:, :]) / 4
-        return shear_tension_factor(mean[cells[:, 0], cells[:, 1]], self._k_st)[0]
 
     @contextlib.contextmanager
     def _timed(self, part: str):
@@ -459,8 +422,8 @@ class TrussProblem:
             self.state.commit()
             for term in self.nodal_terms:
                 term.commit()
-            if self._k_st:  # staggered: the next steps use the tow stresses of this one
-                self._shear_factor = [self._shear_factor[1], self._shear_tension_factor()]
+            if self._coupling is not None:
+                self._coupling.commit()
             self._du_n = self.u.x.array - self._u_n
             self._dt_n = dt
             self._u_n = self.u.x.array.copy()
