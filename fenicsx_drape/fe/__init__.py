@@ -10,7 +10,7 @@ One call per task::
 """
 
 from fenicsx_drape.fe.grid import TrussGrid, read_grid, sheet_grid, write_grid
-from fenicsx_drape.fe.mesh import Sheet, load_sheet, truss_sheet
+from fenicsx_drape.fe.mesh import Sheet, load_sheet, truss_mesh, truss_sheet
 from fenicsx_drape.fe.output import FieldWriter, Results, grid_points, write_grid_csv
 from fenicsx_drape.fe.solver import SolverOptions, StepReport, TrussProblem
 from fenicsx_drape.fe.stepping import RunReport, run
@@ -29,6 +29,7 @@ __all__ = [
     "read_grid",
     "run",
     "sheet_grid",
+    "truss_mesh",
     "truss_sheet",
     "write_grid",
     "write_grid_csv",
