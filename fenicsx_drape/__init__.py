@@ -8,14 +8,23 @@ DOLFINx >= 0.10 and is imported only when used.
 
 __version__ = "0.1.0"
 
-__all__ = ["Model", "__version__", "default_model", "load_model"]
+# The public API, imported on first use so that ``drape --help`` stays fast and the NumPy
+# parts work without DOLFINx. ``fit``, ``compare`` and ``diagnose`` are modules of the same
+# names: call them as ``from fenicsx_drape.fit import fit`` (a package attribute would be
+# replaced by the submodule on its first import).
+_LAZY = {
+    "Model": "fenicsx_drape.model",
+    "default_model": "fenicsx_drape.model",
+    "load_model": "fenicsx_drape.model",
+    "load_bundle": "fenicsx_drape.bundle",
+    "synthetic_bundle": "fenicsx_drape.synthetic",
+    "history": "fenicsx_drape.ledger",
+}
 
-_LAZY = {"Model": "fenicsx_drape.model", "default_model": "fenicsx_drape.model",
-         "load_model": "fenicsx_drape.model"}
+__all__ = ["__version__", *sorted(_LAZY)]
 
 
 def __getattr__(name: str):
-    # The model API is imported on first use, so that ``drape --help`` stays fast.
     if name in _LAZY:
         import importlib
 
