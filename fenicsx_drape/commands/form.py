@@ -41,8 +41,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--full", action="store_true",
                         help="model the full sheet (default: a symmetric quarter)")
     parser.add_argument("--no-die", action="store_true", help="leave the matched die out")
-    parser.add_argument("--penalty-factor", type=float, default=1.0,
-                        help="contact stiffness in units of l_t E_o (default 1)")
+    parser.add_argument("--penalty-factor", type=float, default=0.3,
+                        help="contact stiffness in units of l_t E_o (default 0.3)")
     parser.add_argument("--stabilisation", type=float, default=None, metavar="N_PER_MM",
                         help="out-of-plane stabilisation stiffness (default 1.25 N/mm)")
     parser.add_argument("--grid-mm", type=float, default=10.0,

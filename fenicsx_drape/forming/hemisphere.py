@@ -10,11 +10,16 @@ The parts of the model that are not the truss itself:
 
 - the tools (:class:`~fenicsx_drape.forming.tools.HemisphereTools`: exact surfaces),
 - penalty contact with the punch and the die (:mod:`~fenicsx_drape.forming.contact`) of
-  stiffness k = ``penalty_factor`` · l_t E_o (the axial stiffness of one tow bar),
+  stiffness k = ``penalty_factor`` · l_t E_o (l_t E_o: the axial stiffness of one tow bar),
 - the blank holder (:mod:`~fenicsx_drape.forming.holder`): clamping and eq. 1 friction bars,
   with F/4 on a quarter model,
+- the out-of-plane stabilisation of the slack net (:mod:`~fenicsx_drape.forming.stabilisation`),
 - symmetry conditions u_x = 0 on x = 0 and u_y = 0 on y = 0 for a quarter model; the full
   sheet needs none (the holder's friction bars hold it in its plane).
+
+Load steps move the punch ``step_mm`` (1 mm); a step whose Newton solve fails is halved, and
+steps grow back (×1.5, up to ``step_mm``) after solves of at most 15 iterations. The solver's
+residual tolerance is 1e-6 N (forces on a node are 0.01-1 N).
 """
 
 from __future__ import annotations
@@ -42,7 +47,7 @@ class HemisphereCase:
     holder_force_N: float = 133.0  # total holding force on the whole sheet (N)
     quarter: bool = True  # model one symmetric quarter (else the full sheet)
     die: bool = True  # the matched die closes on the sheet (else the punch alone)
-    penalty_factor: float = 1.0  # contact stiffness k in units of l_t E_o
+    penalty_factor: float = 0.3  # contact stiffness k in units of l_t E_o (contact.py)
     step_mm: float = 1.0  # punch travel per load step (mm); cut back when Newton fails
     stabilisation_N_per_mm: float = 1.25  # out-of-plane spring to the extrapolated motion
     tools: HemisphereTools = dataclasses.field(default_factory=HemisphereTools)
