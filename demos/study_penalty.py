@@ -2,9 +2,8 @@
 #
 # The contact stiffness is k = factor · l_t E_o (the axial stiffness of one tow bar, 2.4 kN/mm
 # for Table 2; the default factor is 0.3). This study forms the 10 mm quarter with factors
-# 0.01 to 3 and reports the
-# deepest penetration of a node into the punch or die at the end, and how little the results
-# move. Writes `penalty.csv` and `penalty.png`.
+# 0.01 to 3 and reports the deepest penetration of a node into the punch or die at the end,
+# and how little the results move. Writes `penalty.csv` and `penalty.png`.
 #
 #     ./drape exec python3 demos/study_penalty.py --out results/study_penalty [--quick]
 
