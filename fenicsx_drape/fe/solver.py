@@ -346,7 +346,9 @@ class TrussProblem:
 
     def _residual(self, snes, x, b) -> None:
         if not self._evaluate(x):
-            snes.setFunctionDomainError()
+            # A domain error (petsc4py 3.25 has no SNES.setFunctionDomainError): a non-finite
+            # residual makes the line search back off, or the step fail and be cut back.
+            b.set(np.nan)
             return
         with self._timed("residual"):
             with b.localForm() as bl:
