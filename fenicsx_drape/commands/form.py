@@ -15,7 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.errors import DrapeInputError, SolverError
 
 CASES = ("hemisphere",)
 
@@ -78,9 +78,14 @@ def run(args: argparse.Namespace) -> int:
     def progress(line: str) -> None:
         print(line, flush=True)
 
-    _, result = form_hemisphere(args.out, case, model, grid_mm=args.grid_mm,
-                                fields=not args.no_fields,
-                                progress=None if args.quiet else progress)
+    try:
+        _, result = form_hemisphere(args.out, case, model, grid_mm=args.grid_mm,
+                                    fields=not args.no_fields,
+                                    progress=None if args.quiet else progress)
+    except SolverError as err:
+        if rank0:
+            print(f"drape form: the forming solve failed: {err}", file=sys.stderr)
+        return 1
     if rank0:
         print(f"max shear {result['max_shear_deg']:.1f}°, total wrinkling "
               f"{100 * result['total_wrinkling_strain']:.2f} %, min wrinkling strain "

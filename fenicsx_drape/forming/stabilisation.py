@@ -16,14 +16,14 @@ This term ties each node instead to its *extrapolated* position,
     f = −c d (d·(x − x̂)),   x̂ = x_n + (x_n − x_{n−1}) (t − t_n) / (t_n − t_{n−1}),   K = c d⊗d,
 
 (x̂ = x_n in the first step) along one direction ``d`` per node, the sheet's normal (out of
-its plane). It adds stiffness where the net has none, but its force vanishes for motion at
-constant velocity and is of order c a Δt² for accelerating nodes (a pseudo-inertia of mass
-c Δt²). Acting in all three directions it still biased the in-plane shear, whose stiffness
-(a few N/mm per node) is of the order of c: max shear 38° at c = 1.25 N/mm against 51° at
-c = 5. Out of the plane only, halving c from 1.25 to 0.625 N/mm moves the nodes by 0.011 mm
-on average (0.18 mm at most), the maximum shear by 0.04° and the total wrinkling by 0.002 %
-(``demos/study_stabilisation.py``). It is part of the model:
-``HemisphereCase.stabilisation_N_per_mm``.
+its plane, :class:`SheetNormal`, evaluated at x̂ once per step). It adds stiffness where the
+net has none, but its force vanishes for motion at constant velocity and is of order c a Δt²
+for accelerating nodes (a pseudo-inertia of mass c Δt²). Acting in all three directions it
+still biased the in-plane shear, whose stiffness (a few N/mm per node) is of the order of c:
+max shear 38° at c = 1.25 N/mm against 51° at c = 5. Out of the plane only, halving c from
+1.25 to 0.625 N/mm moves the nodes by 0.011 mm on average (0.18 mm at most), the maximum
+shear by 0.04° and the total wrinkling by 0.002 % (``demos/study_stabilisation.py``). It is
+part of the model: ``HemisphereCase.stabilisation_N_per_mm``.
 """
 
 from __future__ import annotations
