@@ -21,8 +21,8 @@ net has none, but its force vanishes for motion at constant velocity and is of o
 for accelerating nodes (a pseudo-inertia of mass c Δt²). Acting in all three directions it
 still biased the in-plane shear, whose stiffness (a few N/mm per node) is of the order of c:
 max shear 38° at c = 1.25 N/mm against 51° at c = 5. Out of the plane only, halving c from
-1.25 to 0.625 N/mm moves the nodes by 0.011 mm on average (0.18 mm at most), the maximum
-shear by 0.04° and the total wrinkling by 0.002 % (``demos/study_stabilisation.py``). It is
+1.25 to 0.625 N/mm moves the nodes by 0.006 mm on average (0.06 mm at most), the maximum
+shear by 0.02° and the total wrinkling by 0.001 % (``demos/study_stabilisation.py``). It is
 part of the model: ``HemisphereCase.stabilisation_N_per_mm``.
 """
 
