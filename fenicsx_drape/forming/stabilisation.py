@@ -15,9 +15,9 @@ This term ties each node instead to its *extrapolated* position,
 
     f = −c d (d·(x − x̂)),   x̂ = x_n + (x_n − x_{n−1}) (t − t_n) / (t_n − t_{n−1}),   K = c d⊗d,
 
-(x̂ = x_n in the first step) along one direction ``d`` per node, the sheet's normal (out of
-its plane, :class:`SheetNormal`, evaluated at x̂ once per step). It adds stiffness where the
-net has none, but its force vanishes for motion at constant velocity and is of order c a Δt²
+(x̂ = x_n in the first step) along one direction ``d`` per node out of the sheet's plane
+(the nearest tool's normal, evaluated at x̂ once per step). It adds stiffness where the net
+has none, but its force vanishes for motion at constant velocity and is of order c a Δt²
 for accelerating nodes (a pseudo-inertia of mass c Δt²). Acting in all three directions it
 still biased the in-plane shear, whose stiffness (a few N/mm per node) is of the order of c:
 max shear 38° at c = 1.25 N/mm against 51° at c = 5. Out of the plane only, halving c from
@@ -56,8 +56,6 @@ class ExtrapolationSpring:
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
         """Start from rest at the reference positions."""
-        if hasattr(self.direction, "bind"):
-            self.direction.bind(X, owned, comm)
         self._x = [np.array(X, dtype=float)] * 2  # x_{n-1}, x_n
         self._t = [None, 0.0]
         self._trial: tuple[np.ndarray, float] | None = None
@@ -92,54 +90,3 @@ class ExtrapolationSpring:
     def revert(self) -> None:
         """Forget the trial of a step that is cut back."""
         self._trial = None
-
-
-class SheetNormal:
-    """The sheet's normal at each node, from its neighbours on the structured grid.
-
-    With the neighbours ``e, w`` along the warp and ``n, s`` along the weft (the node itself
-    on the sheet's edges), the normal is ``(x_e − x_w) × (x_n − x_s)`` normalised. The grid is
-    gathered from all ranks, so a partition boundary changes nothing. Where the normal is
-    degenerate (a collapsed cell) the ``fallback`` direction map is used.
-
-    Args:
-        cell_mm: The grid spacing Δ of the reference positions.
-        fallback: A direction map ``(x, t) -> d`` (n, 3) for the nodes without a normal.
-    """
-
-    def __init__(self, cell_mm: float,
-                 fallback: Callable[[np.ndarray, float], np.ndarray]) -> None:
-        self.cell_mm = float(cell_mm)
-        self.fallback = fallback
-
-    def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
-        """Grid indices of the local nodes (collective under MPI)."""
-        ij = np.rint(X[:, :2] / self.cell_mm).astype(int)
-        lo = [int(v) for v in ij.min(axis=0, initial=0)]
-        hi = [int(v) for v in ij.max(axis=0, initial=0)]
-        if comm is not None:
-            from mpi4py import MPI
-
-            lo = [comm.allreduce(v, op=MPI.MIN) for v in lo]
-            hi = [comm.allreduce(v, op=MPI.MAX) for v in hi]
-        self.ij = ij - np.array(lo)
-        self.shape = (hi[0] - lo[0] + 1, hi[1] - lo[1] + 1)
-        self.owned, self.comm = np.asarray(owned, dtype=bool), comm
-
-    def __call__(self, x: np.ndarray, t: float) -> np.ndarray:
-        """Unit normals (n, 3) at the positions ``x`` (collective under MPI)."""
-        mine = (self.ij[self.owned], x[self.owned])
-        parts = self.comm.allgather(mine) if self.comm is not None else [mine]
-        grid = np.zeros((*self.shape, 3))
-        for ij, xs in parts:
-            grid[ij[:, 0], ij[:, 1]] = xs
-        pad = np.pad(grid, ((1, 1), (1, 1), (0, 0)), mode="edge")  # one-sided on the edges
-        a = pad[2:, 1:-1] - pad[:-2, 1:-1]
-        b = pad[1:-1, 2:] - pad[1:-1, :-2]
-        normal = np.cross(a, b)[self.ij[:, 0], self.ij[:, 1]]
-        length = np.linalg.norm(normal, axis=1)
-        bad = length < 1e-9 * self.cell_mm**2
-        normal /= np.where(bad, 1.0, length)[:, None]
-        if bad.any():
-            normal[bad] = self.fallback(x, t)[bad]
-        return normal
