@@ -4,6 +4,7 @@ Example::
 
     ./drape form hemisphere --out results/hemisphere
     ./drape --np 2 form hemisphere --out results/full --full --cell-mm 5
+    ./drape form hemisphere --out results/ply3 --full --ply-angle-deg 3
 
 The outputs are listed in :mod:`fenicsx_drape.forming.outputs`; the same is one call in
 Python: :func:`fenicsx_drape.forming.outputs.form_hemisphere`.
@@ -40,6 +41,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         metavar="EFFECT", help="switch an effect off (repeatable)")
     parser.add_argument("--full", action="store_true",
                         help="model the full sheet (default: a symmetric quarter)")
+    parser.add_argument("--ply-angle-deg", type=float, default=0.0, metavar="THETA",
+                        help="initial ply angle: the tows at THETA to the sheet's edges "
+                        "(degrees; needs --full)")
     parser.add_argument("--no-die", action="store_true", help="leave the matched die out")
     parser.add_argument("--penalty-factor", type=float, default=0.3,
                         help="contact stiffness in units of l_t E_o (default 0.3)")
@@ -72,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
     extra = {} if args.stabilisation is None else {"stabilisation_N_per_mm": args.stabilisation}
     case = HemisphereCase(cell_mm=args.cell_mm, duration_s=args.duration_s,
                           holder_force_N=args.holder_force_N, quarter=not args.full,
-                          die=not args.no_die, penalty_factor=args.penalty_factor, **extra)
+                          die=not args.no_die, penalty_factor=args.penalty_factor,
+                          ply_angle_deg=args.ply_angle_deg, **extra)
     rank0 = MPI.COMM_WORLD.rank == 0
 
     def progress(line: str) -> None:

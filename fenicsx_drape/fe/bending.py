@@ -34,17 +34,26 @@ from fenicsx_drape.fe.grid import TrussGrid
 
 
 def stencils(grid: TrussGrid, edge_factor: float) -> tuple[np.ndarray, np.ndarray]:
-    """Node triplets (n, 3) of every tow line (flat node indices) and their strip shares."""
+    """Node triplets (n, 3) of every tow line (lattice node indices) and their strip shares.
+
+    A triplet needs both its bars in the sheet; its strip is an edge strip when a cell
+    around its centre node is missing (the sheet's or a symmetry plane's edge, or the ragged
+    edge of a clipped net).
+    """
     triplets, shares = [], []
+    bars = grid.tow_bars()
+    c = np.pad(grid.cells, 1)
+    whole = c[:-1, :-1] & c[1:, :-1] & c[:-1, 1:] & c[1:, 1:]  # the four cells around a node
     for axis, (n_along, n_across) in enumerate(((grid.nx, grid.ny), (grid.ny, grid.nx))):
         centre, line = np.meshgrid(np.arange(1, n_along), np.arange(n_across + 1),
                                    indexing="ij")
         ij = [centre, line] if axis == 0 else [line, centre]
         step = (1, 0) if axis == 0 else (0, 1)
         triplet = [grid.node(ij[0] + s * step[0], ij[1] + s * step[1]) for s in (-1, 0, 1)]
-        triplets.append(np.stack([t.ravel() for t in triplet], axis=1))
-        edge = (line == 0) | (line == n_across)
-        shares.append(np.where(edge, edge_factor, 1.0).ravel())
+        keep = (bars[axis][ij[0] - step[0], ij[1] - step[1]] & bars[axis][ij[0], ij[1]]).ravel()
+        triplets.append(np.stack([t.ravel() for t in triplet], axis=1)[keep])
+        edge = ~whole[ij[0], ij[1]]
+        shares.append(np.where(edge, edge_factor, 1.0).ravel()[keep])
     return np.concatenate(triplets), np.concatenate(shares)
 
 
@@ -66,7 +75,7 @@ class TowBending:
         ij = np.rint(grid.grid_coordinates(problem.X[:n])).astype(np.int64)
         flat = grid.node(ij[:, 0], ij[:, 1])
         # PETSc block index of every node of the sheet, on every rank.
-        self.global_index = np.empty((grid.nx + 1) * (grid.ny + 1), dtype=np.int64)
+        self.global_index = np.full((grid.nx + 1) * (grid.ny + 1), -1, dtype=np.int64)
         for f, g in comm.allgather((flat, first + np.arange(n))):
             self.global_index[f] = g
         owned_rows = np.full(len(self.global_index), -1, dtype=np.int64)
@@ -103,7 +112,8 @@ class TowBending:
         """
         row_free = free[self.flat][self.rows]  # (n_blocks, 3)
         col_flat = np.empty(len(self.global_index), dtype=np.int64)
-        col_flat[self.global_index] = np.arange(len(self.global_index))
+        present = self.global_index >= 0  # lattice nodes of a clipped net may be absent
+        col_flat[self.global_index[present]] = np.flatnonzero(present)
         col_free = free[col_flat[self.cols]]
         diag = self.scalars[:, None] * row_free * col_free
         blocks = np.zeros((len(self.scalars), 3, 3))

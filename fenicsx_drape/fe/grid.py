@@ -11,11 +11,19 @@ its edges x = 0 and y = 0 are symmetry planes. A grid may be turned in its plane
 origin by ``rotation_deg`` (e.g. 45° for a patch loaded in the bias direction along x); grid
 indices and edges are those of the unturned grid.
 
+A *ply at an angle* θ (:func:`sheet_grid` ``ply_angle_deg``) keeps the square sheet with its
+edges along x and y and turns only the tow net: the lattice of cells Δ, turned by θ about a
+node on the punch axis, is clipped to the square (``clip_half_mm``). The unit cells whose four
+corners lie in the square are kept (a ply cut from a larger ply at θ: a ragged, cell-wise
+edge), and of those only the cells joined side by side to the centre cell (a cell hanging by
+a corner would turn freely about it). The grid stays structured in (i, j) along the tows:
+:attr:`TrussGrid.cells` and :attr:`TrussGrid.present` mask the kept cells and nodes.
+
 Node flags are bits, so a corner node can be on two edges at once:
 
 - :data:`SYMMETRY_X` — on the symmetry plane x = 0 (u_x = 0 there),
 - :data:`SYMMETRY_Y` — on the symmetry plane y = 0 (u_y = 0 there),
-- :data:`BORDER` — on a free edge of the sheet.
+- :data:`BORDER` — on a free edge of the sheet (a node with a missing cell around it).
 """
 
 from __future__ import annotations
@@ -47,7 +55,10 @@ def flag_name(value: int) -> str:
 class TrussGrid:
     """A structured truss sheet: ``(nx + 1) × (ny + 1)`` nodes, ``nx × ny`` unit cells.
 
-    Node ``(i, j)`` sits at ``origin_mm + (i, j) · cell_mm`` and has index ``j (nx + 1) + i``.
+    Node ``(i, j)`` sits at ``origin_mm + (i, j) · cell_mm`` (then turned by ``rotation_deg``)
+    and has the lattice index ``j (nx + 1) + i``. Without clipping every lattice node is a
+    node of the sheet and the lattice index is its index in :attr:`nodes`; a clipped net keeps
+    the :attr:`present` nodes, numbered in lattice order.
     """
 
     nx: int  # unit cells along x (warp)
@@ -56,6 +67,7 @@ class TrussGrid:
     origin_mm: tuple[float, float]  # position of node (0, 0) (mm)
     quarter: bool  # the edges x = 0 and y = 0 are symmetry planes
     rotation_deg: float = 0.0  # the grid is turned by this angle about the z axis
+    clip_half_mm: float | None = None  # keep the cells inside |x|, |y| <= this (mm)
 
     def _rotation(self) -> np.ndarray:
         c, s = np.cos(np.radians(self.rotation_deg)), np.sin(np.radians(self.rotation_deg))
@@ -66,11 +78,52 @@ class TrussGrid:
         return ((np.asarray(xy)[:, :2] @ self._rotation()) - np.asarray(self.origin_mm)) \
             / self.cell_mm
 
+    def _lattice_xy(self) -> np.ndarray:
+        """Positions (nx + 1, ny + 1, 2) of all lattice nodes (mm)."""
+        i, j = np.meshgrid(np.arange(self.nx + 1), np.arange(self.ny + 1), indexing="ij")
+        ij = np.stack([i, j], axis=-1)
+        return (ij * self.cell_mm + np.asarray(self.origin_mm)) @ self._rotation().T
+
+    @property
+    def cells(self) -> np.ndarray:
+        """Mask of the unit cells of the sheet, shaped (nx, ny) (all, unless clipped)."""
+        if self.clip_half_mm is None:
+            return np.ones((self.nx, self.ny), dtype=bool)
+        a = self.clip_half_mm * (1.0 + 1e-12)
+        inside = np.all(np.abs(self._lattice_xy()) <= a, axis=-1)
+        keep = inside[:-1, :-1] & inside[1:, :-1] & inside[:-1, 1:] & inside[1:, 1:]
+        from scipy import ndimage
+
+        labels, _ = ndimage.label(keep)  # side-joined groups of cells
+        centre = labels[self.nx // 2, self.ny // 2]
+        return labels == centre if centre else np.zeros_like(keep)
+
+    @property
+    def present(self) -> np.ndarray:
+        """Mask of the lattice nodes that are nodes of the sheet (corners of its cells)."""
+        c = np.pad(self.cells, 1)
+        return c[:-1, :-1] | c[1:, :-1] | c[:-1, 1:] | c[1:, 1:]
+
+    def tow_bars(self) -> tuple[np.ndarray, np.ndarray]:
+        """Masks of the warp bars (nx, ny + 1) and weft bars (nx + 1, ny) of the sheet.
+
+        Warp bar (i, j) joins nodes (i, j)-(i + 1, j), weft bar (i, j) nodes (i, j)-(i, j + 1);
+        a tow bar is a side of a cell of the sheet.
+        """
+        cj = np.pad(self.cells, ((0, 0), (1, 1)))
+        ci = np.pad(self.cells, ((1, 1), (0, 0)))
+        return cj[:, :-1] | cj[:, 1:], ci[:-1] | ci[1:]
+
+    def _flat(self, mask: np.ndarray) -> np.ndarray:
+        """A lattice mask (nx + 1, ny + 1) in the order of the lattice indices."""
+        return mask.T.ravel()
+
     @property
     def ij(self) -> np.ndarray:
         """Grid indices ``(i, j)`` of every node, shaped (n_nodes, 2)."""
         j, i = np.divmod(np.arange((self.nx + 1) * (self.ny + 1)), self.nx + 1)
-        return np.column_stack([i, j])
+        ij = np.column_stack([i, j])
+        return ij if self.clip_half_mm is None else ij[self._flat(self.present)]
 
     @property
     def nodes(self) -> np.ndarray:
@@ -79,7 +132,7 @@ class TrussGrid:
         return np.column_stack([xy, np.zeros(len(xy))])
 
     def node(self, i: np.ndarray | int, j: np.ndarray | int) -> np.ndarray | int:
-        """Index of node ``(i, j)``."""
+        """Lattice index of node ``(i, j)`` (its index in :attr:`nodes` unless clipped)."""
         return np.asarray(j) * (self.nx + 1) + np.asarray(i)
 
     @property
@@ -90,34 +143,38 @@ class TrussGrid:
         iy, jy = np.meshgrid(np.arange(nx + 1), np.arange(ny), indexing="ij")
         ic, jc = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
         n = self.node
+        warp, weft = self.tow_bars()
+        cells = self.cells
         pairs = [
-            (n(ix, jx), n(ix + 1, jx), WARP),
-            (n(iy, jy), n(iy, jy + 1), WEFT),
-            (n(ic, jc), n(ic + 1, jc + 1), DIAGONAL_PLUS),
-            (n(ic + 1, jc), n(ic, jc + 1), DIAGONAL_MINUS),
+            (n(ix, jx), n(ix + 1, jx), WARP, warp),
+            (n(iy, jy), n(iy, jy + 1), WEFT, weft),
+            (n(ic, jc), n(ic + 1, jc + 1), DIAGONAL_PLUS, cells),
+            (n(ic + 1, jc), n(ic, jc + 1), DIAGONAL_MINUS, cells),
         ]
-        bars = np.concatenate([np.column_stack([a.ravel(), b.ravel()]) for a, b, _ in pairs])
-        kinds = np.concatenate([np.full(a.size, k, dtype=np.int32) for a, _, k in pairs])
+        bars = np.concatenate([np.column_stack([a[m], b[m]]) for a, b, _, m in pairs])
+        kinds = np.concatenate([np.full(m.sum(), k, dtype=np.int32) for *_, k, m in pairs])
+        if self.clip_half_mm is not None:  # lattice indices → indices of the present nodes
+            bars = (np.cumsum(self._flat(self.present)) - 1)[bars]
         return bars.astype(np.int64), kinds
 
     @property
     def node_flags(self) -> np.ndarray:
         """Bitwise node flags (n_nodes,): symmetry planes and free border."""
-        i, j = self.ij.T
-        on_low = (i == 0, j == 0)
-        on_high = (i == self.nx, j == self.ny)
-        flags = np.zeros(len(i), dtype=np.int32)
+        c = np.pad(self.cells, 1)  # cell (i, j) at [i + 1, j + 1]; outside the lattice: none
+        if self.quarter:  # the mirrored cells across the symmetry planes
+            c[0, :] = c[1, :]
+            c[:, 0] = c[:, 1]
+        whole = c[:-1, :-1] & c[1:, :-1] & c[:-1, 1:] & c[1:, 1:]  # all four cells around
+        i, j = np.meshgrid(np.arange(self.nx + 1), np.arange(self.ny + 1), indexing="ij")
+        flags = np.where(whole, 0, BORDER).astype(np.int32)
         if self.quarter:
-            flags |= np.where(on_low[0], SYMMETRY_X, 0)
-            flags |= np.where(on_low[1], SYMMETRY_Y, 0)
-            flags |= np.where(on_high[0] | on_high[1], BORDER, 0)
-        else:
-            flags |= np.where(on_low[0] | on_low[1] | on_high[0] | on_high[1], BORDER, 0)
-        return flags
+            flags |= np.where(i == 0, SYMMETRY_X, 0) | np.where(j == 0, SYMMETRY_Y, 0)
+        flags = self._flat(flags)
+        return flags if self.clip_half_mm is None else flags[self._flat(self.present)]
 
 
 def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = False,
-               rotation_deg: float = 0.0) -> TrussGrid:
+               rotation_deg: float = 0.0, ply_angle_deg: float = 0.0) -> TrussGrid:
     """The square sheet of side ``size_mm``, or its quarter ``x, y >= 0``.
 
     The number of cells along a half side is ``round(size_mm / 2 / cell_mm)`` (at least 1),
@@ -128,6 +185,9 @@ def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = Fa
         cell_mm: Requested unit-cell size Δ (mm).
         quarter: Model one quarter with symmetry edges on x = 0 and y = 0.
         rotation_deg: Turn the sheet about the z axis by this angle (degrees).
+        ply_angle_deg: Turn the tow net by θ inside the unturned square: warp at θ to the x
+            edge (degrees); the net (same Δ, a node on the punch axis) is clipped to the
+            square cell by cell. Full sheet only, not with ``rotation_deg``.
     """
     if not (math.isfinite(size_mm) and size_mm > 0):
         raise DrapeInputError(f"sheet size_mm = {size_mm} must be a positive number")
@@ -135,8 +195,18 @@ def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = Fa
         raise DrapeInputError(f"cell_mm = {cell_mm} must be in (0, size_mm / 2 = {size_mm / 2}]")
     n_half = max(1, round(size_mm / 2 / cell_mm))
     Δ = size_mm / 2 / n_half
-    if not math.isfinite(rotation_deg):
-        raise DrapeInputError(f"rotation_deg = {rotation_deg} is not a number")
+    for name, value in (("rotation_deg", rotation_deg), ("ply_angle_deg", ply_angle_deg)):
+        if not math.isfinite(value):
+            raise DrapeInputError(f"{name} = {value} is not a number")
+    if ply_angle_deg:
+        if quarter or rotation_deg:
+            raise DrapeInputError(f"ply_angle_deg = {ply_angle_deg}: a ply at an angle needs "
+                                  "the full sheet (no quarter symmetry) and rotation_deg = 0")
+        θ = math.radians(ply_angle_deg)
+        # Lattice cells along a half side: enough to cover the square turned by −θ.
+        m = math.ceil(size_mm / 2 * (abs(math.cos(θ)) + abs(math.sin(θ))) / Δ - 1e-9)
+        return TrussGrid(2 * m, 2 * m, Δ, (-m * Δ, -m * Δ), False, ply_angle_deg,
+                         clip_half_mm=size_mm / 2)
     if quarter:
         return TrussGrid(n_half, n_half, Δ, (0.0, 0.0), True, rotation_deg)
     return TrussGrid(2 * n_half, 2 * n_half, Δ, (-size_mm / 2, -size_mm / 2), False,
@@ -219,8 +289,8 @@ def write_grid(grid: TrussGrid, path: str | Path) -> Path:
 def read_grid(path: str | Path) -> TrussGrid:
     """Read a truss sheet written by :func:`write_grid` (or any structured truss like it).
 
-    The grid (not turned) is recovered from the node positions and checked against the
-    file's bars.
+    The grid (not turned, not clipped) is recovered from the node positions and checked
+    against the file's bars.
     """
     import meshio
 

@@ -96,7 +96,8 @@ def _distribute(data, comm: MPI.Comm):
 
 
 def truss_sheet(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = False,
-                comm: MPI.Comm = MPI.COMM_WORLD, rotation_deg: float = 0.0) -> Sheet:
+                comm: MPI.Comm = MPI.COMM_WORLD, rotation_deg: float = 0.0,
+                ply_angle_deg: float = 0.0) -> Sheet:
     """The woven sheet (or its symmetric quarter) as a distributed truss mesh.
 
     Args:
@@ -106,12 +107,16 @@ def truss_sheet(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = F
         quarter: Model the quarter x, y >= 0 with symmetry edges on x = 0 and y = 0.
         comm: MPI communicator.
         rotation_deg: Turn the sheet about the z axis (e.g. 45° for bias loading along x).
+        ply_angle_deg: Turn only the tow net by θ inside the square, clipped to it cell by
+            cell (full sheet only; see :func:`~fenicsx_drape.fe.grid.sheet_grid`).
 
     Example::
 
         sheet = truss_sheet(240, 10, quarter=True)
     """
-    grid = sheet_grid(size_mm, cell_mm, quarter, rotation_deg) if comm.rank == 0 else None
+    grid = None
+    if comm.rank == 0:
+        grid = sheet_grid(size_mm, cell_mm, quarter, rotation_deg, ply_angle_deg)
     return grid_to_sheet(comm.bcast(grid, root=0), comm)
 
 

@@ -6,6 +6,13 @@ sheet over its hemispherical nose into the matched die, against the friction of 
 (133 N). One call, :func:`run_hemisphere`, sets it up on the FE core and runs it; outputs are
 in :mod:`fenicsx_drape.forming.outputs`.
 
+An optional initial ply angle θ (``ply_angle_deg``, issue 6; the paper blames small angle
+variations for its asymmetric part) turns the tow net by θ inside the square sheet, whose
+edges stay along x and y: the net is clipped to the square cell by cell (a ragged edge,
+:func:`~fenicsx_drape.fe.grid.sheet_grid`), on the full sheet only. The solver gives the
+bars of the ragged edge a full strip of tows (its ``edge_tow_factor`` is applied to the
+lattice's edges only); the bending stencils and the post-processing see the ragged edge.
+
 The parts of the model that are not the truss itself:
 
 - the tools (:class:`~fenicsx_drape.forming.tools.HemisphereTools`: exact surfaces),
@@ -50,6 +57,7 @@ class HemisphereCase:
     penalty_factor: float = 0.3  # contact stiffness k in units of l_t E_o (contact.py)
     step_mm: float = 1.0  # punch travel per load step (mm); cut back when Newton fails
     stabilisation_N_per_mm: float = 1.25  # out-of-plane spring to the extrapolated motion
+    ply_angle_deg: float = 0.0  # tow net turned by θ in the square sheet (full sheet only)
     tools: HemisphereTools = dataclasses.field(default_factory=HemisphereTools)
 
     def __post_init__(self) -> None:
@@ -59,6 +67,12 @@ class HemisphereCase:
         for name in ("holder_force_N", "stabilisation_N_per_mm"):
             if not getattr(self, name) >= 0:
                 raise ParameterError(f"hemisphere: {name} = {getattr(self, name)} must be >= 0")
+        if not np.isfinite(self.ply_angle_deg):
+            raise ParameterError(f"hemisphere: ply_angle_deg = {self.ply_angle_deg} is not a "
+                                 "number")
+        if self.ply_angle_deg and self.quarter:
+            raise ParameterError(f"hemisphere: ply_angle_deg = {self.ply_angle_deg} breaks the "
+                                 "quarter symmetry; model the full sheet (quarter=False)")
 
     @property
     def speed_mm_per_s(self) -> float:
@@ -133,7 +147,8 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
     holder = BlankHolder(model.laws()["friction"], opening_radius_mm=tools.opening_radius_mm,
                          force_N=case.part_force_N, clamp_stiffness_N_per_mm=k,
                          symmetry_axes=(0, 1) if case.quarter else ())
-    sheet = truss_sheet(tools.sheet_mm, case.cell_mm, quarter=case.quarter, comm=comm)
+    sheet = truss_sheet(tools.sheet_mm, case.cell_mm, quarter=case.quarter, comm=comm,
+                        ply_angle_deg=case.ply_angle_deg)
     terms = [*contact, holder]
     if case.stabilisation_N_per_mm:
         terms.append(ExtrapolationSpring(case.stabilisation_N_per_mm, sheet_normal(contact)))
@@ -187,11 +202,17 @@ def sheet_normal(contact: list[PenaltyContact], near_mm: float = 3.0):
 
 
 def draw_in(grid: FormedGrid) -> dict[str, float]:
-    """Inward in-plane displacement (mm) of the middle of a side and of a corner."""
-    q = grid.quadrant
+    """Inward in-plane displacement (mm) of the middle of a side and of a corner.
 
-    def inward(i: int, j: int) -> float:
-        X, x = q.X[i, j, :2], q.x[i, j, :2]
-        return float(np.linalg.norm(X) - np.linalg.norm(x))
+    The nodes of the flat sheet nearest the middle of the side x = max and the corner
+    x = y = max (for a ply at an angle, on its ragged edge).
+    """
+    X, x = grid.X[..., :2], grid.x[..., :2]
+    a = np.nanmax(X[..., 0])
 
-    return {"mid_side_mm": inward(-1, 0), "corner_mm": inward(-1, -1)}
+    def inward(target: tuple[float, float]) -> float:
+        d = np.linalg.norm(X - target, axis=-1)
+        k = np.unravel_index(np.nanargmin(d), d.shape)
+        return float(np.linalg.norm(X[k]) - np.linalg.norm(x[k]))
+
+    return {"mid_side_mm": inward((a, 0.0)), "corner_mm": inward((a, a))}

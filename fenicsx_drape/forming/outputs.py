@@ -9,6 +9,8 @@
   shear angle every 5 mm of travel, for ParaView; ``tools/*.vtk``: the tools at full travel;
 - ``bundle/``: the formed sheet as a forming bundle (``bundle.toml`` and the node positions on
   the 10 mm drawn grid, ``shared/spec/measurements.md``), to compare with a measured part;
+  for a ply at an angle θ the drawn grid follows the tows (``i, j`` in the tow frame, turned
+  by θ; :meth:`~fenicsx_drape.forming.post.FormedGrid.drawn_grid`);
 - ``shear.png``, ``wrinkling.png``, ``paths.png``: the formed sheet coloured by shear angle,
   the wrinkled tows, shear along the diagonal path and wrinkling along the normal path
   (the paper's Figs. 10-11), the last with the kinematic drape beside the FE result;
@@ -44,11 +46,12 @@ def summary(run: HemisphereRun, kinematic: FormedGrid | None = None) -> dict:
     g = run.grid
     warp, weft = g.tow_strains()
     out = {
-        "max_shear_deg": float(np.abs(g.shear_deg()).max()),
+        "max_shear_deg": float(np.nanmax(np.abs(g.shear_deg()))),
         "total_wrinkling_strain": g.total_wrinkling_strain(),
-        "min_wrinkling_strain": float(min(warp.min(), weft.min(), 0.0)),
+        "min_wrinkling_strain": float(min(np.nanmin(warp), np.nanmin(weft), 0.0)),
         "draw_in_mm": run.draw_in_mm,
-        "nodes": int(g.X[..., 0].size),
+        "ply_angle_deg": run.case.ply_angle_deg,
+        "nodes": int(g.present.sum()),
         "steps": run.steps,
         "cutbacks": run.cutbacks,
         "snes_iterations": run.iterations,
@@ -140,7 +143,8 @@ def form_hemisphere(out_dir: str | os.PathLike, case: HemisphereCase | None = No
         write_bundle(forming_bundle(run, μ, grid_mm), out / "bundle",
                      comment=f"simulated by fenicsx_drape (drape form hemisphere): "
                              f"{'quarter' if case.quarter else 'full sheet'}, "
-                             f"cell {case.cell_mm:g} mm")
+                             f"cell {case.cell_mm:g} mm, ply angle {case.ply_angle_deg:g}°"
+                             f"{' (drawn grid along the tows)' if case.ply_angle_deg else ''}")
         if pictures:
             plot_shear(run.grid, out / "shear.png",
                        f"formed sheet, shear angle (max {result['max_shear_deg']:.1f}°)")

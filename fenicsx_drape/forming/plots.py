@@ -13,8 +13,16 @@ from fenicsx_drape.provenance import save_figure
 
 
 def _cells(x: np.ndarray) -> np.ndarray:
-    """The corners of every cell of a grid (n_i, n_j, 3) as polygons (n_cells, 4, 3)."""
+    """The corners of every cell of a grid (n_i, n_j, 3) as polygons (n_cells, 4, 3).
+
+    Cells with an absent (NaN) corner, outside a clipped net, are NaN.
+    """
     return np.stack([x[:-1, :-1], x[1:, :-1], x[1:, 1:], x[:-1, 1:]], axis=2).reshape(-1, 4, 3)
+
+
+def _present(polygons: np.ndarray) -> np.ndarray:
+    """Mask of the polygons (or bars) without an absent corner."""
+    return np.isfinite(polygons).all(axis=(1, 2))
 
 
 def plot_shear(grid: FormedGrid, path: str | os.PathLike, title: str = "") -> Path:
@@ -24,16 +32,17 @@ def plot_shear(grid: FormedGrid, path: str | os.PathLike, title: str = "") -> Pa
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     full = grid.full()
-    γ = np.abs(full.shear_deg()).ravel()
     cells = _cells(full.x)
+    γ = np.abs(full.shear_deg()).ravel()[_present(cells)]
+    cells = cells[_present(cells)]
     norm = plt.Normalize(0.0, max(γ.max(), 1.0))
     cmap = plt.get_cmap("viridis")
     fig = plt.figure(figsize=(11, 4.8))
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     ax.add_collection3d(Poly3DCollection(cells, facecolors=cmap(norm(γ)), edgecolors="k",
                                          linewidths=0.15))
-    lim = np.abs(full.x[..., :2]).max()
-    top = max(full.x[..., 2].max(), 1.0)
+    lim = np.nanmax(np.abs(full.x[..., :2]))
+    top = max(np.nanmax(full.x[..., 2]), 1.0)
     ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(0, top), zticks=np.linspace(0, top, 3).round())
     ax.set_xlabel("x (warp), mm", labelpad=8)
     ax.set_ylabel("y (weft), mm", labelpad=8)
@@ -61,14 +70,17 @@ def plot_wrinkling(grid: FormedGrid, path: str | os.PathLike, title: str = "") -
     bars = np.concatenate([np.stack([x[:-1, :, :2], x[1:, :, :2]], axis=2).reshape(-1, 2, 2),
                            np.stack([x[:, :-1, :2], x[:, 1:, :2]], axis=2).reshape(-1, 2, 2)])
     ε = np.minimum(np.concatenate([warp.ravel(), weft.ravel()]), 0.0)
+    bars, ε = bars[_present(bars)], ε[_present(bars)]
+    cells = _cells(x)[:, :, :2]
     low = min(ε.min(), -1e-4)
     fig, ax = plt.subplots(figsize=(6.4, 5.2))
-    ax.add_collection(PolyCollection(_cells(x)[:, :, :2], facecolors="0.95", edgecolors="none"))
+    ax.add_collection(PolyCollection(cells[_present(cells)], facecolors="0.95",
+                                     edgecolors="none"))
     ax.add_collection(LineCollection(bars[ε >= 0], colors="0.7", linewidths=0.4))
     lines = LineCollection(bars[ε < 0], array=ε[ε < 0], cmap="inferno",
                            norm=plt.Normalize(low, 0.0), linewidths=1.6)
     ax.add_collection(lines)
-    lim = np.abs(x[..., :2]).max()
+    lim = np.nanmax(np.abs(x[..., :2]))
     ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel="x (warp), mm",
            ylabel="y (weft), mm")
     fig.colorbar(lines, ax=ax, label="Green-Lagrange wrinkling strain")

@@ -15,6 +15,12 @@ compared on equal terms (the paper's Figs. 10-11):
 - the **diagonal path** (Fig. 11a): the cells on the bias line from a sheet corner to the
   apex; the **normal path** (Fig. 11b): the nodes on the warp axis from the middle of a side
   to the apex, each with the smallest wrinkling strain of the tows meeting there.
+
+A ply at an angle θ (:func:`~fenicsx_drape.fe.grid.sheet_grid` ``ply_angle_deg``) is a grid
+turned by θ and clipped to the square sheet: absent nodes are NaN, and cells and bars with an
+absent node are NaN too and left out of every maximum, minimum and sum. Its paths, the drawn
+grid and :meth:`FormedGrid.sample` are in the *tow frame*: along the warp and weft from the
+apex, turned by θ from the sheet's edges (the frame is read from the grid itself).
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ class FormedGrid:
     """A formed sheet on its structured grid (mm).
 
     ``quarter`` grids cover x, y ≥ 0 with the apex at [0, 0]; full grids are centred on the
-    apex at [n_i // 2, n_j // 2].
+    apex at [n_i // 2, n_j // 2]. Absent nodes (a clipped net) are NaN in ``X`` and ``x``.
     """
 
     X: np.ndarray  # (n_i, n_j, 3) nodes on the flat sheet
@@ -55,16 +61,41 @@ class FormedGrid:
         return cls(G, g, quarter)
 
     @property
+    def present(self) -> np.ndarray:
+        """Mask (n_i, n_j) of the nodes of the sheet (all unless the net is clipped)."""
+        return np.isfinite(self.X[..., 0])
+
+    def tow_frame(self) -> tuple[np.ndarray, float, np.ndarray]:
+        """The lattice: position (mm) of node [0, 0] on the flat sheet, Δ (mm), rotation.
+
+        Node [i, j] is at ``origin + R (i, j) Δ``; R turns the sheet's axes onto the tows.
+        """
+        X = self.X[..., :2]
+        pairs = np.argwhere(np.isfinite(X[:-1, :, 0]) & np.isfinite(X[1:, :, 0]))
+        if not len(pairs):
+            raise DrapeInputError("FormedGrid: no warp bar on the grid")
+        i, j = pairs[0]
+        d = X[i + 1, j] - X[i, j]
+        Δ = float(np.hypot(d[0], d[1]))
+        c, s = d / Δ
+        R = np.array([[c, -s], [s, c]])
+        return X[i, j] - R @ (np.array([i, j]) * Δ), Δ, R
+
+    @property
     def cell_mm(self) -> float:
         """The grid spacing Δ (mm)."""
-        return float(self.X[1, 0, 0] - self.X[0, 0, 0])
+        return self.tow_frame()[1]
 
     @property
     def quadrant(self) -> FormedGrid:
-        """The quadrant x, y ≥ 0 with the apex at [0, 0] (itself for a quarter grid)."""
+        """The quadrant x, y ≥ 0 with the apex at [0, 0] (itself for a quarter grid).
+
+        For a ply at an angle, the quadrant of the tow frame.
+        """
         if self.quarter:
             return self
-        c = np.argmin(np.abs(self.X[:, 0, 0])), np.argmin(np.abs(self.X[0, :, 1]))
+        r = np.linalg.norm(self.X[..., :2], axis=-1)
+        c = np.unravel_index(np.nanargmin(r), r.shape)
         return FormedGrid(self.X[c[0]:, c[1]:], self.x[c[0]:, c[1]:], True)
 
     def full(self) -> FormedGrid:
@@ -106,48 +137,58 @@ class FormedGrid:
 
         Σ w ε⁻ / Σ w over the tow bars (all of length Δ), ε⁻ = min(ε, 0), with w = ½ for the
         bars on the grid's edges (they stand for half a strip of tows):
-        :attr:`fenicsx_drape.fe.output.Results.total_wrinkling_strain`.
+        :attr:`fenicsx_drape.fe.output.Results.total_wrinkling_strain`. A bar's w is half the
+        number of cells beside it, so the ragged edge of a clipped net has w = ½ too.
         """
-        warp, weft = self.tow_strains()
-        w_warp, w_weft = np.ones_like(warp), np.ones_like(weft)
-        w_warp[:, [0, -1]] = 0.5
-        w_weft[[0, -1], :] = 0.5
-        total = np.sum(w_warp * np.minimum(warp, 0)) + np.sum(w_weft * np.minimum(weft, 0))
-        return float(total / (w_warp.sum() + w_weft.sum()))
+        cells = np.isfinite(self.shear_deg()).astype(float)
+        total, weight = 0.0, 0.0
+        for axis, ε in enumerate(self.tow_strains()):
+            pad = [(0, 0), (0, 0)]
+            pad[1 - axis] = (1, 1)
+            c = np.pad(cells, pad)
+            w = 0.5 * (c[:, :-1] + c[:, 1:] if axis == 0 else c[:-1] + c[1:])
+            total += np.sum(np.where(w > 0, w * np.minimum(ε, 0), 0.0))
+            weight += w.sum()
+        return float(total / weight)
 
     def wrinkle_strain_nodes(self) -> np.ndarray:
         """Per node, the smallest wrinkling strain (≤ 0) of the tows meeting there."""
         warp, weft = self.tow_strains()
         w = np.zeros(self.X.shape[:2])
         warp, weft = np.minimum(warp, 0.0), np.minimum(weft, 0.0)
-        w[:-1, :] = np.minimum(w[:-1, :], warp)
-        w[1:, :] = np.minimum(w[1:, :], warp)
-        w[:, :-1] = np.minimum(w[:, :-1], weft)
-        w[:, 1:] = np.minimum(w[:, 1:], weft)
-        return w
+        # fmin: an absent bar (NaN) does not count
+        w[:-1, :] = np.fmin(w[:-1, :], warp)
+        w[1:, :] = np.fmin(w[1:, :], warp)
+        w[:, :-1] = np.fmin(w[:, :-1], weft)
+        w[:, 1:] = np.fmin(w[:, 1:], weft)
+        return np.where(self.present, w, np.nan)
 
     def shear_nodes(self) -> np.ndarray:
         """Per node, the mean shear angle (deg) of the cells around it."""
         γ = self.shear_deg()
+        ok = np.isfinite(γ)
+        γ = np.where(ok, γ, 0.0)
         s, c = np.zeros(self.X.shape[:2]), np.zeros(self.X.shape[:2])
         for di in (0, 1):
             for dj in (0, 1):
                 sl = (slice(di, di + γ.shape[0]), slice(dj, dj + γ.shape[1]))
                 s[sl] += γ
-                c[sl] += 1.0
-        return s / c
+                c[sl] += ok
+        return np.divide(s, c, out=np.full_like(s, np.nan), where=c > 0)
 
     def diagonal_path(self) -> tuple[np.ndarray, np.ndarray]:
         """Shear along the diagonal path (Fig. 11a).
 
         Returns the distance (mm) of the cell centres on the bias line from the apex on the
-        flat sheet, and their shear angle (deg), from the apex to the corner.
+        flat sheet, and their shear angle (deg), from the apex to the corner (the cells of
+        the sheet only; the bias line of the tow frame for a ply at an angle).
         """
         q = self.quadrant
         γ = np.diagonal(q.shear_deg())
         Xc = 0.5 * (np.diagonal(q.X[:-1, :-1], axis1=0, axis2=1)
                     + np.diagonal(q.X[1:, 1:], axis1=0, axis2=1))
-        return np.linalg.norm(Xc[:2].T, axis=1), γ
+        ok = np.isfinite(γ)
+        return np.linalg.norm(Xc[:2].T, axis=1)[ok], γ[ok]
 
     def normal_path(self) -> tuple[np.ndarray, np.ndarray]:
         """Wrinkling strain along the normal path (Fig. 11b).
@@ -155,44 +196,64 @@ class FormedGrid:
         Returns the distance (mm) from the apex on the flat sheet of the nodes on the warp
         axis, from the apex to the middle of a side, and their wrinkling strain
         (:meth:`wrinkle_strain_nodes`). In a quarter grid the weft bars of the symmetry edge
-        y = 0 stand for both sides.
+        y = 0 stand for both sides. For a ply at an angle: the warp axis of the tow frame,
+        distances along it.
         """
         q = self.quadrant
-        return q.X[:, 0, 0], q.wrinkle_strain_nodes()[:, 0]
+        ok = q.present[:, 0]
+        warp = q.tow_frame()[2][:, 0]  # the warp direction on the flat sheet
+        return (q.X[:, 0, :2] @ warp)[ok], q.wrinkle_strain_nodes()[ok, 0]
 
     def sample(self, points_mm: np.ndarray) -> np.ndarray:
-        """Formed positions (m, 3) of flat-sheet points (m, 2), bilinear in each cell."""
+        """Formed positions (m, 3) of flat-sheet points (m, 2), bilinear in each cell.
+
+        NaN for points outside the cells of a clipped net.
+        """
         p = np.asarray(points_mm, float)
-        Δ = self.cell_mm
-        s = (p - self.X[0, 0, :2]) / Δ
+        origin, Δ, R = self.tow_frame()
+        s = ((p - origin) @ R) / Δ
         n = np.array(self.X.shape[:2]) - 1
         if (s < -1e-9).any() or (s > n + 1e-9).any():
             raise DrapeInputError("FormedGrid.sample: a point lies outside the sheet")
-        k = np.clip(np.floor(s).astype(int), 0, n - 1)
-        a, b = (s - k)[:, :1], (s - k)[:, 1:]
         x = self.x
-        return ((1 - a) * (1 - b) * x[k[:, 0], k[:, 1]] + a * (1 - b) * x[k[:, 0] + 1, k[:, 1]]
-                + (1 - a) * b * x[k[:, 0], k[:, 1] + 1] + a * b * x[k[:, 0] + 1, k[:, 1] + 1])
+        out = np.full((len(p), 3), np.nan)
+        # A point on a side or corner of a cell of the sheet (to rounding) may have an absent
+        # cell on the other side: try the cells around it.
+        around = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj]
+        for shift in ((0, 0), *around):
+            k = np.clip(np.floor(s).astype(int) + shift, 0, n - 1)
+            a, b = (s - k)[:, :1], (s - k)[:, 1:]
+            v = ((1 - a) * (1 - b) * x[k[:, 0], k[:, 1]] + a * (1 - b) * x[k[:, 0] + 1, k[:, 1]]
+                 + (1 - a) * b * x[k[:, 0], k[:, 1] + 1] + a * b * x[k[:, 0] + 1, k[:, 1] + 1])
+            inside = np.all((s - k > -1e-9) & (s - k < 1 + 1e-9), axis=1)
+            out = np.where(np.isnan(out) & inside[:, None], v, out)
+        return out
 
     def drawn_grid(self, grid_mm: float = 10.0) -> dict[str, np.ndarray]:
         """The nodes of a drawn grid of spacing ``grid_mm`` as a forming-bundle table.
 
         Columns ``i, j, x0_mm, y0_mm, x_mm, y_mm, z_mm`` (``i, j`` = position / grid, zero on
         the punch axis), plus ``shear_deg`` and ``wrinkle_strain`` where the grid points are
-        nodes of this grid (otherwise omitted).
+        nodes of this grid (otherwise omitted). For a ply at an angle the drawn grid follows
+        the tows (``i, j`` in the tow frame; ``x0_mm, y0_mm`` on the flat sheet), points in
+        absent cells of the clipped net left out.
         """
-        lo, hi = self.X[0, 0, :2], self.X[-1, -1, :2]
+        origin, Δ, R = self.tow_frame()
+        T = self.X[..., :2] @ R  # node positions in the tow frame
+        lo, hi = np.nanmin(T, axis=(0, 1)), np.nanmax(T, axis=(0, 1))
         i = np.arange(np.ceil(lo[0] / grid_mm - 1e-9), np.floor(hi[0] / grid_mm + 1e-9) + 1)
         j = np.arange(np.ceil(lo[1] / grid_mm - 1e-9), np.floor(hi[1] / grid_mm + 1e-9) + 1)
         ii, jj = (a.ravel() for a in np.meshgrid(i, j, indexing="ij"))
         ii, jj = ii + 0.0, jj + 0.0  # no negative zeros in the table
-        P = np.column_stack([ii, jj]) * grid_mm
+        P = (np.column_stack([ii, jj]) * grid_mm) @ R.T
         x = self.sample(P)
+        ok = np.isfinite(x[:, 0])
+        P, x, ii, jj = P[ok], x[ok], ii[ok], jj[ok]
         table = {"i": ii, "j": jj, "x0_mm": P[:, 0], "y0_mm": P[:, 1],
                  "x_mm": x[:, 0], "y_mm": x[:, 1], "z_mm": x[:, 2]}
-        ratio = grid_mm / self.cell_mm
+        ratio = grid_mm / Δ
         if abs(ratio - round(ratio)) < 1e-9:
-            k = np.rint((P - lo) / self.cell_mm).astype(int)
+            k = np.rint(((P - origin) @ R) / Δ).astype(int)
             table["shear_deg"] = self.shear_nodes()[k[:, 0], k[:, 1]]
             table["wrinkle_strain"] = self.wrinkle_strain_nodes()[k[:, 0], k[:, 1]]
         return table
