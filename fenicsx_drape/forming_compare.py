@@ -37,6 +37,7 @@ Gauss-Newton step moves the parameters by more than :data:`XTOL`.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import math
 import os
@@ -117,46 +118,83 @@ def _form(case, model: Model) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _in_workers(jobs: list[tuple[Any, Model]]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Run forming jobs in fresh Python processes, :data:`WORKERS` at a time.
+    """Run forming jobs on :data:`WORKERS` persistent worker processes, a batch at a time.
 
-    Fresh processes (not forks: MPI is initialised here) that import this module, read a
-    pickled job on stdin and write the pickled grids on stdout; the MPI launcher's
-    environment is left out so that each starts as its own single-process MPI job.
+    Fresh processes (not forks: MPI is initialised here) started once and kept: each imports
+    DOLFINx and compiles the forms once, then reads pickled jobs on stdin and writes the
+    pickled grids on stdout. The MPI launcher's environment is left out so that each runs as
+    its own single-process MPI job.
     """
     import pickle
-    import subprocess
-    import sys
 
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
-    command = [sys.executable, "-c", "from fenicsx_drape.forming_compare import _worker; "
-               "_worker()"]
     results: list = [None] * len(jobs)
     pending = list(enumerate(jobs))
     while pending:
         batch, pending = pending[:WORKERS], pending[WORKERS:]
-        running = [(i, subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                        env=env)) for i, _ in batch]
-        for (_, job), (_, proc) in zip(batch, running):
-            proc.stdin.write(pickle.dumps(job))
-            proc.stdin.close()
-        for i, proc in running:
-            out = proc.stdout.read()
-            if proc.wait() != 0:
-                raise RuntimeError(f"forming worker failed (exit status {proc.returncode})")
-            results[i] = pickle.loads(out)
+        workers = _pool(len(batch))
+        for (_, job), proc in zip(batch, workers):
+            pickle.dump(job, proc.stdin)
+            proc.stdin.flush()
+        for (i, _), proc in zip(batch, workers):
+            try:
+                status, value = pickle.load(proc.stdout)
+            except EOFError:
+                _workers.remove(proc)
+                raise RuntimeError(f"forming worker failed (exit status {proc.wait()})") from None
+            if status == "error":
+                raise value
+            results[i] = value
     return results
 
 
+_workers: list = []  # the persistent worker processes of _in_workers
+
+
+def _pool(n: int) -> list:
+    """``n`` live worker processes, started on first use and stopped at exit."""
+    import subprocess
+    import sys
+
+    _workers[:] = [p for p in _workers if p.poll() is None]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
+    command = [sys.executable, "-c", "from fenicsx_drape.forming_compare import _worker; "
+               "_worker()"]
+    while len(_workers) < n:
+        _workers.append(subprocess.Popen(command, stdin=subprocess.PIPE,
+                                         stdout=subprocess.PIPE, env=env))
+    return _workers[:n]
+
+
+@atexit.register
+def _stop_workers() -> None:
+    for proc in _workers:
+        proc.stdin.close()
+        proc.wait()
+    _workers.clear()
+
+
 def _worker() -> None:
-    """Entry point of a worker process (:func:`_in_workers`)."""
+    """Entry point of a worker process (:func:`_in_workers`): jobs until stdin closes."""
     import pickle
     import sys
 
-    case, model = pickle.loads(sys.stdin.buffer.read())
-    result = os.fdopen(os.dup(1), "wb")
-    os.dup2(2, 1)  # whatever the solver prints goes to stderr, not into the pickle
-    result.write(pickle.dumps(_form(case, model)))
-    result.close()
+    jobs, result = sys.stdin.buffer, os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)  # whatever the solver prints goes to stderr, not into the pickles
+    while True:
+        try:
+            case, model = pickle.load(jobs)
+        except EOFError:
+            return
+        try:
+            reply = ("ok", _form(case, model))
+        except Exception as error:  # sent back and raised in the parent
+            reply = ("error", error)
+        try:
+            data = pickle.dumps(reply)
+        except Exception:
+            data = pickle.dumps(("error", RuntimeError(f"forming worker: {reply[1]!r}")))
+        result.write(data)
+        result.flush()
 
 
 def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:

@@ -275,8 +275,9 @@ class TrussProblem:
         for key, val in petsc_opts.items():
             options[prefix + key] = val
         snes.setFromOptions()
-        for key in petsc_opts:
-            options.delValue(prefix + key)
+        # The factor (MUMPS) reads its options at the first factorisation: they stay in the
+        # database until the first solve is over (see step), then are cleared.
+        self._option_keys = [prefix + key for key in petsc_opts]
         snes.setFunction(self._residual, self._b)
         snes.setJacobian(self._jacobian, self._A)
         self.snes = snes
@@ -416,6 +417,10 @@ class TrussProblem:
             reason = self.snes.getConvergedReason()
         except PETSc.Error:
             reason = PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
+        finally:
+            for key in self._option_keys:
+                PETSc.Options().delValue(key)
+            self._option_keys = []
         iterations = self.snes.getIterationNumber()
         converged = reason > 0
         if converged:
