@@ -264,6 +264,7 @@ def test_zero_angle_and_a_quarter_turn_give_todays_run(runs):
     assert g90.total_wrinkling_strain() == pytest.approx(g0.total_wrinkling_strain(), abs=1e-10)
     assert mirror_asymmetry_deg(g0) < 1e-6
     assert mirror_asymmetry_deg(g90) < 1e-6
+    assert g0.mirror_asymmetry_deg() < 1e-6
 
 
 @pytest.mark.skip_in_parallel
@@ -276,6 +277,7 @@ def test_a_small_ply_angle_breaks_the_mirror_symmetry(runs):
     # Measured 10.5° on this mesh (the shear lobes turn with the tows, by 2θ under the mirror);
     # at θ = 0 below 1e-6° (previous test).
     assert mirror_asymmetry_deg(g) > 5.0
+    assert g.mirror_asymmetry_deg() == pytest.approx(mirror_asymmetry_deg(g), rel=1e-9)
     # The formed sheet is still a hemisphere with a sheared net: apex on the punch, shear of
     # the order of θ = 0's (26.4° here).
     np.testing.assert_allclose(g.x[g.X.shape[0] // 2, g.X.shape[1] // 2], [0, 0, 80], atol=0.05)
@@ -292,6 +294,7 @@ def test_summary_pictures_and_bundle_of_a_turned_ply(runs, tmp_path):
     run = runs[5.0]
     out = summary(run)
     assert out["ply_angle_deg"] == 5.0 and out["case"]["ply_angle_deg"] == 5.0
+    assert out["mirror_asymmetry_deg"] > 5.0
     assert out["nodes"] == len(sheet_grid(SIZE, 20.0, ply_angle_deg=5.0).nodes)
     for key in ("max_shear_deg", "total_wrinkling_strain", "min_wrinkling_strain"):
         assert np.isfinite(out[key])
@@ -310,3 +313,21 @@ def test_cli_refuses_a_ply_angle_on_the_quarter(tmp_path, capsys):
 
     assert main(["form", "hemisphere", "--out", str(tmp_path / "q"), "--ply-angle-deg", "3"]) == 2
     assert "quarter" in capsys.readouterr().err
+
+
+@pytest.mark.skip_in_parallel
+def test_cli_forms_a_turned_ply(tmp_path):
+    pytest.importorskip("dolfinx")
+    import json
+
+    from fenicsx_drape.cli import main
+
+    out = tmp_path / "ply"
+    assert main(["form", "hemisphere", "--out", str(out), "--full", "--ply-angle-deg", "5",
+                 "--cell-mm", "20", "--duration-s", "8", "--no-fields", "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    provenance = json.loads((out / "provenance.json").read_text())
+    assert summary["ply_angle_deg"] == 5.0 and provenance["case"]["ply_angle_deg"] == 5.0
+    assert summary["nodes"] == len(sheet_grid(SIZE, 20.0, ply_angle_deg=5.0).nodes)
+    assert summary["mirror_asymmetry_deg"] > 5.0
+    assert (out / "shear.png").exists() and (out / "bundle" / "bundle.toml").exists()

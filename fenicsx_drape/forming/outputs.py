@@ -3,8 +3,9 @@
 :func:`form_hemisphere` is the Python twin of ``drape form hemisphere``: it runs the case
 (:func:`~fenicsx_drape.forming.hemisphere.run_hemisphere`) and writes into one folder
 
-- ``summary.json``: max shear angle, total and minimum wrinkling strain, draw-in, nodes,
-  steps, Newton (SNES) iterations, wall time, penetration, and the kinematic drape's max shear;
+- ``summary.json``: max shear angle, total and minimum wrinkling strain, draw-in, the ply
+  angle and the shear's asymmetry under the mirror x → −x, nodes, steps, Newton (SNES)
+  iterations, wall time, penetration, and the kinematic drape's max shear;
 - ``fields.xdmf`` (+ ``.h5``): displacement, bar strain and stress, wrinkling strain and
   shear angle every 5 mm of travel, for ParaView; ``tools/*.vtk``: the tools at full travel;
 - ``bundle/``: the formed sheet as a forming bundle (``bundle.toml`` and the node positions on
@@ -51,6 +52,7 @@ def summary(run: HemisphereRun, kinematic: FormedGrid | None = None) -> dict:
         "min_wrinkling_strain": float(min(np.nanmin(warp), np.nanmin(weft), 0.0)),
         "draw_in_mm": run.draw_in_mm,
         "ply_angle_deg": run.case.ply_angle_deg,
+        "mirror_asymmetry_deg": g.mirror_asymmetry_deg(),
         "nodes": int(g.present.sum()),
         "steps": run.steps,
         "cutbacks": run.cutbacks,

@@ -176,6 +176,20 @@ class FormedGrid:
                 c[sl] += ok
         return np.divide(s, c, out=np.full_like(s, np.nan), where=c > 0)
 
+    def mirror_asymmetry_deg(self) -> float:
+        """Largest change of the shear magnitude (deg) under the mirror x → −x of the sheet.
+
+        The magnitude at every node (:meth:`shear_nodes`) against its value at the node's
+        mirror image, bilinear in the cells of the tow frame (images are nodes when the tows
+        lie along the edges; images outside the net are left out). 0 for a sheet symmetric in
+        the plane x = 0; a ply at an angle θ is not (issue 6).
+        """
+        g = self.full()
+        γ = np.abs(g.shear_nodes())
+        field = FormedGrid(g.X, np.stack([γ] * 3, axis=-1), False)
+        mirrored = field.sample(g.X[g.present][:, :2] * [-1.0, 1.0])[:, 0]
+        return float(np.nanmax(np.abs(mirrored - γ[g.present])))
+
     def diagonal_path(self) -> tuple[np.ndarray, np.ndarray]:
         """Shear along the diagonal path (Fig. 11a).
 
