@@ -248,7 +248,7 @@ def runs():
     from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
 
     return {θ: run_hemisphere(HemisphereCase(**COARSE, ply_angle_deg=θ), comm=MPI.COMM_SELF)
-            for θ in (0.0, 90.0, 5.0)}
+            for θ in (0.0, 90.0, 5.0, 10.0)}
 
 
 @pytest.mark.skip_in_parallel
@@ -283,6 +283,24 @@ def test_a_small_ply_angle_breaks_the_mirror_symmetry(runs):
     np.testing.assert_allclose(g.x[g.X.shape[0] // 2, g.X.shape[1] // 2], [0, 0, 80], atol=0.05)
     assert 15.0 < np.nanmax(γ) < 35.0
     assert run.max_penetration_mm < 1.0
+
+
+@pytest.mark.skip_in_parallel
+@pytest.mark.slow
+def test_the_formed_net_turns_with_the_tows(runs):
+    """Tools and holder are axisymmetric: θ enters only through the cells the square keeps.
+
+    At Δ = 20 mm, θ = 5° and 10° keep the same cells of the lattice, so the second run is
+    the first turned by 5°.
+    """
+    a, b = runs[5.0].grid, runs[10.0].grid
+    np.testing.assert_array_equal(a.present, b.present)
+    c, s = np.cos(np.radians(5.0)), np.sin(np.radians(5.0))
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(b.X[b.present], a.X[a.present] @ turn.T, atol=1e-9)
+    np.testing.assert_allclose(b.x[b.present], a.x[a.present] @ turn.T, atol=1e-6)
+    assert np.nanmax(np.abs(b.shear_deg())) == pytest.approx(np.nanmax(np.abs(a.shear_deg())),
+                                                             abs=1e-8)
 
 
 @pytest.mark.skip_in_parallel

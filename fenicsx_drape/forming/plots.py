@@ -25,6 +25,14 @@ def _present(polygons: np.ndarray) -> np.ndarray:
     return np.isfinite(polygons).all(axis=(1, 2))
 
 
+def _axis_labels(grid: FormedGrid) -> tuple[str, str]:
+    """Labels of the x and y axes: the tows lie along them unless the ply is turned."""
+    R = grid.tow_frame()[2]
+    if np.allclose(R, np.eye(2), atol=1e-12):
+        return "x (warp), mm", "y (weft), mm"
+    return f"x, mm (warp at {np.degrees(np.arctan2(R[1, 0], R[0, 0])):.3g}°)", "y, mm"
+
+
 def plot_shear(grid: FormedGrid, path: str | os.PathLike, title: str = "") -> Path:
     """The formed sheet coloured by the cells' shear angle: a 3D view and a top view."""
     import matplotlib.pyplot as plt
@@ -44,15 +52,16 @@ def plot_shear(grid: FormedGrid, path: str | os.PathLike, title: str = "") -> Pa
     lim = np.nanmax(np.abs(full.x[..., :2]))
     top = max(np.nanmax(full.x[..., 2]), 1.0)
     ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(0, top), zticks=np.linspace(0, top, 3).round())
-    ax.set_xlabel("x (warp), mm", labelpad=8)
-    ax.set_ylabel("y (weft), mm", labelpad=8)
+    xlabel, ylabel = _axis_labels(full)
+    ax.set_xlabel(xlabel, labelpad=8)
+    ax.set_ylabel(ylabel, labelpad=8)
     ax.set_box_aspect((1, 1, max(top / (2 * lim), 0.15)))
     ax.view_init(elev=28, azim=-60)
     ax2 = fig.add_subplot(1, 2, 2)
     ax2.add_collection(PolyCollection(cells[:, :, :2], facecolors=cmap(norm(γ)),
                                       edgecolors="k", linewidths=0.15))
-    ax2.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel="x (warp), mm",
-            ylabel="y (weft), mm", title="top view")
+    ax2.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel=xlabel, ylabel=ylabel,
+            title="top view")
     fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax2,
                  label="shear angle (deg)")
     fig.suptitle(title or f"shear angle, max {γ.max():.1f}°")
@@ -81,8 +90,8 @@ def plot_wrinkling(grid: FormedGrid, path: str | os.PathLike, title: str = "") -
                            norm=plt.Normalize(low, 0.0), linewidths=1.6)
     ax.add_collection(lines)
     lim = np.nanmax(np.abs(x[..., :2]))
-    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel="x (warp), mm",
-           ylabel="y (weft), mm")
+    xlabel, ylabel = _axis_labels(full)
+    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel=xlabel, ylabel=ylabel)
     fig.colorbar(lines, ax=ax, label="Green-Lagrange wrinkling strain")
     ax.set_title(title or f"wrinkled tows (min {ε.min():.3f}, total "
                           f"{100 * grid.total_wrinkling_strain():.2f} %)")
