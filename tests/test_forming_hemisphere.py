@@ -139,3 +139,19 @@ def test_serial_and_parallel_runs_agree():
     assert parallel.problem.sheet.num_nodes_global == serial.grid.X[..., 0].size
     np.testing.assert_allclose(parallel.grid.x, serial.grid.x, atol=1e-3)
     assert parallel.max_penetration_mm == pytest.approx(serial.max_penetration_mm, rel=1e-3)
+
+
+@pytest.mark.skip_in_parallel
+def test_a_run_that_cannot_finish_raises_or_returns_how_far_it_got():
+    """One Newton iteration per step cannot converge: SolverError, or the last state."""
+    from fenicsx_drape.errors import SolverError
+
+    case = HemisphereCase(cell_mm=30.0, duration_s=8.0)
+    starved = SolverOptions(snes_atol=1e-6, snes_max_it=1)
+    with pytest.raises(SolverError, match="cannot be cut"):
+        run_hemisphere(case, options=starved, comm=MPI.COMM_SELF)
+    run = run_hemisphere(case, options=starved, comm=MPI.COMM_SELF, allow_incomplete=True)
+    assert "cannot be cut" in run.stopped
+    assert 0.0 <= run.travel_mm < case.tools.travel_mm
+    assert run.cutbacks >= 10  # halved down to dt / 1024
+    np.testing.assert_allclose(run.grid.x[..., 2].max(), 0.0, atol=1e-6 + run.travel_mm)

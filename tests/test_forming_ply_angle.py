@@ -218,6 +218,27 @@ def test_bending_energy_of_a_curved_turned_net():
     assert energy == pytest.approx(0.5 * np.sum(k * second**2), rel=1e-10)
 
 
+@pytest.mark.parallel
+@pytest.mark.parametrize("θ", [0.0, 7.0])
+def test_tows_of_the_clipped_net_add_up_to_its_area(θ):
+    """Each cell owns half of each of its four sides: Σ n_t = 2 l_t Δ × cells (edge halves)."""
+    pytest.importorskip("dolfinx")
+    from mpi4py import MPI
+
+    from fenicsx_drape.fe import TrussProblem, truss_sheet
+    from fenicsx_drape.model import default_model
+
+    sheet = truss_sheet(SIZE, 20.0, ply_angle_deg=θ)
+    problem = TrussProblem(sheet, default_model())
+    kinds, tows = problem._bars()
+    total = MPI.COMM_WORLD.allreduce(tows[(kinds == WARP) | (kinds == WEFT)].sum())
+    n_cells = int(sheet.grid.cells.sum())
+    l_t = problem.options.tows_per_mm
+    assert total == pytest.approx(2 * l_t * sheet.grid.cell_mm * n_cells, rel=1e-12)
+    if θ:
+        assert n_cells < 144  # the ragged edge has lost cells: its bars are edge bars
+
+
 # -- hemisphere runs (coarse: Δ = 20 mm, 8 s) ---------------------------------------------
 
 

@@ -17,18 +17,24 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         "the ledger of versions)")
     parser.add_argument("--no-fit", action="store_true",
                         help="compare the model as given, without fitting its parameters")
+    parser.add_argument("--forming-cell-mm", type=float, default=10.0, metavar="MM",
+                        help="unit cell of the forming simulations (default 10 mm, the paper's)")
 
 
 def run(args: argparse.Namespace) -> int:
     """Fit, compare, write the outputs and print the summary; returns the exit status."""
     from fenicsx_drape.bundle import load_bundle
     from fenicsx_drape.compare import compare, write_compare
+    from fenicsx_drape.forming_compare import resolution
     from fenicsx_drape.model import default_model, load_model
 
     bundle = load_bundle(args.bundle)
     model = load_model(args.model) if args.model else default_model()
-    result = compare(bundle, model, fit=not args.no_fit,
-                     progress=lambda line: print(line, file=sys.stderr))
+    if not args.forming_cell_mm > 0:
+        raise DrapeInputError(f"--forming-cell-mm {args.forming_cell_mm} must be > 0 (mm)")
+    with resolution(args.forming_cell_mm):
+        result = compare(bundle, model, fit=not args.no_fit,
+                         progress=lambda line: print(line, file=sys.stderr))
     if not result.tests:
         raise DrapeInputError(f"{args.bundle}: nothing to compare")
     write_compare(result, bundle, args.out, model_path=args.model)

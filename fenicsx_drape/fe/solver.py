@@ -184,17 +184,21 @@ class TrussProblem:
         kinds[tags.indices[owned]] = tags.values[owned]
         if (kinds == 0).any():
             raise DrapeInputError("the sheet has bars without a kind tag")
-        # n_t = l_t Δ (NOTES.md: the printed l_t/Δ is a typo); half on edge tows.
+        # n_t = l_t Δ (NOTES.md: the printed l_t/Δ is a typo); half on edge tows, the tow
+        # bars with a unit cell on one side only (sheet edges, symmetry edges, ragged edges
+        # of a clipped net).
         tows = np.full(n, opts.tows_per_mm * self.sheet.cell_mm)
         if grid is None:
             return kinds, tows
         nodes = mesh.geometry.dofmaps[0][:n]
-        mid = mesh.geometry.x[nodes].mean(axis=1)
-        ij = grid.grid_coordinates(mid)
-        j, i = np.round(ij[:, 1]), np.round(ij[:, 0])
-        edge = ((kinds == WARP) & ((j == 0) | (j == grid.ny))) | (
-            (kinds == WEFT) & ((i == 0) | (i == grid.nx)))
-        tows[edge] *= opts.edge_tow_factor
+        ij = grid.grid_coordinates(mesh.geometry.x[nodes].mean(axis=1))
+        lo, near = np.floor(ij).astype(int), np.rint(ij).astype(int)
+        cells = np.pad(grid.cells, 1).astype(int)  # cell (a, b) at [a + 1, b + 1]
+        sides = np.where(
+            kinds == WARP,  # warp bar (i, j): cells (i, j - 1) and (i, j)
+            cells[lo[:, 0] + 1, near[:, 1]] + cells[lo[:, 0] + 1, near[:, 1] + 1],
+            cells[near[:, 0], lo[:, 1] + 1] + cells[near[:, 0] + 1, lo[:, 1] + 1])
+        tows[((kinds == WARP) | (kinds == WEFT)) & (sides == 1)] *= opts.edge_tow_factor
         return kinds, tows
 
     def nodes(self, where: Where) -> np.ndarray:

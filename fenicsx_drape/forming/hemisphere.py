@@ -37,7 +37,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fenicsx_drape.errors import ParameterError
+from fenicsx_drape.errors import ParameterError, SolverError
 from fenicsx_drape.forming.contact import PenaltyContact
 from fenicsx_drape.forming.holder import BlankHolder
 from fenicsx_drape.forming.post import FormedGrid
@@ -100,6 +100,12 @@ class HemisphereRun:
     draw_in_mm: dict[str, float]  # inward displacement of the sheet edge (mid-side, corner)
     contact: list[PenaltyContact]
     holder: BlankHolder
+    stopped: str | None = None  # why the run stopped short of full travel (allow_incomplete)
+
+    @property
+    def travel_mm(self) -> float:
+        """Punch travel reached (mm): the full travel unless the run stopped short."""
+        return self.case.speed_mm_per_s * self.problem.t
 
 
 def contact_stiffness(model, options, factor: float = 1.0) -> float:
@@ -110,7 +116,8 @@ def contact_stiffness(model, options, factor: float = 1.0) -> float:
 
 def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None, *,
                    progress: Callable[[str], None] | None = None,
-                   on_step: Callable[[object], None] | None = None, comm=None) -> HemisphereRun:
+                   on_step: Callable[[object], None] | None = None, comm=None,
+                   allow_incomplete: bool = False) -> HemisphereRun:
     """Form the hemisphere: build the sheet, tools and terms, then step to full travel.
 
     Args:
@@ -120,6 +127,8 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
         progress: Called with a line of text after every load step (rank 0 only).
         on_step: Called with the problem after every converged step (e.g. field output).
         comm: MPI communicator (default ``COMM_WORLD``).
+        allow_incomplete: When a step fails at the smallest step, return the sheet at the
+            last converged step (``stopped`` says why) instead of raising ``SolverError``.
 
     Returns:
         The formed sheet and the run's statistics.
@@ -164,18 +173,27 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
                      f"{travel:6.2f} mm  Newton {step.iterations:2d}  {state}")
 
     dt = case.step_mm / case.speed_mm_per_s
-    run = problem.run(case.duration_s, dt, dt_max_s=dt, easy_iterations=15, progress=report,
-                      on_step=on_step)
+    stopped = None
+    try:
+        problem.run(case.duration_s, dt, dt_max_s=dt, easy_iterations=15, progress=report,
+                    on_step=on_step)
+    except SolverError as error:
+        if not allow_incomplete:
+            raise
+        stopped = str(error)
     res = problem.results()
     grid = FormedGrid(res.X, res.x, case.quarter)
     x = problem.positions()[: problem.num_owned]
     t = problem.t
     depth = max((float(c.penetration(x, t).max(initial=0.0)) for c in contact), default=0.0)
+    converged = [s.converged for s in problem.steps]
     return HemisphereRun(
-        case=case, grid=grid, problem=problem, steps=len(run.accepted), cutbacks=run.cutbacks,
-        iterations=run.iterations, wall_time_s=time.perf_counter() - start,
+        case=case, grid=grid, problem=problem, steps=sum(converged),
+        cutbacks=len(converged) - sum(converged),
+        iterations=sum(s.iterations for s in problem.steps),
+        wall_time_s=time.perf_counter() - start,
         max_penetration_mm=comm.allreduce(depth, op=MPI.MAX), draw_in_mm=draw_in(grid),
-        contact=contact, holder=holder)
+        contact=contact, holder=holder, stopped=stopped)
 
 
 def sheet_normal(contact: list[PenaltyContact], near_mm: float = 3.0):
