@@ -592,6 +592,11 @@ def summary(report: dict[str, Any]) -> str:
         lines.append(f"    {c['explanation']}")
     lines += [f"not testable from these tests: {u['effect']} ({u['reason']})"
               for u in report["untestable"]]
+    for label, tests in report.get("metrics", {}).items():
+        for test, m in tests.items():
+            if "stopped_at_travel_mm" in m:
+                lines.append(f"note: {label} could not form {test} to full travel (stopped at "
+                             f"{m['stopped_at_travel_mm']:.1f} mm); compared as far as it got")
     lines.append(f"missing_effect: {report['missing_effect']}")
     lines.append(report["conclusion"])
     return "\n".join(lines)
