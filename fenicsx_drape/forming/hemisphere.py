@@ -9,9 +9,9 @@ in :mod:`fenicsx_drape.forming.outputs`.
 An optional initial ply angle θ (``ply_angle_deg``, issue 6; the paper blames small angle
 variations for its asymmetric part) turns the tow net by θ inside the square sheet, whose
 edges stay along x and y: the net is clipped to the square cell by cell (a ragged edge,
-:func:`~fenicsx_drape.fe.grid.sheet_grid`), on the full sheet only. The solver gives the
-bars of the ragged edge a full strip of tows (its ``edge_tow_factor`` is applied to the
-lattice's edges only); the bending stencils and the post-processing see the ragged edge.
+:func:`~fenicsx_drape.fe.grid.sheet_grid`), on the full sheet only. Its tow bars with a
+cell on one side only carry half a strip of tows, as on a straight edge; the bending
+stencils and the post-processing see the ragged edge too.
 
 The parts of the model that are not the truss itself:
 
