@@ -462,7 +462,8 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
         if np.abs(trial - p).max() < XTOL:
             break
         r_new, J_new = evaluate(trial)
-        say(f"  forming fit {iteration + 1}: {dict(zip(names, np.round(trial, 4)))}, "
+        say(f"  forming fit {iteration + 1}: "
+            f"{ {n: round(float(v), 4) for n, v in zip(names, trial)} }, "
             f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
         if r_new @ r_new >= r @ r:
             break

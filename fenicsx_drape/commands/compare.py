@@ -51,6 +51,14 @@ def summary(result) -> str:
     for c in result.tests:
         lines.append(f"{c.id:<16} {c.rmse:>8.3g} {c.unit:<1} {c.mean_abs:>8.3g} {c.unit:<1} "
                      f"{c.percent:>6.1f} {c.noise:>8.3g} {c.unit:<1} {c.normalised:>10.2f}")
+    for test_id, m in (result.metrics or {}).items():
+        line = (f"{test_id}: mean distance {m['mean_distance_mm']:.2f} mm "
+                f"({m['percent_of_displacement']:.1f} % of the mean node displacement)")
+        if "shear_rmse_deg" in m:
+            line += f", shear error {m['shear_rmse_deg']:.2f}° RMS"
+        if "stopped_at_travel_mm" in m:
+            line += f"; stopped at {m['stopped_at_travel_mm']:.1f} mm of travel"
+        lines.append(line)
     lines.append(f"normalised error {result.normalised:.3f} (1 = noise floor)")
     lines.append("where the error sits:")
     for e in result.where():
