@@ -155,3 +155,21 @@ def test_a_run_that_cannot_finish_raises_or_returns_how_far_it_got():
     assert 0.0 <= run.travel_mm < case.tools.travel_mm
     assert run.cutbacks >= 10  # halved down to dt / 1024
     np.testing.assert_allclose(run.grid.x[..., 2].max(), 0.0, atol=1e-6 + run.travel_mm)
+
+
+@pytest.mark.parametrize("with_tool_friction", [False, True])
+def test_the_jacobian_is_symmetric_unless_tool_friction_acts(with_tool_friction):
+    """run_hemisphere factors with a symmetric LDLᵀ when the Jacobian is symmetric."""
+    model = default_model()
+    if with_tool_friction:
+        model = model.with_effects("tool_friction")
+    run = run_hemisphere(HemisphereCase(cell_mm=30.0, duration_s=8.0), model)
+    A = run.problem._A
+    asymmetry = A.copy().transpose()  # in place, on the copy
+    asymmetry.axpy(-1.0, A)
+    relative = asymmetry.norm() / A.norm()
+    pc = run.problem.snes.getKSP().getPC().getType()
+    if with_tool_friction:
+        assert relative > 1e-6 and pc == "lu"  # the friction tangent is not symmetric
+    else:
+        assert relative < 1e-12 and pc == "cholesky"

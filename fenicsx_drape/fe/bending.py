@@ -156,3 +156,11 @@ class TowBending:
         values = y.array_r.copy()
         y.destroy()
         return values
+
+    def energy(self, u: PETSc.Vec) -> float:
+        """The bending energy ½ uᵀ K u (N mm) of the displacement ``u``, over all ranks."""
+        y = self.matrix.createVecLeft()
+        self.matrix.mult(u, y)
+        value = 0.5 * y.dot(u)
+        y.destroy()
+        return value

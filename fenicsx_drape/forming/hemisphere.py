@@ -141,13 +141,18 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
 
     case = case or HemisphereCase()
     model = model or default_model()
-    options = options or SolverOptions(snes_atol=1e-6)
+    μ_t = float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
+    if options is None:
+        # The Jacobian is symmetric unless tool friction or the shear-tension coupling acts:
+        # a symmetric (indefinite LDLᵀ) factorisation then costs about 20 % less time.
+        symmetric = μ_t == 0.0 and "shear_tension_coupling" not in model.effects
+        options = SolverOptions(snes_atol=1e-6,
+                                petsc_options={"pc_type": "cholesky"} if symmetric else {})
     comm = comm or MPI.COMM_WORLD
     tools = case.tools
     start = time.perf_counter()
 
     k = contact_stiffness(model, options, case.penalty_factor)
-    μ_t = float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
     slip = float(model.parameters.get("tool_slip_mm", 0.1))
     contact = [PenaltyContact(tools.punch(case.duration_s), k, friction=μ_t,
                               slip_regularisation_mm=slip)]
