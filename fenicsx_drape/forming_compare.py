@@ -228,8 +228,9 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
             results = _in_workers(list(todo.values()))
         for k, (X, x, stopped_mm) in zip(todo, results):
             if len(_cache) >= _CACHE_SIZE:
-                _stopped.pop(next(iter(_cache)), None)
-                _cache.pop(next(iter(_cache)))
+                oldest = next(iter(_cache))
+                del _cache[oldest]
+                _stopped.pop(oldest, None)
             _cache[k] = FormedGrid(X, x, True)
             if stopped_mm is not None:
                 _stopped[k] = stopped_mm

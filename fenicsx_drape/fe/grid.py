@@ -104,15 +104,20 @@ class TrussGrid:
         c = np.pad(self.cells, 1)
         return c[:-1, :-1] | c[1:, :-1] | c[:-1, 1:] | c[1:, 1:]
 
-    def tow_bars(self) -> tuple[np.ndarray, np.ndarray]:
-        """Masks of the warp bars (nx, ny + 1) and weft bars (nx + 1, ny) of the sheet.
+    def tow_bar_cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """Cells (0, 1 or 2) beside each warp bar (nx, ny + 1) and weft bar (nx + 1, ny).
 
-        Warp bar (i, j) joins nodes (i, j)-(i + 1, j), weft bar (i, j) nodes (i, j)-(i, j + 1);
-        a tow bar is a side of a cell of the sheet.
+        One on an edge of the sheet. Warp bar (i, j) joins nodes (i, j)-(i + 1, j), weft bar
+        (i, j) nodes (i, j)-(i, j + 1).
         """
-        cj = np.pad(self.cells, ((0, 0), (1, 1)))
-        ci = np.pad(self.cells, ((1, 1), (0, 0)))
-        return cj[:, :-1] | cj[:, 1:], ci[:-1] | ci[1:]
+        cj = np.pad(self.cells, ((0, 0), (1, 1))).astype(int)
+        ci = np.pad(self.cells, ((1, 1), (0, 0))).astype(int)
+        return cj[:, :-1] + cj[:, 1:], ci[:-1] + ci[1:]
+
+    def tow_bars(self) -> tuple[np.ndarray, np.ndarray]:
+        """Masks of the warp bars (nx, ny + 1) and weft bars (nx + 1, ny): sides of cells."""
+        warp, weft = self.tow_bar_cells()
+        return warp > 0, weft > 0
 
     def _flat(self, mask: np.ndarray) -> np.ndarray:
         """A lattice mask (nx + 1, ny + 1) in the order of the lattice indices."""

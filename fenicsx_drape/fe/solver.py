@@ -192,13 +192,13 @@ class TrussProblem:
             return kinds, tows
         nodes = mesh.geometry.dofmaps[0][:n]
         ij = grid.grid_coordinates(mesh.geometry.x[nodes].mean(axis=1))
-        lo, near = np.floor(ij).astype(int), np.rint(ij).astype(int)
-        cells = np.pad(grid.cells, 1).astype(int)  # cell (a, b) at [a + 1, b + 1]
-        sides = np.where(
-            kinds == WARP,  # warp bar (i, j): cells (i, j - 1) and (i, j)
-            cells[lo[:, 0] + 1, near[:, 1]] + cells[lo[:, 0] + 1, near[:, 1] + 1],
-            cells[near[:, 0], lo[:, 1] + 1] + cells[near[:, 0] + 1, lo[:, 1] + 1])
-        tows[((kinds == WARP) | (kinds == WEFT)) & (sides == 1)] *= opts.edge_tow_factor
+        lo, near = np.floor(ij).astype(int), np.rint(ij).astype(int)  # a bar's (i, j)
+        warp, weft = kinds == WARP, kinds == WEFT
+        warp_cells, weft_cells = grid.tow_bar_cells()
+        sides = np.zeros(n, dtype=int)
+        sides[warp] = warp_cells[lo[warp, 0], near[warp, 1]]
+        sides[weft] = weft_cells[near[weft, 0], lo[weft, 1]]
+        tows[sides == 1] *= opts.edge_tow_factor
         return kinds, tows
 
     def nodes(self, where: Where) -> np.ndarray:

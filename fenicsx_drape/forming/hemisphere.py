@@ -137,6 +137,7 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
 
     from fenicsx_drape.fe.mesh import truss_sheet
     from fenicsx_drape.fe.solver import SolverOptions, TrussProblem
+    from fenicsx_drape.fe.stepping import RunReport
     from fenicsx_drape.model import default_model
 
     case = case or HemisphereCase()
@@ -191,12 +192,10 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
     x = problem.positions()[: problem.num_owned]
     t = problem.t
     depth = max((float(c.penetration(x, t).max(initial=0.0)) for c in contact), default=0.0)
-    converged = [s.converged for s in problem.steps]
+    run = RunReport(problem.steps)  # every attempt, also when the run stopped short
     return HemisphereRun(
-        case=case, grid=grid, problem=problem, steps=sum(converged),
-        cutbacks=len(converged) - sum(converged),
-        iterations=sum(s.iterations for s in problem.steps),
-        wall_time_s=time.perf_counter() - start,
+        case=case, grid=grid, problem=problem, steps=len(run.accepted), cutbacks=run.cutbacks,
+        iterations=run.iterations, wall_time_s=time.perf_counter() - start,
         max_penetration_mm=comm.allreduce(depth, op=MPI.MAX), draw_in_mm=draw_in(grid),
         contact=contact, holder=holder, stopped=stopped)
 
