@@ -12,8 +12,8 @@ One call per task::
 from fenicsx_drape.fe.grid import TrussGrid, read_grid, sheet_grid, write_grid
 from fenicsx_drape.fe.mesh import Sheet, load_sheet, truss_mesh, truss_sheet
 from fenicsx_drape.fe.output import FieldWriter, Results, grid_points, write_grid_csv
-from fenicsx_drape.fe.solver import SolverOptions, StepReport, TrussProblem
-from fenicsx_drape.fe.stepping import RunReport, run
+from fenicsx_drape.fe.solver import SolverOptions, TrussProblem
+from fenicsx_drape.fe.stepping import RunReport, StepReport, run
 
 __all__ = [
     "FieldWriter",

@@ -35,6 +35,7 @@ from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
 from fenicsx_drape.fe.state import MaterialState, StrainError
+from fenicsx_drape.fe.stepping import StepReport, run
 from fenicsx_drape.materials.base import MaterialLaw
 
 _ids = itertools.count()
@@ -72,17 +73,6 @@ class SolverOptions:
             if not getattr(self, name) >= 0:
                 raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be "
                                       ">= 0")
-
-
-@dataclasses.dataclass(frozen=True)
-class StepReport:
-    """How one load step went."""
-
-    time_s: float  # time at the end of the step
-    dt_s: float  # step length
-    converged: bool
-    iterations: int  # SNES (Newton) iterations
-    reason: str  # SNES converged/diverged reason
 
 
 _REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
@@ -455,8 +445,6 @@ class TrussProblem:
 
     def run(self, duration_s: float, dt_s: float, **kwargs):
         """Step to ``t + duration_s`` with adaptive steps; see :func:`~.stepping.run`."""
-        from fenicsx_drape.fe.stepping import run
-
         return run(self, self.t + duration_s, dt_s, **kwargs)
 
     # -- forces and results -------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Load stepping with cut-back: adaptive time steps around :meth:`TrussProblem.step`.
+"""Load stepping with cut-back: adaptive time steps around a problem's ``step(t)``.
 
 A step whose Newton solve fails is reverted (the laws' and nodal terms' history stay at the last
 converged step), halved and retried; after ``easy_iterations`` or fewer Newton iterations the
@@ -14,11 +14,36 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 
 from fenicsx_drape.errors import SolverError
-from fenicsx_drape.fe.solver import StepReport, TrussProblem
+
+
+@dataclasses.dataclass(frozen=True)
+class StepReport:
+    """How one load step went."""
+
+    time_s: float  # time at the end of the step
+    dt_s: float  # step length
+    converged: bool
+    iterations: int  # SNES (Newton) iterations
+    reason: str  # SNES converged/diverged reason
+
+
+class Steppable(Protocol):
+    """What load stepping drives: a problem at its last converged time ``t``.
+
+    :class:`~fenicsx_drape.fe.solver.TrussProblem` is one; this module does not import it,
+    so the solver may import the stepping and not the other way round.
+    """
+
+    t: float  # time (s) of the last converged step
+    comm: Any  # MPI communicator (save_state gathers the nodes over it)
+
+    def step(self, t: float) -> StepReport:
+        """Solve one step to time ``t`` (s); revert to the last converged state on failure."""
 
 
 @dataclasses.dataclass
@@ -43,10 +68,10 @@ class RunReport:
         return sum(s.iterations for s in self.steps)
 
 
-def run(problem: TrussProblem, t_end: float, dt_s: float, *, dt_min_s: float | None = None,
+def run(problem: Steppable, t_end: float, dt_s: float, *, dt_min_s: float | None = None,
         dt_max_s: float | None = None, growth: float = 1.5, easy_iterations: int = 5,
         progress: Callable[[StepReport], None] | None = None,
-        on_step: Callable[[TrussProblem], None] | None = None,
+        on_step: Callable[[Steppable], None] | None = None,
         failure_dir: str | os.PathLike | None = None) -> RunReport:
     """Step ``problem`` from its current time to ``t_end`` (s).
 
@@ -99,7 +124,7 @@ def run(problem: TrussProblem, t_end: float, dt_s: float, *, dt_min_s: float | N
     return report
 
 
-def save_state(problem: TrussProblem, folder: str | os.PathLike | None = None) -> Path:
+def save_state(problem: Steppable, folder: str | os.PathLike | None = None) -> Path:
     """Save the node positions of the last converged state as ``state.npz`` (rank 0 writes).
 
     The file holds ``time_s`` and ``X``, ``x``: the reference and current positions (mm) of
