@@ -12,9 +12,9 @@
 import sys
 import time
 
-from fenicsx_drape.diagnose import diagnose
+from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
+from fenicsx_drape.diagnosis.diagnose import diagnose
 from fenicsx_drape.model import Model, default_parameters
-from fenicsx_drape.synthetic import bias_test, synthetic_bundle, tensile_test
 
 rows = int(sys.argv[1]) if len(sys.argv) > 1 else 150
 effects = ("rate_dependence", "strain_dependent_viscosity", "decrimping", "tow_buckling",

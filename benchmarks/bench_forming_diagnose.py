@@ -16,9 +16,9 @@ cores), the forming runs it made, the verdict and the errors.
 
 import time
 
-from fenicsx_drape import forming_compare as fc
-from fenicsx_drape.bundle import Bundle
-from fenicsx_drape.diagnose import diagnose
+from fenicsx_drape.diagnosis import forming_kind as fc
+from fenicsx_drape.diagnosis.diagnose import diagnose
+from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model
 
 CANDIDATES = ["tow_buckling", "tool_friction", "shear_tension_coupling"]

@@ -22,11 +22,11 @@
 import sys
 from pathlib import Path
 
-from fenicsx_drape.compare import compare, write_compare
-from fenicsx_drape.diagnose import diagnose, summary, write_diagnosis
-from fenicsx_drape.ledger import history, table
+from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
+from fenicsx_drape.diagnosis.compare import compare, write_compare
+from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
+from fenicsx_drape.diagnosis.ledger import history, table
 from fenicsx_drape.model import Model, default_parameters
-from fenicsx_drape.synthetic import bias_test, synthetic_bundle, tensile_test
 
 here = Path(__file__).resolve().parent
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else here.parent / "results" / "demo_diagnosis"

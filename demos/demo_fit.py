@@ -14,10 +14,10 @@
 import sys
 from pathlib import Path
 
-from fenicsx_drape.bundle import load_bundle
-from fenicsx_drape.fit import fit, write_fit
+from fenicsx_drape.calibration.fit import fit, write_fit
+from fenicsx_drape.calibration.sensitivity import format_table
+from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import default_model, default_parameters
-from fenicsx_drape.sensitivity import format_table
 
 # %% [markdown]
 # Load the bundle; the loader validates every file and reports what it kept or derived.

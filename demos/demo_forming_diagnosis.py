@@ -20,10 +20,10 @@ Pictures for a report: ``OUT/compare/residual_hemisphere.png`` (baseline error m
 import sys
 from pathlib import Path
 
-from fenicsx_drape import forming_compare as fc
-from fenicsx_drape.bundle import Bundle, load_bundle, write_bundle
-from fenicsx_drape.compare import evaluate, write_compare
-from fenicsx_drape.diagnose import diagnose, summary, write_diagnosis
+from fenicsx_drape.diagnosis import forming_kind as fc
+from fenicsx_drape.diagnosis.compare import evaluate, write_compare
+from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
+from fenicsx_drape.measurements.bundle import Bundle, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
 
 CANDIDATES = ["tow_buckling", "tool_friction", "shear_tension_coupling"]

@@ -9,8 +9,8 @@
 
 from pathlib import Path
 
+from fenicsx_drape.calibration.synthetic import standard_tests, synthetic_bundle
 from fenicsx_drape.model import default_model
-from fenicsx_drape.synthetic import standard_tests, synthetic_bundle
 
 NOISE_REL = 0.02  # noise standard deviation: 2 % of the peak force of each test
 SEED = 2007

@@ -10,15 +10,15 @@ __version__ = "0.1.0"
 
 # The public API, imported on first use so that ``drape --help`` stays fast and the NumPy
 # parts work without DOLFINx. ``fit``, ``compare`` and ``diagnose`` are modules of the same
-# names: call them as ``from fenicsx_drape.fit import fit`` (a package attribute would be
-# replaced by the submodule on its first import).
+# names: call them as ``from fenicsx_drape.calibration.fit import fit`` (a package attribute
+# would be replaced by the submodule on its first import).
 _LAZY = {
     "Model": "fenicsx_drape.model",
     "default_model": "fenicsx_drape.model",
     "load_model": "fenicsx_drape.model",
-    "load_bundle": "fenicsx_drape.bundle",
-    "synthetic_bundle": "fenicsx_drape.synthetic",
-    "history": "fenicsx_drape.ledger",
+    "load_bundle": "fenicsx_drape.measurements.bundle",
+    "synthetic_bundle": "fenicsx_drape.calibration.synthetic",
+    "history": "fenicsx_drape.diagnosis.ledger",
 }
 
 __all__ = ["__version__", *sorted(_LAZY)]

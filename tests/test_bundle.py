@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fenicsx_drape.bundle import BundleError, derived_tows, load_bundle, write_bundle
+from fenicsx_drape.measurements.bundle import BundleError, derived_tows, load_bundle, write_bundle
 
 TOML = """\
 # a small bundle

@@ -6,8 +6,9 @@ import json
 import numpy as np
 import pytest
 
+from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
 from fenicsx_drape.cli import main
-from fenicsx_drape.compare import (
+from fenicsx_drape.diagnosis.compare import (
     Comparison,
     Region,
     _knees,
@@ -18,9 +19,8 @@ from fenicsx_drape.compare import (
     trends,
     where,
 )
+from fenicsx_drape.measurements.noise import noise_from_sd, noise_from_second_differences
 from fenicsx_drape.model import Model, default_parameters, load_model
-from fenicsx_drape.noise import noise_from_sd, noise_from_second_differences
-from fenicsx_drape.synthetic import bias_test, synthetic_bundle, tensile_test
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])

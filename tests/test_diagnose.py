@@ -7,8 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
 from fenicsx_drape.cli import main
-from fenicsx_drape.diagnose import (
+from fenicsx_drape.diagnosis.diagnose import (
     EVIDENCE_THRESHOLD,
     _without_rows,
     candidate_names,
@@ -18,7 +19,6 @@ from fenicsx_drape.diagnose import (
 )
 from fenicsx_drape.effects import EFFECTS
 from fenicsx_drape.model import Model, default_parameters
-from fenicsx_drape.synthetic import bias_test, synthetic_bundle, tensile_test
 
 COUPON = ("rate_dependence", "strain_dependent_viscosity", "decrimping", "tow_buckling")
 PLUGIN = Path(__file__).parents[1] / "demos" / "user_laws" / "power_law_viscosity.py"

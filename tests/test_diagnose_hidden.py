@@ -11,9 +11,9 @@ seed; one case per effect runs in the normal suite, the others are marked ``slow
 
 import pytest
 
-from fenicsx_drape.diagnose import ADEQUATE, diagnose
+from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
+from fenicsx_drape.diagnosis.diagnose import ADEQUATE, diagnose
 from fenicsx_drape.model import Model, default_parameters
-from fenicsx_drape.synthetic import bias_test, synthetic_bundle, tensile_test
 
 COUPON = ("rate_dependence", "strain_dependent_viscosity", "decrimping", "tow_buckling")
 

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from fenicsx_drape.diagnose import ADEQUATE, diagnose
+from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
+from fenicsx_drape.diagnosis.diagnose import ADEQUATE, diagnose
 from fenicsx_drape.model import Model, default_parameters
-from fenicsx_drape.synthetic import bias_test, synthetic_bundle, tensile_test
 
 COUPON = ("rate_dependence", "strain_dependent_viscosity", "decrimping", "tow_buckling")
 PLUGIN = Path(__file__).parents[1] / "demos" / "user_laws" / "power_law_viscosity.py"

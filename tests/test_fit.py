@@ -7,11 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from fenicsx_drape.bundle import Test, load_bundle
+from fenicsx_drape.calibration.fit import fit, simulate, write_fit
+from fenicsx_drape.calibration.synthetic import (
+    bias_test,
+    standard_tests,
+    synthetic_bundle,
+    tensile_test,
+)
 from fenicsx_drape.cli import main
-from fenicsx_drape.fit import fit, simulate, write_fit
+from fenicsx_drape.measurements.bundle import Test, load_bundle
 from fenicsx_drape.model import Model, default_model, load_model
-from fenicsx_drape.synthetic import bias_test, standard_tests, synthetic_bundle, tensile_test
 
 # Two materials other than Table 2: a stiffer, more viscous prepreg and a softer, more fluid
 # one (every parameter differs from Table 2 by a factor 1.3-2).

@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from fenicsx_drape import forming_compare as fc
-from fenicsx_drape.bundle import Bundle, Test
-from fenicsx_drape.compare import KINDS, compare_tests, normalised_error
+from fenicsx_drape.diagnosis import forming_kind as fc
+from fenicsx_drape.diagnosis.compare import KINDS, compare_tests, normalised_error
 from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.measurements.bundle import Bundle, Test
 
 SETUP = {"punch_radius_mm": 60.0, "fillet_radius_mm": 20.0, "holder_opening_mm": 170.0,
          "sheet_mm": 240.0, "travel_mm": 80.0, "duration_s": 40.0, "holder_force_N": 133.0,
@@ -88,7 +88,7 @@ def test_regions_partition_the_part_and_shares_sum_to_the_error():
     shifted = truth.copy()
     shifted[regions[0].rows] += 2.0
     (c,) = compare_tests([test], {"dome": shifted})
-    from fenicsx_drape.compare import locate
+    from fenicsx_drape.diagnosis.compare import locate
 
     entries = {e["says"]: e["share_of_error"] for e in locate([c])}
     assert entries["apex"] == pytest.approx(1.0, abs=0.01)
@@ -117,7 +117,7 @@ def dolfinx():
 
 def _diagnose(truth, baseline, candidates, seed):
     """Data formed and diagnosed on the same coarse 20 mm mesh (4× cheaper than 10 mm)."""
-    from fenicsx_drape.diagnose import diagnose
+    from fenicsx_drape.diagnosis.diagnose import diagnose
 
     with fc.resolution(fc.SCREEN_CELL_MM):
         test = fc.synthetic_forming_test(truth, seed=seed, sd_mm=0.3,
@@ -171,9 +171,9 @@ def test_diagnose_names_hidden_tool_friction_in_a_forming_bundle(dolfinx):
 @pytest.mark.skip_in_parallel
 def test_mixed_bundle_reports_coupons_and_forming_and_names_the_forming_effect(dolfinx):
     """Coupons and a formed part in one bundle; the hidden effect acts on the part only."""
-    from fenicsx_drape.diagnose import diagnose
+    from fenicsx_drape.calibration.synthetic import standard_tests, synthetic_bundle
+    from fenicsx_drape.diagnosis.diagnose import diagnose
     from fenicsx_drape.model import default_model
-    from fenicsx_drape.synthetic import standard_tests, synthetic_bundle
 
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
     coupons = synthetic_bundle(truth, standard_tests(bias_speeds_mm_per_min=(10.0, 160.0)),

@@ -7,9 +7,9 @@ import pytest
 
 pytest.importorskip("dolfinx")
 
-from fenicsx_drape.bundle import load_bundle
 from fenicsx_drape.cli import main
 from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.measurements.bundle import load_bundle
 
 
 @pytest.mark.skip_in_parallel

@@ -5,11 +5,11 @@ import json
 import numpy as np
 import pytest
 
-from fenicsx_drape import ledger
-from fenicsx_drape.bundle import Bundle
 from fenicsx_drape.cli import main
-from fenicsx_drape.compare import CompareResult, Comparison
+from fenicsx_drape.diagnosis import ledger
+from fenicsx_drape.diagnosis.compare import CompareResult, Comparison
 from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import Model
 
 

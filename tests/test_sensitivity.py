@@ -5,10 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from fenicsx_drape.fit import simulate
+from fenicsx_drape.calibration.fit import simulate
+from fenicsx_drape.calibration.sensitivity import format_table, table2, to_csv, uncertainty
+from fenicsx_drape.calibration.synthetic import (
+    bias_test,
+    standard_tests,
+    synthetic_bundle,
+    tensile_test,
+)
 from fenicsx_drape.model import default_model
-from fenicsx_drape.sensitivity import format_table, table2, to_csv, uncertainty
-from fenicsx_drape.synthetic import bias_test, standard_tests, synthetic_bundle, tensile_test
 
 # The paper's Table 2: (tensile error, bias error, tensile force, bias force) sensitivities.
 PAPER = {

@@ -30,10 +30,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose, write the report and print its summary; returns the exit status."""
-    from fenicsx_drape import forming_compare as fc
-    from fenicsx_drape.bundle import load_bundle
-    from fenicsx_drape.diagnose import diagnose, summary, write_diagnosis
+    from fenicsx_drape.diagnosis import forming_kind as fc
+    from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
     from fenicsx_drape.errors import DrapeInputError
+    from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
 
     if not args.forming_cell_mm > 0 or not args.confirm_cell_mm >= 0:

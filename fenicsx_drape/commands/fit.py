@@ -24,10 +24,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Fit, print progress and the errors, write the outputs."""
-    from fenicsx_drape.bundle import load_bundle
-    from fenicsx_drape.fit import fit, write_fit
+    from fenicsx_drape.calibration.fit import fit, write_fit
+    from fenicsx_drape.calibration.sensitivity import format_table
+    from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
-    from fenicsx_drape.sensitivity import format_table
 
     bundle = load_bundle(args.bundle)
     for line in bundle.report().splitlines():

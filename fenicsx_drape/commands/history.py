@@ -15,7 +15,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the table of versions and write the plot; returns the exit status."""
-    from fenicsx_drape.ledger import history, table
+    from fenicsx_drape.diagnosis.ledger import history, table
 
     versions = history(args.dirs, out_dir=args.out)
     print(table(versions))

@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.bundle import Bundle, Test, write_bundle
 from fenicsx_drape.forming.hemisphere import HemisphereCase, HemisphereRun, run_hemisphere
 from fenicsx_drape.forming.kinematic import kinematic_drape
 from fenicsx_drape.forming.plots import plot_paths, plot_shear, plot_wrinkling
 from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.measurements.bundle import Bundle, Test, write_bundle
 from fenicsx_drape.provenance import write_json, write_provenance
 
 FRAME_MM = 5.0  # punch travel between two frames of the field output

@@ -3,7 +3,7 @@
 The definitions are those of the diagnosis contract (``shared/spec/measurements.md``):
 
 - the **noise** of a test is the RMS of its ``force_sd_N`` column, or else a model-free
-  estimate from second differences of its rows (:mod:`fenicsx_drape.noise`);
+  estimate from second differences of its rows (:mod:`fenicsx_drape.measurements.noise`);
 - a test's error is the RMS of ``measured - simulated`` over its rows (N for coupons); its
   **normalised** error is that RMSE over the test's noise, and the bundle's ``normalised`` error
   is ``sqrt(mean over tests of (RMSE / noise)²)`` -- 1.0 is the noise floor;
@@ -36,7 +36,7 @@ import numpy as np
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
-    from fenicsx_drape.bundle import Bundle, Test
+    from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
 # Regions listed in ``where``: those carrying at least this share of the error, at most this
@@ -84,14 +84,14 @@ def register_kind(name: str, kind: Kind) -> None:
 
 
 def _coupon_noise(test: Test) -> tuple[float, str]:
-    from fenicsx_drape.fit import test_noise
+    from fenicsx_drape.calibration.fit import test_noise
 
     _, noise, source = test_noise(test)  # the same noise the fit weighs the rows with
     return noise, source
 
 
 def _coupon_simulate(test: Test, model: Model) -> np.ndarray:
-    from fenicsx_drape.fit import simulate as simulate_coupon
+    from fenicsx_drape.calibration.fit import simulate as simulate_coupon
 
     return simulate_coupon(test, model)
 
@@ -538,15 +538,16 @@ def compare(bundle: Bundle, model: Model, *, fit: bool = True,
     Args:
         bundle: The measurements.
         model: The model (effects and starting parameters).
-        fit: Fit the model's parameters first (coupons: :func:`fenicsx_drape.fit.fit`, then
-            forming: :func:`fenicsx_drape.forming_compare.fit_bundle`).
+        fit: Fit the model's parameters first (coupons:
+            :func:`fenicsx_drape.calibration.fit.fit`, then forming:
+            :func:`fenicsx_drape.diagnosis.forming_kind.fit_bundle`).
         progress: Called with a line of text as the fit proceeds.
 
     Returns:
         How far the model is from each test and where it fails.
     """
     if fit:
-        from fenicsx_drape.forming_compare import fit_bundle
+        from fenicsx_drape.diagnosis.forming_kind import fit_bundle
 
         model = fit_bundle(bundle, model, progress=progress)
     return evaluate(bundle, model)
@@ -633,7 +634,7 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
     Returns:
         The path of ``compare.json``.
     """
-    from fenicsx_drape import ledger
+    from fenicsx_drape.diagnosis import ledger
     from fenicsx_drape.provenance import atomic_write_text, write_json, write_provenance
 
     out = Path(out_dir)
@@ -657,4 +658,4 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
 
 
 # Forming tests register their kind (after this module's names exist: it imports them).
-import fenicsx_drape.forming_compare  # noqa: E402, F401
+import fenicsx_drape.diagnosis.forming_kind  # noqa: E402, F401

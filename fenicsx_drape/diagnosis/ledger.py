@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING, Any
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
-    from fenicsx_drape.bundle import Bundle
-    from fenicsx_drape.compare import CompareResult
+    from fenicsx_drape.diagnosis.compare import CompareResult
+    from fenicsx_drape.measurements.bundle import Bundle
 
 LEDGER = "ledger.jsonl"
 

@@ -38,7 +38,7 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.signal import savgol_filter
 
-from fenicsx_drape.bundle import Test
+from fenicsx_drape.measurements.bundle import Test
 
 
 def hinge_fit(x: np.ndarray, y: np.ndarray, n_breaks: int,

@@ -2,9 +2,10 @@
 
 The procedure follows the diagnosis contract of ``shared/spec/measurements.md``:
 
-1. **Baseline.** The model is fitted to the bundle (:func:`fenicsx_drape.fit.fit`) and compared
-   with every test (:mod:`fenicsx_drape.compare`): per-test RMSE, the noise floor (from
-   ``force_sd_N`` or model-free), ``normalised`` and ``where`` the error sits.
+1. **Baseline.** The model is fitted to the bundle (:func:`fenicsx_drape.calibration.fit.fit`)
+   and compared with every test (:mod:`fenicsx_drape.diagnosis.compare`): per-test RMSE, the
+   noise floor (from ``force_sd_N`` or model-free), ``normalised`` and ``where`` the error
+   sits.
 2. **Candidates.** Every catalogued effect not in the model (:data:`fenicsx_drape.effects.
    EFFECTS`), and every user law the model's plugins register, is a candidate. An effect whose
    prerequisite is missing is tried together with it, under the joined name
@@ -53,7 +54,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.compare import (
+from fenicsx_drape.diagnosis.compare import (
     Comparison,
     compare_tests,
     error_record,
@@ -69,7 +70,7 @@ from fenicsx_drape.compare import (
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
-    from fenicsx_drape.bundle import Bundle, Test
+    from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
 CONTRACT = 2  # version of the diagnosis contract the report follows
@@ -130,7 +131,7 @@ class _Data:
 
 
 def _prepare(bundle: Bundle) -> _Data:
-    from fenicsx_drape.compare import KINDS
+    from fenicsx_drape.diagnosis.compare import KINDS
 
     tests, skipped = prepare(bundle)
     tests = tuple(sorted(tests, key=lambda t: t.id))
@@ -183,7 +184,7 @@ def _without_rows(test: Test, rows: np.ndarray) -> Test:
     The other rows keep their ``force_sd_N``, or get the test's model-free noise estimate,
     so that they weigh in the fit exactly as they do without a ``force_sd_N`` column.
     """
-    from fenicsx_drape.compare import KINDS
+    from fenicsx_drape.diagnosis.compare import KINDS
 
     column = "position_sd_mm" if test.kind == "forming" else "force_sd_N"
     sd = test.column(column)
@@ -201,7 +202,7 @@ def _without_rows(test: Test, rows: np.ndarray) -> Test:
 def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
          parameters: Sequence[str] | None = None, max_iterations: int,
          from_features: bool = False) -> Model:
-    from fenicsx_drape.forming_compare import fit_bundle
+    from fenicsx_drape.diagnosis.forming_kind import fit_bundle
 
     return fit_bundle(bundle, model, tests=tests, parameters=parameters,
                       from_features=from_features, max_iterations=max_iterations)
@@ -209,7 +210,7 @@ def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
 
 def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
     """Every row predicted by the fold that held it out (module doc, 5.)."""
-    from fenicsx_drape.compare import KINDS
+    from fenicsx_drape.diagnosis.compare import KINDS
 
     predicted = {t.id: np.full(np.shape(KINDS[t.kind].measured(t)), np.nan) for t in data.tests}
     tests = {t.id: t for t in data.tests}
@@ -227,7 +228,7 @@ def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
 
 def _costs(data: _Data, model: Model) -> np.ndarray:
     """Squared normalised error of each parameter set of a vectorised ``model``."""
-    from fenicsx_drape.compare import KINDS
+    from fenicsx_drape.diagnosis.compare import KINDS
 
     total = 0.0
     for test in data.tests:
@@ -245,7 +246,7 @@ def _best_start(data: _Data, model: Model, own: Sequence[str], names: Sequence[s
     baseline, while the fit still feels them: exactly zero can leave it no gradient, e.g.
     a Maxwell branch without spring); the curve-feature guess of section 3.2.
     """
-    from fenicsx_drape.fit import initial_guess
+    from fenicsx_drape.calibration.fit import initial_guess
     from fenicsx_drape.model import parameter_info
 
     weak = {n: WEAK * float(model.parameters[n]) for n in own
@@ -295,7 +296,7 @@ def _role_parameters(model: Model, role: str) -> tuple[str, ...]:
 
 def _kind_parameters(model: Model, kind: str) -> tuple[str, ...] | None:
     """The parameters that tests of ``kind`` identify (all active ones for other kinds)."""
-    from fenicsx_drape.fit import BLOCK_ROLE
+    from fenicsx_drape.calibration.fit import BLOCK_ROLE
 
     return _role_parameters(model, BLOCK_ROLE[kind]) if kind in BLOCK_ROLE else None
 
@@ -329,7 +330,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         ``add_effects`` (the effects to add), ``heldout_scheme``, ``significance``,
         ``ranking``, ``trends``, ``conclusion``, ``notes`` and ``seconds``.
     """
-    from fenicsx_drape.compare import KINDS, kind_metrics
+    from fenicsx_drape.diagnosis.compare import KINDS, kind_metrics
     from fenicsx_drape.effects import describe_effect
 
     start = time.perf_counter()
@@ -611,7 +612,7 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     :class:`Report`, ``residual_<test>.png`` (the baseline and the best candidate against
     each test), plus ``provenance.json``.
     """
-    from fenicsx_drape.compare import KINDS, locate, plot_residuals, plot_where, safe_name
+    from fenicsx_drape.diagnosis.compare import KINDS, locate, plot_residuals, plot_where, safe_name
     from fenicsx_drape.provenance import write_json, write_provenance
 
     path = write_json(json_path, report)

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from fenicsx_drape.bundle import Test
+from fenicsx_drape.measurements.bundle import Test
 
 STEP = 0.025  # the paper's +2.5 %
 UNDETERMINED_SD = 0.5  # standard deviation of ln(parameter) above which it is flagged
@@ -34,7 +34,7 @@ CORRELATED = 0.98  # |correlation| above which two estimates are reported as a c
 
 def used_parameters(model) -> tuple[str, ...]:
     """The parameters that shape the model's coupon tests, fixed ones included."""
-    from fenicsx_drape.fit import COUPON_KINDS
+    from fenicsx_drape.calibration.fit import COUPON_KINDS
 
     return dataclasses.replace(model, fixed=()).active_parameters(COUPON_KINDS)
 
@@ -46,7 +46,7 @@ def table2(model, tests: Sequence[Test], names: Sequence[str] | None = None,
     Returns:
         ``{parameter: {kind: {"error": S_error, "force": S_force}}}``.
     """
-    from fenicsx_drape.fit import simulate
+    from fenicsx_drape.calibration.fit import simulate
 
     names = tuple(used_parameters(model) if names is None else names)
     base = np.array([float(model.parameters[n]) for n in names])
@@ -100,7 +100,7 @@ def uncertainty(model, tests: Sequence[Test], names: Sequence[str],
         ``{parameter: {"value", "sd_log", "ci95", "determined", "correlated_with"}}`` and the
         flags as sentences.
     """
-    from fenicsx_drape.fit import _Residuals, _Variables, test_noise
+    from fenicsx_drape.calibration.fit import _Residuals, _Variables, test_noise
 
     if not names:
         return {}, []

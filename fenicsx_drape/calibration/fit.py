@@ -5,7 +5,7 @@ force of every coupon test of a bundle by ``scipy.optimize.least_squares``:
 
 - **residuals**: per row, ``(simulated - measured) / σ_row / √n_test``, with ``σ_row`` the
   row's ``force_sd_N`` or, without it, the model-free noise estimate of the test
-  (:mod:`fenicsx_drape.noise`). The cost is then ``Σ_tests (RMSE / noise)²``: each test
+  (:mod:`fenicsx_drape.measurements.noise`). The cost is then ``Σ_tests (RMSE / noise)²``: each test
   weighs the same whatever its number of rows, and the minimum is the spec's ``normalised``
   error (1.0 = at the noise floor). The paper minimised the mean absolute force error
   instead; that error is reported too (N and %), like its 7.1 N tensile and 0.6 N bias.
@@ -23,12 +23,12 @@ force of every coupon test of a bundle by ``scipy.optimize.least_squares``:
   to its own kind alone costs the other kind at most a fifth of its noise); otherwise all
   parameters are fitted to all tests together. Parameters no test responds to keep their
   starting value and are flagged.
-- **start**: curve features (:mod:`fenicsx_drape.features`), then the best of six variants
-  along the two directions the features leave open (η_o against s_o, s_inf against
+- **start**: curve features (:mod:`fenicsx_drape.calibration.features`), then the best of six
+  variants along the two directions the features leave open (η_o against s_o, s_inf against
   eps_v_bar), judged in one vectorised call; or, with ``initial_guess_from_features=False``,
   the given model's values (a warm start, e.g. a baseline being extended by one effect).
 
-After the fit, :mod:`fenicsx_drape.sensitivity` gives the Table 2 sensitivities and the
+After the fit, :mod:`fenicsx_drape.calibration.sensitivity` gives the Table 2 sensitivities and the
 parameter uncertainties from the Jacobian at the optimum, with flags on parameters the data
 cannot determine. Forming tests are not part of this fit (they are skipped with a note).
 """
@@ -45,9 +45,9 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from fenicsx_drape.bundle import Bundle, Test
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.noise import noise_from_sd, noise_from_second_differences
+from fenicsx_drape.measurements.bundle import Bundle, Test
+from fenicsx_drape.measurements.noise import noise_from_sd, noise_from_second_differences
 
 COUPON_KINDS = ("tensile", "bias_extension")
 # The law role whose parameters each coupon kind identifies (the paper's blocks).
@@ -357,7 +357,7 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str]
 
 def initial_guess(model, tests: Sequence[Test], names: Sequence[str]):
     """``model`` with the parameters ``names`` started from curve features (section 3.2)."""
-    from fenicsx_drape import features
+    from fenicsx_drape.calibration import features
     from fenicsx_drape.model import parameter_info
 
     guess: dict[str, float] = {}
@@ -444,7 +444,7 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
     Returns:
         The :class:`FitResult`.
     """
-    from fenicsx_drape import sensitivity
+    from fenicsx_drape.calibration import sensitivity
     from fenicsx_drape.model import default_model
 
     start = time.perf_counter()
@@ -557,7 +557,7 @@ def write_fit(result: FitResult, out_dir: str | Path) -> Path:
     Files: ``model.toml`` (loadable by ``load_model``), ``report.json``, ``sensitivity.csv``,
     ``fit_<test>.png`` per test (measured vs fitted, residual below), ``provenance.json``.
     """
-    from fenicsx_drape import sensitivity
+    from fenicsx_drape.calibration import sensitivity
     from fenicsx_drape.provenance import atomic_write_text, write_json, write_provenance
 
     out = Path(out_dir)

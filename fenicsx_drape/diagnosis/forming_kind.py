@@ -2,7 +2,8 @@
 
 A forming test (``kind = "forming"``, ``shared/spec/measurements.md``) gives the formed
 positions of the nodes of a grid drawn on the flat sheet. It plugs into
-:mod:`fenicsx_drape.compare` through :func:`~fenicsx_drape.compare.register_kind`:
+:mod:`fenicsx_drape.diagnosis.compare` through
+:func:`~fenicsx_drape.diagnosis.compare.register_kind`:
 
 - **simulation**: the hemisphere is formed (:func:`~fenicsx_drape.forming.hemisphere.
   run_hemisphere`) under the test's conditions (tool sizes, travel, duration, holding force)
@@ -52,13 +53,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.compare import Kind, Region, register_kind
+from fenicsx_drape.diagnosis.compare import Kind, Region, register_kind
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
-    from fenicsx_drape.bundle import Bundle, Test
-    from fenicsx_drape.compare import Comparison
+    from fenicsx_drape.diagnosis.compare import Comparison
     from fenicsx_drape.forming.post import FormedGrid
+    from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
 FULL_CELL_MM = 10.0  # unit cell of the forming runs (mm), the paper's Δ
@@ -168,7 +169,7 @@ def _pool(n: int) -> list:
 
     _workers[:] = [p for p in _workers if p.poll() is None]
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
-    command = [sys.executable, "-c", "from fenicsx_drape.forming_compare import _worker; "
+    command = [sys.executable, "-c", "from fenicsx_drape.diagnosis.forming_kind import _worker; "
                "_worker()"]
     while len(_workers) < n:
         _workers.append(subprocess.Popen(command, stdin=subprocess.PIPE,
@@ -479,10 +480,10 @@ def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = No
     """Fit a model to a bundle that may mix coupon and forming tests.
 
     The coupon tests (when chosen and when some of ``parameters`` act on them) fix the
-    material (:func:`fenicsx_drape.fit.fit`); the forming tests then fit the forming
+    material (:func:`fenicsx_drape.calibration.fit.fit`); the forming tests then fit the forming
     parameters (:func:`fit_forming`) with the material held.
     """
-    from fenicsx_drape.fit import COUPON_KINDS, fit
+    from fenicsx_drape.calibration.fit import COUPON_KINDS, fit
 
     chosen = [t for t in bundle.tests if tests is None or t.id in tests]
     coupon_names = model.active_parameters(COUPON_KINDS)
@@ -507,8 +508,8 @@ def synthetic_forming_test(model: Model, *, test_id: str = "hemisphere",
     ``grid_mm`` (default: the cell), with noise of ``sd_mm`` per coordinate written as the
     ``position_sd_mm`` column; the quarter grid, or the full sheet by symmetry.
     """
-    from fenicsx_drape.bundle import Test
     from fenicsx_drape.forming.hemisphere import HemisphereCase
+    from fenicsx_drape.measurements.bundle import Test
 
     case = HemisphereCase(cell_mm=cell_mm, duration_s=duration_s,
                           holder_force_N=holder_force_N)
@@ -532,7 +533,7 @@ def confirm(bundle: Bundle, report, cell_mm: float = FULL_CELL_MM,
             progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """The screening's baseline and best candidate again on the full mesh (module doc, cost).
 
-    Each model of a diagnosis :class:`~fenicsx_drape.diagnose.Report` keeps its material;
+    Each model of a diagnosis :class:`~fenicsx_drape.diagnosis.diagnose.Report` keeps its material;
     its forming parameters are refitted on cells of ``cell_mm`` and it is compared with the
     forming tests there.
 
@@ -540,7 +541,7 @@ def confirm(bundle: Bundle, report, cell_mm: float = FULL_CELL_MM,
         ``{"cell_mm", label: {"error", "metrics", "forming_parameters"}}`` for the baseline
         and the first-ranked candidate.
     """
-    from fenicsx_drape.compare import compare_tests, error_record
+    from fenicsx_drape.diagnosis.compare import compare_tests, error_record
 
     tests = [t for t in bundle.tests if t.kind == "forming"]
     labels = ["baseline"] + [c["effect"] for c in report["candidates"][:1]]

@@ -1,0 +1,1 @@
+"""Where a model is judged against measurements: compare, diagnose, the ledger of versions."""
