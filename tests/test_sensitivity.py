@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from fenicsx_drape.calibration.fit import simulate
+from fenicsx_drape.calibration.coupons import simulate
 from fenicsx_drape.calibration.sensitivity import format_table, table2, to_csv, uncertainty
 from fenicsx_drape.calibration.synthetic import (
     bias_test,

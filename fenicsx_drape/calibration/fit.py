@@ -3,10 +3,13 @@
 The model's unit-cell solutions (:mod:`fenicsx_drape.unitcell`) are fitted to the measured
 force of every coupon test of a bundle by ``scipy.optimize.least_squares``:
 
+Residuals, variables and Jacobian are those of :mod:`fenicsx_drape.calibration.coupons`
+(shared with the sensitivity analysis):
+
 - **residuals**: per row, ``(simulated - measured) / σ_row / √n_test``, with ``σ_row`` the
   row's ``force_sd_N`` or, without it, the model-free noise estimate of the test
-  (:mod:`fenicsx_drape.measurements.noise`). The cost is then ``Σ_tests (RMSE / noise)²``: each test
-  weighs the same whatever its number of rows, and the minimum is the spec's ``normalised``
+  (:mod:`fenicsx_drape.measurements.noise`). The cost is then ``Σ_tests (RMSE / noise)²``: each
+  test weighs the same whatever its number of rows, and the minimum is the spec's ``normalised``
   error (1.0 = at the noise floor). The paper minimised the mean absolute force error
   instead; that error is reported too (N and %), like its 7.1 N tensile and 0.6 N bias.
 - **variables**: the logarithm of each positive parameter (others are scaled linearly),
@@ -28,8 +31,8 @@ force of every coupon test of a bundle by ``scipy.optimize.least_squares``:
   eps_v_bar), judged in one vectorised call; or, with ``initial_guess_from_features=False``,
   the given model's values (a warm start, e.g. a baseline being extended by one effect).
 
-After the fit, :mod:`fenicsx_drape.calibration.sensitivity` gives the Table 2 sensitivities and the
-parameter uncertainties from the Jacobian at the optimum, with flags on parameters the data
+After the fit, :mod:`fenicsx_drape.calibration.sensitivity` gives the Table 2 sensitivities and
+the parameter uncertainties from the Jacobian at the optimum, with flags on parameters the data
 cannot determine. Forming tests are not part of this fit (they are skipped with a note).
 """
 
@@ -45,13 +48,20 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
+from fenicsx_drape.calibration import features, sensitivity
+from fenicsx_drape.calibration.coupons import (
+    BLOCK_ROLE,
+    COUPON_KINDS,
+    DECADES,
+    FD_STEP,
+    Residuals,
+    Variables,
+    simulate,
+    test_noise,
+)
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements.bundle import Bundle, Test
-from fenicsx_drape.measurements.noise import noise_from_sd, noise_from_second_differences
 
-COUPON_KINDS = ("tensile", "bias_extension")
-# The law role whose parameters each coupon kind identifies (the paper's blocks).
-BLOCK_ROLE = {"tensile": "tow", "bias_extension": "shear"}
 # Cross-effect ratio above which the tow and shear blocks are fitted together: a parameter
 # fitted to its own kind of test (standard deviation ~ 1/effect there, in ln p) then moves the
 # other kind's curves by at most this fraction of their noise.
@@ -59,10 +69,6 @@ COUPLING_THRESHOLD = 0.2
 # A parameter whose change by a factor e moves the simulated tests by less than this fraction
 # of their noise (RMS over the rows, averaged over tests) is one no test responds to.
 RESPONSE_FLOOR = 0.05
-# Forward-difference step in the fitting variables (log parameters): 1e-6 relative.
-FD_STEP = 1e-6
-# Bounds: at most this many decades away from the starting value (within physical bounds).
-DECADES = 4.0
 # Stop when an iteration lowers the cost by less than this fraction (at the noise floor the
 # cost is half the number of tests, so with 100-1000 rows per test 1e-4 is a change of the
 # χ² of the data by 0.03-0.3, below the 1 that matters statistically), or moves
@@ -73,46 +79,6 @@ FTOL = 1e-4
 XTOL = 1e-6
 
 Progress = Callable[[str], None]
-
-
-# --------------------------------------------------------------------------------------------
-# Forward model
-
-
-def simulate(bundle_or_test: Bundle | Test, model) -> np.ndarray | dict[str, np.ndarray]:
-    """Simulated force (N) per row of a coupon test, or a dict of them for a bundle.
-
-    With a model whose parameters are arrays of k values, each test gives an array shaped
-    ``(k, n_rows)``.
-    """
-    if isinstance(bundle_or_test, Bundle):
-        return {t.id: simulate(t, model) for t in bundle_or_test.of_kind(*COUPON_KINDS)}
-    from fenicsx_drape import unitcell
-
-    test = bundle_or_test
-    if test.kind == "tensile":
-        curve = unitcell.tensile(model, test.time_s, test.displacement_mm,
-                                 gauge_length_mm=test.gauge_length_mm,
-                                 conditions=test.conditions)
-    elif test.kind == "bias_extension":
-        curve = unitcell.bias_extension(model, test.time_s, test.displacement_mm,
-                                        length_mm=test.length_mm, width_mm=test.width_mm,
-                                        conditions=test.conditions)
-    else:
-        raise ValueError(f"test {test.id!r}: a {test.kind} test is not a coupon test")
-    # curves are (n_rows,) or (n_rows, k): return one row per parameter set
-    return np.asarray(curve.force_per_tow_N).T * test.tows
-
-
-def test_noise(test: Test) -> tuple[np.ndarray, float, str]:
-    """Per-row noise (N), the test's noise (RMS, N) and its source (spec's definition)."""
-    if test.force_sd_N is not None:
-        return np.asarray(test.force_sd_N), noise_from_sd(test.force_sd_N), "force_sd_N"
-    noise = noise_from_second_differences(test.time_s, test.force_N)
-    if not noise > 0:
-        raise DrapeInputError(f"test {test.id!r}: no noise can be estimated from the force "
-                              "column (give force_sd_N)")
-    return np.full(test.n_rows, noise), noise, "second_differences"
 
 
 # --------------------------------------------------------------------------------------------
@@ -226,80 +192,6 @@ def normalised_error(errors: Mapping[str, TestError]) -> float:
 
 
 # --------------------------------------------------------------------------------------------
-# Fitting variables and residuals
-
-
-@dataclasses.dataclass(frozen=True)
-class _Variables:
-    """Map between parameter values and the optimiser's variables (log or scaled)."""
-
-    names: tuple[str, ...]
-    log: np.ndarray  # bool per name: log-transformed
-    scale: np.ndarray  # linear scale for the others
-    lower: np.ndarray  # bounds in variable space
-    upper: np.ndarray
-
-    @classmethod
-    def make(cls, model, names: Sequence[str]) -> _Variables:
-        from fenicsx_drape.model import parameter_info
-
-        p0 = np.array([float(model.parameters[n]) for n in names])
-        bounds = np.array([parameter_info(n).bounds for n in names], dtype=float)
-        log = (bounds[:, 0] >= 0.0) & (p0 > 0.0)  # a parameter starting at 0 stays linear
-        scale = np.where(log | (p0 == 0.0), 1.0, np.abs(p0))
-        span = 10.0**DECADES
-        lo = np.where(log, np.maximum(bounds[:, 0], p0 / span), bounds[:, 0])
-        hi = np.where(log, np.minimum(bounds[:, 1], p0 * span), bounds[:, 1])
-        with np.errstate(divide="ignore"):
-            lower = np.where(log, np.log(lo), lo / scale)
-            upper = np.where(log, np.log(hi), hi / scale)
-        return cls(tuple(names), log, scale, lower, upper)
-
-    def to_x(self, p: np.ndarray) -> np.ndarray:
-        return np.where(self.log, np.log(np.maximum(p, 1e-300)), p / self.scale)
-
-    def to_p(self, x: np.ndarray) -> np.ndarray:
-        return np.where(self.log, np.exp(x), x * self.scale)
-
-
-class _Residuals:
-    """Weighted residuals of a set of tests as a function of some parameters."""
-
-    def __init__(self, model, tests: Sequence[Test], variables: _Variables):
-        self.model, self.tests, self.v = model, tuple(tests), variables
-        self.weights = []
-        for test in self.tests:
-            sd, _, _ = test_noise(test)
-            self.weights.append(1.0 / (sd * math.sqrt(test.n_rows)))
-        self.evaluations = 0
-
-    def model_at(self, P: np.ndarray):
-        """The model with parameter sets ``P`` (k × n, or n for a single set)."""
-        values = {n: (P[..., j] if P.ndim == 2 else float(P[j]))
-                  for j, n in enumerate(self.v.names)}
-        return self.model.with_parameters(**values)
-
-    def forces(self, P: np.ndarray) -> list[np.ndarray]:
-        model = self.model_at(P)
-        self.evaluations += 1 if P.ndim == 1 else P.shape[0]
-        return [np.atleast_2d(simulate(t, model)) for t in self.tests]
-
-    def residuals_sets(self, X: np.ndarray) -> np.ndarray:
-        """Residual vectors (k × m) for variable sets ``X`` (k × n)."""
-        forces = self.forces(self.v.to_p(X))
-        return np.concatenate([(f - t.force_N) * w for f, t, w
-                               in zip(forces, self.tests, self.weights)], axis=1)
-
-    def jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals at ``x`` and their forward-difference Jacobian (one vectorised call)."""
-        h = FD_STEP * np.maximum(1.0, np.abs(x))
-        h = np.where(x + h > self.v.upper, -h, h)  # step inwards at an upper bound
-        X = np.vstack([x, x + np.diag(h)])
-        R = self.residuals_sets(X)
-        return R[0], ((R[1:] - R[0]) / h[:, None]).T
-
-
-# --------------------------------------------------------------------------------------------
 # Blocks
 
 
@@ -317,8 +209,8 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str]
         The blocks ``(parameter names, tests)``, the parameters no test responds to, and
         notes on the decision.
     """
-    variables = _Variables.make(model, names)
-    res = _Residuals(model, tests, variables)
+    variables = Variables.make(model, names)
+    res = Residuals(model, tests, variables)
     _, J = res.jacobian(variables.to_x(np.array([float(model.parameters[n]) for n in names])))
     kinds = sorted({t.kind for t in tests})
     rows = np.cumsum([0] + [t.n_rows for t in tests])
@@ -357,7 +249,6 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str]
 
 def initial_guess(model, tests: Sequence[Test], names: Sequence[str]):
     """``model`` with the parameters ``names`` started from curve features (section 3.2)."""
-    from fenicsx_drape.calibration import features
     from fenicsx_drape.model import parameter_info
 
     guess: dict[str, float] = {}
@@ -444,7 +335,6 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
     Returns:
         The :class:`FitResult`.
     """
-    from fenicsx_drape.calibration import sensitivity
     from fenicsx_drape.model import default_model
 
     start = time.perf_counter()
@@ -506,8 +396,8 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
 def _fit_block(model, names: Sequence[str], tests: Sequence[Test], max_iterations: int,
                say: Progress):
     """Least-squares fit of ``names`` to ``tests``; returns the model and a record."""
-    variables = _Variables.make(model, names)
-    res = _Residuals(model, tests, variables)
+    variables = Variables.make(model, names)
+    res = Residuals(model, tests, variables)
     x0 = np.clip(variables.to_x(np.array([float(model.parameters[n]) for n in names])),
                  variables.lower, variables.upper)
     # A unit-cell call costs about the same for one parameter set as for n + 1 (its cost is
@@ -557,7 +447,6 @@ def write_fit(result: FitResult, out_dir: str | Path) -> Path:
     Files: ``model.toml`` (loadable by ``load_model``), ``report.json``, ``sensitivity.csv``,
     ``fit_<test>.png`` per test (measured vs fitted, residual below), ``provenance.json``.
     """
-    from fenicsx_drape.calibration import sensitivity
     from fenicsx_drape.provenance import atomic_write_text, write_json, write_provenance
 
     out = Path(out_dir)

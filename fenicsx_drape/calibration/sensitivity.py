@@ -25,6 +25,13 @@ from typing import Any
 
 import numpy as np
 
+from fenicsx_drape.calibration.coupons import (
+    COUPON_KINDS,
+    Residuals,
+    Variables,
+    simulate,
+    test_noise,
+)
 from fenicsx_drape.measurements.bundle import Test
 
 STEP = 0.025  # the paper's +2.5 %
@@ -34,8 +41,6 @@ CORRELATED = 0.98  # |correlation| above which two estimates are reported as a c
 
 def used_parameters(model) -> tuple[str, ...]:
     """The parameters that shape the model's coupon tests, fixed ones included."""
-    from fenicsx_drape.calibration.fit import COUPON_KINDS
-
     return dataclasses.replace(model, fixed=()).active_parameters(COUPON_KINDS)
 
 
@@ -46,8 +51,6 @@ def table2(model, tests: Sequence[Test], names: Sequence[str] | None = None,
     Returns:
         ``{parameter: {kind: {"error": S_error, "force": S_force}}}``.
     """
-    from fenicsx_drape.calibration.fit import simulate
-
     names = tuple(used_parameters(model) if names is None else names)
     base = np.array([float(model.parameters[n]) for n in names])
     P = np.tile(base, (len(names) + 1, 1))
@@ -100,12 +103,10 @@ def uncertainty(model, tests: Sequence[Test], names: Sequence[str],
         ``{parameter: {"value", "sd_log", "ci95", "determined", "correlated_with"}}`` and the
         flags as sentences.
     """
-    from fenicsx_drape.calibration.fit import _Residuals, _Variables, test_noise
-
     if not names:
         return {}, []
-    variables = _Variables.make(model, names)
-    res = _Residuals(model, tests, variables)
+    variables = Variables.make(model, names)
+    res = Residuals(model, tests, variables)
     # statistical weights: 1/σ per row (the fit's 1/√n per test scaling removed)
     res.weights = [1.0 / test_noise(t)[0] for t in tests]
     x = variables.to_x(np.array([float(model.parameters[n]) for n in names]))

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fenicsx_drape.calibration.coupons import simulate
 from fenicsx_drape.measurements.bundle import Bundle, Test, derived_tows, write_bundle
 
 # The paper's material (Table 1): 7.1 tows/cm.
@@ -118,8 +119,6 @@ def synthetic_bundle(model, tests: Sequence[Test], *, noise_sd_N: float | Mappin
     Returns:
         The bundle, with ``force_N`` (noisy) and ``force_sd_N`` columns added.
     """
-    from fenicsx_drape.calibration.fit import simulate
-
     if (noise_sd_N is None) == (noise_rel is None):
         raise ValueError("give exactly one of noise_sd_N (N) and noise_rel (fraction of peak)")
     rng = np.random.default_rng(seed)

@@ -84,14 +84,14 @@ def register_kind(name: str, kind: Kind) -> None:
 
 
 def _coupon_noise(test: Test) -> tuple[float, str]:
-    from fenicsx_drape.calibration.fit import test_noise
+    from fenicsx_drape.calibration.coupons import test_noise
 
     _, noise, source = test_noise(test)  # the same noise the fit weighs the rows with
     return noise, source
 
 
 def _coupon_simulate(test: Test, model: Model) -> np.ndarray:
-    from fenicsx_drape.calibration.fit import simulate as simulate_coupon
+    from fenicsx_drape.calibration.coupons import simulate as simulate_coupon
 
     return simulate_coupon(test, model)
 

@@ -296,7 +296,7 @@ def _role_parameters(model: Model, role: str) -> tuple[str, ...]:
 
 def _kind_parameters(model: Model, kind: str) -> tuple[str, ...] | None:
     """The parameters that tests of ``kind`` identify (all active ones for other kinds)."""
-    from fenicsx_drape.calibration.fit import BLOCK_ROLE
+    from fenicsx_drape.calibration.coupons import BLOCK_ROLE
 
     return _role_parameters(model, BLOCK_ROLE[kind]) if kind in BLOCK_ROLE else None
 

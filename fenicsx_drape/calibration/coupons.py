@@ -1,0 +1,150 @@
+"""Coupon tests as least squares sees them: shared by the fit and the sensitivity analysis.
+
+- **forward model** (:func:`simulate`): the unit-cell solutions
+  (:mod:`fenicsx_drape.unitcell`) give the force per row of a tensile or bias-extension test,
+  for one parameter set or, vectorised, for k sets at once;
+- **noise** (:func:`test_noise`): the per-row standard deviation a row is weighed with, from
+  ``force_sd_N`` or the model-free estimate of :mod:`fenicsx_drape.measurements.noise`;
+- **variables** (:class:`Variables`): the logarithm of each positive parameter (others scaled
+  linearly), bounded by the physical range and :data:`DECADES` decades around the start;
+- **residuals** (:class:`Residuals`): ``(simulated - measured) / σ_row / √n_test`` and their
+  forward-difference Jacobian, all perturbed sets in one vectorised call per test.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.measurements.bundle import Bundle, Test
+from fenicsx_drape.measurements.noise import noise_from_sd, noise_from_second_differences
+
+COUPON_KINDS = ("tensile", "bias_extension")
+# The law role whose parameters each coupon kind identifies (the paper's blocks).
+BLOCK_ROLE = {"tensile": "tow", "bias_extension": "shear"}
+# Forward-difference step in the fitting variables (log parameters): 1e-6 relative.
+FD_STEP = 1e-6
+# Bounds: at most this many decades away from the starting value (within physical bounds).
+DECADES = 4.0
+
+
+# --------------------------------------------------------------------------------------------
+# Forward model
+
+
+def simulate(bundle_or_test: Bundle | Test, model) -> np.ndarray | dict[str, np.ndarray]:
+    """Simulated force (N) per row of a coupon test, or a dict of them for a bundle.
+
+    With a model whose parameters are arrays of k values, each test gives an array shaped
+    ``(k, n_rows)``.
+    """
+    if isinstance(bundle_or_test, Bundle):
+        return {t.id: simulate(t, model) for t in bundle_or_test.of_kind(*COUPON_KINDS)}
+    from fenicsx_drape import unitcell
+
+    test = bundle_or_test
+    if test.kind == "tensile":
+        curve = unitcell.tensile(model, test.time_s, test.displacement_mm,
+                                 gauge_length_mm=test.gauge_length_mm,
+                                 conditions=test.conditions)
+    elif test.kind == "bias_extension":
+        curve = unitcell.bias_extension(model, test.time_s, test.displacement_mm,
+                                        length_mm=test.length_mm, width_mm=test.width_mm,
+                                        conditions=test.conditions)
+    else:
+        raise ValueError(f"test {test.id!r}: a {test.kind} test is not a coupon test")
+    # curves are (n_rows,) or (n_rows, k): return one row per parameter set
+    return np.asarray(curve.force_per_tow_N).T * test.tows
+
+
+def test_noise(test: Test) -> tuple[np.ndarray, float, str]:
+    """Per-row noise (N), the test's noise (RMS, N) and its source (spec's definition)."""
+    if test.force_sd_N is not None:
+        return np.asarray(test.force_sd_N), noise_from_sd(test.force_sd_N), "force_sd_N"
+    noise = noise_from_second_differences(test.time_s, test.force_N)
+    if not noise > 0:
+        raise DrapeInputError(f"test {test.id!r}: no noise can be estimated from the force "
+                              "column (give force_sd_N)")
+    return np.full(test.n_rows, noise), noise, "second_differences"
+
+
+# --------------------------------------------------------------------------------------------
+# Fitting variables and residuals
+
+
+@dataclasses.dataclass(frozen=True)
+class Variables:
+    """Map between parameter values and the optimiser's variables (log or scaled)."""
+
+    names: tuple[str, ...]
+    log: np.ndarray  # bool per name: log-transformed
+    scale: np.ndarray  # linear scale for the others
+    lower: np.ndarray  # bounds in variable space
+    upper: np.ndarray
+
+    @classmethod
+    def make(cls, model, names: Sequence[str]) -> Variables:
+        """The variables of the parameters ``names`` of ``model``, bounded around its values."""
+        from fenicsx_drape.model import parameter_info
+
+        p0 = np.array([float(model.parameters[n]) for n in names])
+        bounds = np.array([parameter_info(n).bounds for n in names], dtype=float)
+        log = (bounds[:, 0] >= 0.0) & (p0 > 0.0)  # a parameter starting at 0 stays linear
+        scale = np.where(log | (p0 == 0.0), 1.0, np.abs(p0))
+        span = 10.0**DECADES
+        lo = np.where(log, np.maximum(bounds[:, 0], p0 / span), bounds[:, 0])
+        hi = np.where(log, np.minimum(bounds[:, 1], p0 * span), bounds[:, 1])
+        with np.errstate(divide="ignore"):
+            lower = np.where(log, np.log(lo), lo / scale)
+            upper = np.where(log, np.log(hi), hi / scale)
+        return cls(tuple(names), log, scale, lower, upper)
+
+    def to_x(self, p: np.ndarray) -> np.ndarray:
+        """Parameter values to variables."""
+        return np.where(self.log, np.log(np.maximum(p, 1e-300)), p / self.scale)
+
+    def to_p(self, x: np.ndarray) -> np.ndarray:
+        """Variables to parameter values."""
+        return np.where(self.log, np.exp(x), x * self.scale)
+
+
+class Residuals:
+    """Weighted residuals of a set of tests as a function of some parameters."""
+
+    def __init__(self, model, tests: Sequence[Test], variables: Variables):
+        self.model, self.tests, self.v = model, tuple(tests), variables
+        self.weights = []
+        for test in self.tests:
+            sd, _, _ = test_noise(test)
+            self.weights.append(1.0 / (sd * math.sqrt(test.n_rows)))
+        self.evaluations = 0
+
+    def model_at(self, P: np.ndarray):
+        """The model with parameter sets ``P`` (k × n, or n for a single set)."""
+        values = {n: (P[..., j] if P.ndim == 2 else float(P[j]))
+                  for j, n in enumerate(self.v.names)}
+        return self.model.with_parameters(**values)
+
+    def forces(self, P: np.ndarray) -> list[np.ndarray]:
+        """Simulated forces (k × n_rows per test) for parameter sets ``P``."""
+        model = self.model_at(P)
+        self.evaluations += 1 if P.ndim == 1 else P.shape[0]
+        return [np.atleast_2d(simulate(t, model)) for t in self.tests]
+
+    def residuals_sets(self, X: np.ndarray) -> np.ndarray:
+        """Residual vectors (k × m) for variable sets ``X`` (k × n)."""
+        forces = self.forces(self.v.to_p(X))
+        return np.concatenate([(f - t.force_N) * w for f, t, w
+                               in zip(forces, self.tests, self.weights)], axis=1)
+
+    def jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals at ``x`` and their forward-difference Jacobian (one vectorised call)."""
+        h = FD_STEP * np.maximum(1.0, np.abs(x))
+        h = np.where(x + h > self.v.upper, -h, h)  # step inwards at an upper bound
+        X = np.vstack([x, x + np.diag(h)])
+        R = self.residuals_sets(X)
+        return R[0], ((R[1:] - R[0]) / h[:, None]).T
