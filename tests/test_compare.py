@@ -10,15 +10,14 @@ from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, ten
 from fenicsx_drape.cli import main
 from fenicsx_drape.diagnosis.compare import (
     Comparison,
-    Region,
-    _knees,
-    _loading_phases,
     evaluate,
     locate,
     normalised_error,
     trends,
     where,
 )
+from fenicsx_drape.diagnosis.coupon_kind import _knees, _loading_phases
+from fenicsx_drape.diagnosis.kinds import Region
 from fenicsx_drape.measurements.noise import noise_from_sd, noise_from_second_differences
 from fenicsx_drape.model import Model, default_parameters, load_model
 

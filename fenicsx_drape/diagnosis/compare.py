@@ -11,20 +11,21 @@ The definitions are those of the diagnosis contract (``shared/spec/measurements.
   ``k`` (``n_k`` rows, noise ``s_k``, ``n`` tests) contributes ``r_i² / (s_k² n_k n)``, and these
   contributions sum to ``normalised²``.
 
-The regions are the ranges of the variables that matter physically: per test, ranges of the
-kinematic strain that separate the mechanisms of the paper's section 3.2 (bias extension:
-initial tow bending, friction plateau, lock-up; tension: decrimping, then tow stretching),
-the phases of the loading history (loading, hold, unloading), and across tests of one kind,
-each value of a condition that varies (``speed_mm_per_min``, ``temperature_C``, ...).
+The regions are the ranges of the variables that matter physically: per test, those its
+kind gives (coupons, :mod:`~fenicsx_drape.diagnosis.coupon_kind`: ranges of the kinematic
+strain that separate the mechanisms of the paper's section 3.2, and the phases of the loading
+history; forming, :mod:`~fenicsx_drape.diagnosis.forming_kind`: parts of the formed part),
+and across tests of one kind, each value of a condition that varies (``speed_mm_per_min``,
+``temperature_C``, ...).
 
-Test kinds plug in through :func:`register_kind` (measured values, noise, simulation,
-regions): coupons are built in; forming tests join through the same entry point.
+This module knows no test kind by name: each test's kind is looked up in the registry
+(:mod:`fenicsx_drape.diagnosis.kinds`), which says how to measure, simulate, fit and picture
+it. The built-in kinds register when :mod:`fenicsx_drape.diagnosis` is imported.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -33,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fenicsx_drape.diagnosis.kinds import KINDS, Region
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
@@ -43,173 +45,6 @@ if TYPE_CHECKING:
 # many (the complete list is in ``CompareResult.regions``).
 WHERE_MIN_SHARE = 0.05
 WHERE_MAX_ENTRIES = 12
-
-
-@dataclasses.dataclass(frozen=True)
-class Region:
-    """A range of one variable over the rows of one test."""
-
-    variable: str  # e.g. "diagonal_strain", "time_s"
-    range: tuple[float, float]  # (low, high) of the variable over the region's rows
-    says: str  # what the region is physically, e.g. "lock-up"
-    rows: np.ndarray  # boolean mask over the test's rows
-
-
-@dataclasses.dataclass(frozen=True)
-class Kind:
-    """How one test kind is compared: what is measured, its noise, how it is simulated."""
-
-    unit: str  # unit of the compared quantity ("N" for coupons, "mm" for forming)
-    measured: Callable[[Test], np.ndarray]  # the measured values, one per row
-    noise: Callable[[Test], tuple[float, str]]  # (noise in ``unit``, source)
-    simulate: Callable[[Test, Model], np.ndarray]  # the model's values, one per row
-    regions: Callable[[Test], list[Region]]  # physically meaningful regions of the rows
-    abscissa: Callable[[Test], tuple[str, np.ndarray]]  # (name, values) to plot against
-    # Optional: the kind's own measures of a comparison (test, simulated values, model) and
-    # its own picture (as :func:`plot_residuals`).
-    metrics: Callable[[Test, np.ndarray, Model], dict[str, Any]] | None = None
-    plot: Callable[..., Path] | None = None
-
-
-KINDS: dict[str, Kind] = {}
-
-
-def register_kind(name: str, kind: Kind) -> None:
-    """Make tests of kind ``name`` comparable (and diagnosable)."""
-    KINDS[name] = kind
-
-
-# --------------------------------------------------------------------------------------------
-# Coupon tests: tensile and bias extension
-
-
-def _coupon_noise(test: Test) -> tuple[float, str]:
-    from fenicsx_drape.calibration.coupons import test_noise
-
-    _, noise, source = test_noise(test)  # the same noise the fit weighs the rows with
-    return noise, source
-
-
-def _coupon_simulate(test: Test, model: Model) -> np.ndarray:
-    from fenicsx_drape.calibration.coupons import simulate as simulate_coupon
-
-    return simulate_coupon(test, model)
-
-
-def coupon_strain(test: Test) -> tuple[str, np.ndarray]:
-    """The kinematic strain of a coupon's rows: ``("tow_strain" | "diagonal_strain", values)``.
-
-    Tension: the Green-Lagrange strain of the loaded tows, ``e + e²/2`` with
-    ``e = displacement / gauge length`` (eq. 13). Bias extension: the diagonal strain of the
-    gauge region, eq. 21. Both follow from the measured displacement alone.
-    """
-    if test.kind == "tensile":
-        e = test.displacement_mm / test.gauge_length_mm
-        return "tow_strain", e + 0.5 * e**2
-    from fenicsx_drape.unitcell import bias_diagonal_strain
-
-    return "diagonal_strain", np.asarray(
-        bias_diagonal_strain(test.displacement_mm, test.length_mm, test.width_mm))
-
-
-def _loading_phases(time_s: np.ndarray, displacement_mm: np.ndarray) -> np.ndarray:
-    """Per row: +1 loading, 0 hold, -1 unloading (the crosshead motion ending at the row)."""
-    rate = np.diff(displacement_mm) / np.diff(time_s)
-    tol = 1e-3 * np.abs(rate).max() if rate.size and np.abs(rate).max() > 0 else 0.0
-    phase = np.where(rate > tol, 1, np.where(rate < -tol, -1, 0))
-    return np.concatenate([phase[:1], phase])
-
-
-def _window_lines(x: np.ndarray, y: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
-    """Slope and intercept of the least-squares line over every ``w`` consecutive points."""
-    x0 = x.mean()
-    xc = x - x0
-
-    def sums(a):
-        c = np.concatenate([[0.0], np.cumsum(a)])
-        return c[w:] - c[:-w]
-
-    sx, sy, sxx, sxy = sums(xc), sums(y), sums(xc * xc), sums(xc * y)
-    slope = (w * sxy - sx * sy) / np.maximum(w * sxx - sx**2, 1e-300)
-    intercept = (sy - slope * sx) / w - slope * x0
-    return slope, intercept
-
-
-def _knees(x: np.ndarray, y: np.ndarray, pattern: str) -> tuple[float, ...]:
-    """Where the mechanisms of a loading curve ``y(x)`` hand over, by tangent intersections.
-
-    The classic onset construction: straight lines fitted over windows of 1/8 of the rows at
-    the start and at the end of the curve and, for ``pattern = "stiff-soft-stiff"`` (bias
-    extension), over the window of least slope in between (the plateau); each knee is where
-    two neighbouring lines cross. A knee is NaN (its two regions merge) when the stiffer line
-    is not at least 1.5 times as steep as the softer one. ``pattern = "soft-stiff"`` (tension)
-    has one knee, between the start and end lines.
-    """
-    order = np.argsort(x, kind="stable")
-    x, y = x[order], y[order]
-    w = max(5, x.size // 8)
-    slope, intercept = _window_lines(x, y, w)
-    lines = [(slope[0], intercept[0])]
-    if pattern == "stiff-soft-stiff":
-        j = int(np.argmin(slope[1:-1])) + 1 if slope.size > 2 else 0
-        lines.append((slope[j], intercept[j]))
-    lines.append((slope[-1], intercept[-1]))
-    knees = []
-    for i, ((s1, b1), (s2, b2)) in enumerate(itertools.pairwise(lines)):
-        stiff, soft = (s1, s2) if (pattern == "stiff-soft-stiff" and i == 0) else (s2, s1)
-        if stiff > 0 and stiff > 1.5 * max(soft, 0.0):
-            knees.append(float(np.clip((b1 - b2) / (s2 - s1), x[0], x[-1])))
-        else:
-            knees.append(math.nan)
-    return tuple(knees)
-
-
-# The strain ranges of each coupon kind, in order, and the shape of its loading curve:
-# bias extension stiff - soft - stiff, tension soft - stiff (section 3.2).
-_STRAIN_REGIONS = {
-    "bias_extension": (("initial tow bending", "friction plateau", "lock-up"),
-                       "stiff-soft-stiff"),
-    "tensile": (("decrimping", "tow stretching"), "soft-stiff"),
-}
-
-
-def _coupon_regions(test: Test) -> list[Region]:
-    variable, strain = coupon_strain(test)
-    phases = _loading_phases(test.time_s, test.displacement_mm)
-    regions: list[Region] = []
-    names, pattern = _STRAIN_REGIONS[test.kind]
-    loading = phases > 0
-    knees = _knees(strain[loading], test.force_N[loading], pattern) \
-        if loading.sum() >= 24 else (math.nan,) * (len(names) - 1)
-    # A missing knee merges its two regions; the merged region keeps the later name.
-    edges, kept = [-math.inf], []
-    for name, knee in zip(names, knees):
-        if not math.isnan(knee) and knee > edges[-1]:
-            kept.append(name)
-            edges.append(knee)
-    kept.append(names[-1])
-    edges.append(math.inf)
-    for name, lo, hi in zip(kept, edges[:-1], edges[1:]):
-        rows = (strain >= lo) & (strain < hi)
-        if rows.any():
-            regions.append(Region(variable, (float(strain[rows].min()),
-                                             float(strain[rows].max())), name, rows))
-    if len(np.unique(phases)) > 1:
-        labels = {1: "loading", 0: "hold (relaxation)", -1: "unloading"}
-        starts = np.flatnonzero(np.diff(phases, prepend=phases[0] + 1) != 0)
-        for start, stop in zip(starts, [*starts[1:], len(phases)]):
-            rows = np.zeros(len(phases), bool)
-            rows[start:stop] = True
-            t = test.time_s[rows]
-            regions.append(Region("time_s", (float(t[0]), float(t[-1])),
-                                  labels[int(phases[start])], rows))
-    return regions
-
-
-_COUPON = Kind(unit="N", measured=lambda test: test.force_N, noise=_coupon_noise,
-               simulate=_coupon_simulate, regions=_coupon_regions, abscissa=coupon_strain)
-register_kind("tensile", _COUPON)
-register_kind("bias_extension", _COUPON)
 
 
 # --------------------------------------------------------------------------------------------
@@ -538,19 +373,51 @@ def compare(bundle: Bundle, model: Model, *, fit: bool = True,
     Args:
         bundle: The measurements.
         model: The model (effects and starting parameters).
-        fit: Fit the model's parameters first (coupons:
-            :func:`fenicsx_drape.calibration.fit.fit`, then forming:
-            :func:`fenicsx_drape.diagnosis.forming_kind.fit_bundle`).
+        fit: Fit the model's parameters first (:func:`fit_bundle`: each test kind's fit).
         progress: Called with a line of text as the fit proceeds.
 
     Returns:
         How far the model is from each test and where it fails.
     """
     if fit:
-        from fenicsx_drape.diagnosis.forming_kind import fit_bundle
-
         model = fit_bundle(bundle, model, progress=progress)
     return evaluate(bundle, model)
+
+
+def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
+               parameters: Sequence[str] | None = None, max_iterations: int = 200,
+               from_features: bool = True, progress: Callable[[str], None] | None = None
+               ) -> Model:
+    """Fit a model to a bundle that may mix test kinds: each kind's own ``fit`` in turn.
+
+    The fits of the kinds present among the chosen tests run once each, in registration
+    order: the coupons (registered first) fix the material
+    (:func:`fenicsx_drape.calibration.fit.fit`), then the forming tests fit the friction
+    coefficients with the material held (:func:`~fenicsx_drape.diagnosis.forming_kind.
+    fit_forming`). A kind without a fit leaves the model as it is.
+
+    Args:
+        bundle: The measurements.
+        model: The model (effects and starting parameters).
+        tests: Only these test ids; all tests when None.
+        parameters: Only these parameters (of the kinds that fit them); all when None.
+        max_iterations: Cap on each optimiser's iterations.
+        from_features: Start the coupon fit from curve features (section 3.2) rather than
+            the model's values.
+        progress: Called with a line of text as the fits proceed.
+
+    Returns:
+        The fitted model.
+    """
+    present = {t.kind for t in bundle.tests if tests is None or t.id in tests}
+    done: list[Callable[..., Model]] = []
+    for name, kind in KINDS.items():
+        if name in present and kind.fit is not None and kind.fit not in done:
+            done.append(kind.fit)
+            model = kind.fit(bundle, model, tests=tests, parameters=parameters,
+                             max_iterations=max_iterations, from_features=from_features,
+                             progress=progress)
+    return model
 
 
 # --------------------------------------------------------------------------------------------
@@ -656,6 +523,3 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
                      parameters=record["model"]["parameters"], seed=None)
     return path
 
-
-# Forming tests register their kind (after this module's names exist: it imports them).
-import fenicsx_drape.diagnosis.forming_kind  # noqa: E402, F401

@@ -58,6 +58,7 @@ from fenicsx_drape.diagnosis.compare import (
     Comparison,
     compare_tests,
     error_record,
+    fit_bundle,
     locate,
     model_record,
     noise_record,
@@ -67,6 +68,7 @@ from fenicsx_drape.diagnosis.compare import (
     trends,
     where,
 )
+from fenicsx_drape.diagnosis.kinds import KINDS
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
@@ -131,8 +133,6 @@ class _Data:
 
 
 def _prepare(bundle: Bundle) -> _Data:
-    from fenicsx_drape.diagnosis.compare import KINDS
-
     tests, skipped = prepare(bundle)
     tests = tuple(sorted(tests, key=lambda t: t.id))
     canonical = dataclasses.replace(bundle, tests=tests)
@@ -184,9 +184,7 @@ def _without_rows(test: Test, rows: np.ndarray) -> Test:
     The other rows keep their ``force_sd_N``, or get the test's model-free noise estimate,
     so that they weigh in the fit exactly as they do without a ``force_sd_N`` column.
     """
-    from fenicsx_drape.diagnosis.compare import KINDS
-
-    column = "position_sd_mm" if test.kind == "forming" else "force_sd_N"
+    column = KINDS[test.kind].sd_column
     sd = test.column(column)
     if sd is None:
         sd = np.full(test.n_rows, KINDS[test.kind].noise(test)[0])
@@ -202,16 +200,12 @@ def _without_rows(test: Test, rows: np.ndarray) -> Test:
 def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
          parameters: Sequence[str] | None = None, max_iterations: int,
          from_features: bool = False) -> Model:
-    from fenicsx_drape.diagnosis.forming_kind import fit_bundle
-
     return fit_bundle(bundle, model, tests=tests, parameters=parameters,
                       from_features=from_features, max_iterations=max_iterations)
 
 
 def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
     """Every row predicted by the fold that held it out (module doc, 5.)."""
-    from fenicsx_drape.diagnosis.compare import KINDS
-
     predicted = {t.id: np.full(np.shape(KINDS[t.kind].measured(t)), np.nan) for t in data.tests}
     tests = {t.id: t for t in data.tests}
     for i, fold in enumerate(data.folds):
@@ -228,8 +222,6 @@ def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
 
 def _costs(data: _Data, model: Model) -> np.ndarray:
     """Squared normalised error of each parameter set of a vectorised ``model``."""
-    from fenicsx_drape.diagnosis.compare import KINDS
-
     total = 0.0
     for test in data.tests:
         values = np.atleast_2d(simulate([test], model)[test.id])
@@ -330,7 +322,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         ``add_effects`` (the effects to add), ``heldout_scheme``, ``significance``,
         ``ranking``, ``trends``, ``conclusion``, ``notes`` and ``seconds``.
     """
-    from fenicsx_drape.diagnosis.compare import KINDS, kind_metrics
+    from fenicsx_drape.diagnosis.compare import kind_metrics
     from fenicsx_drape.effects import describe_effect
 
     start = time.perf_counter()
@@ -612,7 +604,7 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     :class:`Report`, ``residual_<test>.png`` (the baseline and the best candidate against
     each test), plus ``provenance.json``.
     """
-    from fenicsx_drape.diagnosis.compare import KINDS, locate, plot_residuals, plot_where, safe_name
+    from fenicsx_drape.diagnosis.compare import locate, plot_residuals, plot_where, safe_name
     from fenicsx_drape.provenance import write_json, write_provenance
 
     path = write_json(json_path, report)

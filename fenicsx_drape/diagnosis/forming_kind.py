@@ -2,8 +2,8 @@
 
 A forming test (``kind = "forming"``, ``shared/spec/measurements.md``) gives the formed
 positions of the nodes of a grid drawn on the flat sheet. It plugs into
-:mod:`fenicsx_drape.diagnosis.compare` through
-:func:`~fenicsx_drape.diagnosis.compare.register_kind`:
+:mod:`fenicsx_drape.diagnosis.compare` through the registry of test kinds
+(:func:`~fenicsx_drape.diagnosis.kinds.register_kind`; compare never imports it):
 
 - **simulation**: the hemisphere is formed (:func:`~fenicsx_drape.forming.hemisphere.
   run_hemisphere`) under the test's conditions (tool sizes, travel, duration, holding force)
@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.compare import Kind, Region, register_kind
+from fenicsx_drape.diagnosis.kinds import Kind, Region, register_kind
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
@@ -473,29 +473,16 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     return model.with_parameters(**{n: float(v) for n, v in zip(names, p)})
 
 
-def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
-               parameters: Sequence[str] | None = None, max_iterations: int = 200,
-               from_features: bool = True,
-               progress: Callable[[str], None] | None = None) -> Model:
-    """Fit a model to a bundle that may mix coupon and forming tests.
+def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
+         parameters: Sequence[str] | None = None, max_iterations: int = MAX_ITERATIONS,
+         from_features: bool = True, progress: Callable[[str], None] | None = None) -> Model:
+    """The forming kind's fit (:class:`~fenicsx_drape.diagnosis.kinds.FitHook`).
 
-    The coupon tests (when chosen and when some of ``parameters`` act on them) fix the
-    material (:func:`fenicsx_drape.calibration.fit.fit`); the forming tests then fit the forming
-    parameters (:func:`fit_forming`) with the material held.
+    The forming parameters only (:func:`fit_forming`), the material held as the coupons (or
+    the model) left it: ``parameters`` and ``from_features`` concern the material.
     """
-    from fenicsx_drape.calibration.fit import COUPON_KINDS, fit
-
-    chosen = [t for t in bundle.tests if tests is None or t.id in tests]
-    coupon_names = model.active_parameters(COUPON_KINDS)
-    if any(t.kind in COUPON_KINDS for t in chosen) and (
-            parameters is None or set(parameters) & set(coupon_names)):
-        model = fit(bundle, model, tests=tests, parameters=parameters,
-                    initial_guess_from_features=from_features, max_iterations=max_iterations,
-                    progress=progress, analyse=False).model
-    if any(t.kind == "forming" for t in chosen):
-        model = fit_forming(bundle, model, tests=tests, progress=progress,
-                            max_iterations=max_iterations)
-    return model
+    return fit_forming(bundle, model, tests=tests, progress=progress,
+                       max_iterations=max_iterations)
 
 
 def synthetic_forming_test(model: Model, *, test_id: str = "hemisphere",
@@ -605,5 +592,5 @@ def plot_error_map(comparisons: Mapping[str, Comparison], test: Test, path: Path
 
 FORMING = Kind(unit="mm", measured=lambda test: measured_positions(test).ravel(), noise=noise,
                simulate=simulate, regions=part_regions, abscissa=_abscissa,
-               metrics=metrics, plot=plot_error_map)
+               sd_column="position_sd_mm", fit=_fit, metrics=metrics, plot=plot_error_map)
 register_kind("forming", FORMING)

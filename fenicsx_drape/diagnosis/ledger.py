@@ -16,18 +16,31 @@ import json
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
-    from fenicsx_drape.diagnosis.compare import CompareResult
     from fenicsx_drape.measurements.bundle import Bundle
 
 LEDGER = "ledger.jsonl"
 
 
-def record(out_dir: str | Path, result: CompareResult, *, bundle: Bundle,
+class Compared(Protocol):
+    """What the ledger records of a comparison (a ``compare.CompareResult``).
+
+    A protocol rather than the class itself: compare writes into the ledger, so the ledger
+    must not import compare back.
+    """
+
+    bundle: str  # the bundle's name
+
+    def to_dict(self) -> dict[str, Any]:
+        """The content of ``compare.json`` (``model``, ``error``, ``noise_floor``, ...)."""
+        ...
+
+
+def record(out_dir: str | Path, result: Compared, *, bundle: Bundle,
            model_path: str | Path | None = None) -> dict[str, Any]:
     """Append the version compared in ``result`` to ``out_dir/ledger.jsonl``; returns it."""
     record = result.to_dict()
