@@ -17,6 +17,7 @@ cores), the forming runs it made, the verdict and the errors.
 import time
 
 from fenicsx_drape.diagnosis import forming_kind as fc
+from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.diagnose import diagnose
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model
@@ -31,17 +32,17 @@ def main() -> None:
         "tool_friction": (paper.with_effects("tool_friction").with_parameters(mu_tool=0.8),
                           paper),
     }
-    print(f"forming workers: {fc.WORKERS}; cells {fc.FULL_CELL_MM:g} mm", flush=True)
+    print(f"forming workers: {runs.WORKERS}; cells {runs.FULL_CELL_MM:g} mm", flush=True)
     for hidden, (truth, baseline) in cases.items():
         test = fc.synthetic_forming_test(truth, sd_mm=0.3, seed=7)
-        fc._cache.clear()
+        runs._cache.clear()
         start = time.perf_counter()
         report = diagnose(Bundle(name=f"hidden-{hidden}", tests=(test,)), baseline,
                           candidates=[c for c in CANDIDATES if c not in baseline.effects])
         seconds = time.perf_counter() - start
         best = report["candidates"][0]
         m = report["metrics"]
-        print(f"hidden {hidden}: {seconds:.1f} s, {len(fc._cache)} forming runs, "
+        print(f"hidden {hidden}: {seconds:.1f} s, {len(runs._cache)} forming runs, "
               f"missing_effect = {report['missing_effect']}, normalised "
               f"{report['baseline']['error']['normalised']:.2f} → "
               f"{best['error_after']['normalised']:.2f} (evidence {best['evidence']:.2f}), "

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.diagnosis import forming_kind as fc
+from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.compare import compare_tests, normalised_error
 from fenicsx_drape.diagnosis.kinds import KINDS
 from fenicsx_drape.forming.post import FormedGrid
@@ -120,9 +121,9 @@ def _diagnose(truth, baseline, candidates, seed):
     """Data formed and diagnosed on the same coarse 20 mm mesh (4× cheaper than 10 mm)."""
     from fenicsx_drape.diagnosis.diagnose import diagnose
 
-    with fc.resolution(fc.SCREEN_CELL_MM):
+    with runs.resolution(runs.SCREEN_CELL_MM):
         test = fc.synthetic_forming_test(truth, seed=seed, sd_mm=0.3,
-                                         cell_mm=fc.SCREEN_CELL_MM)
+                                         cell_mm=runs.SCREEN_CELL_MM)
         return diagnose(Bundle(name="hidden", tests=(test,)), baseline, candidates=candidates)
 
 
@@ -179,8 +180,8 @@ def test_mixed_bundle_reports_coupons_and_forming_and_names_the_forming_effect(d
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
     coupons = synthetic_bundle(truth, standard_tests(bias_speeds_mm_per_min=(10.0, 160.0)),
                                noise_rel=0.02, seed=5)
-    with fc.resolution(fc.SCREEN_CELL_MM):
-        formed = fc.synthetic_forming_test(truth, seed=14, sd_mm=0.3, cell_mm=fc.SCREEN_CELL_MM)
+    with runs.resolution(runs.SCREEN_CELL_MM):
+        formed = fc.synthetic_forming_test(truth, seed=14, sd_mm=0.3, cell_mm=runs.SCREEN_CELL_MM)
         bundle = Bundle(name="mixed", tests=(*coupons.tests, formed))
         report = diagnose(bundle, default_model(), candidates=["tool_friction"])
     ids = {t.id for t in bundle.tests}

@@ -24,7 +24,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Fit, compare, write the outputs and print the summary; returns the exit status."""
     from fenicsx_drape.diagnosis.compare import compare, write_compare
-    from fenicsx_drape.diagnosis.forming_kind import resolution
+    from fenicsx_drape.diagnosis.forming_runs import resolution
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
 

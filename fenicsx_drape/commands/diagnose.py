@@ -30,8 +30,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose, write the report and print its summary; returns the exit status."""
-    from fenicsx_drape.diagnosis import forming_kind as fc
     from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
+    from fenicsx_drape.diagnosis.forming_kind import confirm
+    from fenicsx_drape.diagnosis.forming_runs import resolution
     from fenicsx_drape.errors import DrapeInputError
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
@@ -42,11 +43,11 @@ def run(args: argparse.Namespace) -> int:
     bundle = load_bundle(args.bundle)
     model = load_model(args.model) if args.model else default_model()
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
-    with fc.resolution(args.forming_cell_mm):
+    with resolution(args.forming_cell_mm):
         report = diagnose(bundle, model, progress=progress)
     forming = any(t.kind == "forming" for t in bundle.tests)
     if forming and args.confirm_cell_mm and report["candidates"]:
-        report["confirmation"] = fc.confirm(bundle, report, args.confirm_cell_mm, progress)
+        report["confirmation"] = confirm(bundle, report, args.confirm_cell_mm, progress)
     write_diagnosis(report, args.json, args.out, bundle=bundle)
     print(summary(report))
     for label, entry in report.get("confirmation", {}).items():

@@ -25,34 +25,40 @@ the friction coefficients of the model's forming effects (``mu`` of ``holder_fri
 ``mu_tool`` of ``tool_friction``), the material parameters staying at their coupon-fitted (or
 given) values. The fit is Gauss-Newton on the per-coordinate residuals in noise units, with
 forward differences of :data:`FD_STEP`; every forming run is cached by its conditions and
-parameters, and the runs of one iteration (the point and its perturbations) go to
-:data:`WORKERS` processes at once.
+parameters, and the runs of one iteration (the point and its perturbations) go to worker
+processes at once (:mod:`~fenicsx_drape.diagnosis.forming_runs`).
 
 **Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
 a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
 in at most :data:`MAX_ITERATIONS` iterations), every run is cached, the runs of an iteration
 go to persistent worker processes, and the held-out folds (every third node of the grid
 left out, three folds) start from the full fit, so a fold costs a run only when its step
-moves the parameters by more than :data:`XTOL`. The runs use cells of :data:`FULL_CELL_MM`
-(the paper's Δ), set with :func:`resolution`. A coarser screening mesh
-(:data:`SCREEN_CELL_MM`, 4× cheaper) is only sound when its discretisation error is below
-the noise: against a grid formed on 10 mm cells, the 20 mm mesh misses by 2.9 × the 0.3 mm
-noise (at the tow axes over the fillet), which hides a tool friction that the 10 mm mesh
-finds; :func:`confirm` refits the baseline and the winner on another mesh to check a verdict.
+moves the parameters by more than :data:`XTOL`. The runs use cells of
+:data:`~fenicsx_drape.diagnosis.forming_runs.FULL_CELL_MM` (the paper's Δ), set with
+:func:`~fenicsx_drape.diagnosis.forming_runs.resolution`. A coarser screening mesh
+(:data:`~fenicsx_drape.diagnosis.forming_runs.SCREEN_CELL_MM`, 4× cheaper) is only sound
+when its discretisation error is below the noise: against a grid formed on 10 mm cells, the
+20 mm mesh misses by 2.9 × the 0.3 mm noise (at the tow axes over the fillet), which hides a
+tool friction that the 10 mm mesh finds; :func:`confirm` refits the baseline and the winner
+on another mesh to check a verdict.
 """
 
 from __future__ import annotations
 
-import atexit
-import contextlib
 import math
-import os
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fenicsx_drape.diagnosis.forming_runs import (
+    FULL_CELL_MM,
+    current_cell_mm,
+    form_many,
+    resolution,
+    stopped_at,
+)
 from fenicsx_drape.diagnosis.kinds import Kind, Region, register_kind
 from fenicsx_drape.errors import DrapeInputError
 
@@ -62,31 +68,13 @@ if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
-FULL_CELL_MM = 10.0  # unit cell of the forming runs (mm), the paper's Δ
-SCREEN_CELL_MM = 20.0  # a coarse screening mesh (mm), for data formed on it (tests)
 FORMING_PARAMETERS = ("mu", "mu_tool")  # what a forming test fits (friction coefficients)
 FD_STEP = 0.02  # forward-difference step in a friction coefficient
 XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
 MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
-WORKERS = max(1, min(2, os.cpu_count() or 1))  # processes running forming solves at once
 TOOL_KEYS = ("punch_radius_mm", "fillet_radius_mm", "holder_opening_mm", "sheet_mm",
              "travel_mm")
 
-_settings = {"cell_mm": FULL_CELL_MM}
-_cache: dict[tuple, FormedGrid] = {}
-_stopped: dict[tuple, float] = {}  # travel (mm) reached by the runs that stopped short
-_CACHE_SIZE = 256
-
-
-@contextlib.contextmanager
-def resolution(cell_mm: float) -> Iterator[None]:
-    """Run the forming simulations of compare/diagnose on cells of ``cell_mm`` (mm) inside."""
-    old = _settings["cell_mm"]
-    _settings["cell_mm"] = float(cell_mm)
-    try:
-        yield
-    finally:
-        _settings["cell_mm"] = old
 
 
 # --------------------------------------------------------------------------------------------
@@ -103,139 +91,9 @@ def case_of(test: Test, cell_mm: float | None = None):
                               "simulated (known: hemisphere)")
     f = test.forming
     tools = HemisphereTools(**{k: float(f[k]) for k in TOOL_KEYS if k in f})
-    return HemisphereCase(cell_mm=cell_mm or _settings["cell_mm"],
+    return HemisphereCase(cell_mm=cell_mm or current_cell_mm(),
                           duration_s=float(f["duration_s"]),
                           holder_force_N=float(f["holder_force_N"]), quarter=True, tools=tools)
-
-
-def _key(case, model: Model) -> tuple:
-    params = tuple(sorted((k, float(v)) for k, v in model.parameters.items()))
-    return (repr(case), tuple(sorted(model.effects)), params,
-            tuple(str(p) for p in model.plugins))
-
-
-def _form(case, model: Model, comm=None) -> tuple[np.ndarray, np.ndarray, float | None]:
-    """One forming run (on this process alone by default): flat and formed quarter grids.
-
-    A model that cannot form the part to full travel (its solve fails at the smallest step)
-    is compared as far as it got: the third value is then the travel reached (mm), which
-    the comparison reports (:func:`metrics`), else None.
-    """
-    from mpi4py import MPI
-
-    from fenicsx_drape.forming.hemisphere import run_hemisphere
-
-    run = run_hemisphere(case, model, comm=comm or MPI.COMM_SELF, allow_incomplete=True)
-    return run.grid.X, run.grid.x, (run.travel_mm if run.stopped else None)
-
-
-def _in_workers(jobs: list[tuple[Any, Model]]) -> list[tuple]:
-    """Run forming jobs on :data:`WORKERS` persistent worker processes, a batch at a time.
-
-    Fresh processes (not forks: MPI is initialised here) started once and kept: each imports
-    DOLFINx and compiles the forms once, then reads pickled jobs on stdin and writes the
-    pickled grids on stdout. The MPI launcher's environment is left out so that each runs as
-    its own single-process MPI job.
-    """
-    import pickle
-
-    results: list = [None] * len(jobs)
-    pending = list(enumerate(jobs))
-    while pending:
-        batch, pending = pending[:WORKERS], pending[WORKERS:]
-        workers = _pool(len(batch))
-        for (_, job), proc in zip(batch, workers):
-            pickle.dump(job, proc.stdin)
-            proc.stdin.flush()
-        for (i, _), proc in zip(batch, workers):
-            try:
-                status, value = pickle.load(proc.stdout)
-            except EOFError:
-                _workers.remove(proc)
-                raise RuntimeError(f"forming worker failed (exit status {proc.wait()})") from None
-            if status == "error":
-                raise value
-            results[i] = value
-    return results
-
-
-_workers: list = []  # the persistent worker processes of _in_workers
-
-
-def _pool(n: int) -> list:
-    """``n`` live worker processes, started on first use and stopped at exit."""
-    import subprocess
-    import sys
-
-    _workers[:] = [p for p in _workers if p.poll() is None]
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
-    command = [sys.executable, "-c", "from fenicsx_drape.diagnosis.forming_kind import _worker; "
-               "_worker()"]
-    while len(_workers) < n:
-        _workers.append(subprocess.Popen(command, stdin=subprocess.PIPE,
-                                         stdout=subprocess.PIPE, env=env))
-    return _workers[:n]
-
-
-@atexit.register
-def _stop_workers() -> None:
-    for proc in _workers:
-        proc.stdin.close()
-        proc.wait()
-    _workers.clear()
-
-
-def _worker() -> None:
-    """Entry point of a worker process (:func:`_in_workers`): jobs until stdin closes."""
-    import pickle
-    import sys
-
-    jobs, result = sys.stdin.buffer, os.fdopen(os.dup(1), "wb")
-    os.dup2(2, 1)  # whatever the solver prints goes to stderr, not into the pickles
-    while True:
-        try:
-            case, model = pickle.load(jobs)
-        except EOFError:
-            return
-        try:
-            reply = ("ok", _form(case, model))
-        except Exception as error:  # sent back and raised in the parent
-            reply = ("error", error)
-        try:
-            data = pickle.dumps(reply)
-        except Exception:
-            data = pickle.dumps(("error", RuntimeError(f"forming worker: {reply[1]!r}")))
-        result.write(data)
-        result.flush()
-
-
-def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
-    """Formed quarter sheets of ``(case, model)`` jobs: cached, the new ones in parallel.
-
-    With one MPI process the new runs go to :data:`WORKERS` worker processes; under
-    ``mpirun`` they run one after the other on all ranks.
-    """
-    from mpi4py import MPI
-
-    from fenicsx_drape.forming.post import FormedGrid
-
-    keys = [_key(case, model) for case, model in jobs]
-    todo = {k: job for k, job in zip(keys, jobs) if k not in _cache}
-    if todo:
-        comm = MPI.COMM_WORLD
-        if comm.size > 1 or WORKERS == 1 or len(todo) == 1:
-            results = [_form(c, m, comm) for c, m in todo.values()]
-        else:
-            results = _in_workers(list(todo.values()))
-        for k, (X, x, stopped_mm) in zip(todo, results):
-            if len(_cache) >= _CACHE_SIZE:
-                oldest = next(iter(_cache))
-                del _cache[oldest]
-                _stopped.pop(oldest, None)
-            _cache[k] = FormedGrid(X, x, True)
-            if stopped_mm is not None:
-                _stopped[k] = stopped_mm
-    return [_cache[k] for k in keys]
 
 
 def is_quarter(test: Test) -> bool:
@@ -383,7 +241,7 @@ def metrics(test: Test, simulated: np.ndarray, model: Model | None = None) -> di
            "percent_of_displacement": float(100 * d.mean() / displacement.mean())}
     if model is not None:
         out |= field_errors(test, simulated_sheets(test, model)[0])
-        stopped = _stopped.get(_key(case_of(test), model))
+        stopped = stopped_at(case_of(test), model)
         if stopped is not None:
             out["stopped_at_travel_mm"] = stopped
     return out

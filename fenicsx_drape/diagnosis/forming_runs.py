@@ -1,0 +1,188 @@
+"""The forming runs of compare and diagnose: cached, and in worker processes.
+
+A forming test is simulated by forming its part (:func:`~fenicsx_drape.forming.hemisphere.
+run_hemisphere`) for a model; a diagnosis asks for a few dozen such runs, many of them the
+same. :func:`form_many` forms ``(case, model)`` jobs: every run is cached by its case and
+model (the :data:`_CACHE_SIZE` latest), and the new runs of one call go to :data:`WORKERS`
+persistent worker processes at once (under ``mpirun`` they run one after the other on all
+ranks). The cells of the runs are :data:`FULL_CELL_MM` (the paper's Δ) unless set with
+:func:`resolution`. A run that stops short of full travel is kept as far as it got, and
+:func:`stopped_at` tells the travel it reached.
+
+This module knows forming cases and models, not tests: the forming kind
+(:mod:`~fenicsx_drape.diagnosis.forming_kind`) turns a test into a case.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from fenicsx_drape.forming.post import FormedGrid
+    from fenicsx_drape.model import Model
+
+FULL_CELL_MM = 10.0  # unit cell of the forming runs (mm), the paper's Δ
+SCREEN_CELL_MM = 20.0  # a coarse screening mesh (mm), for data formed on it (tests)
+WORKERS = max(1, min(2, os.cpu_count() or 1))  # processes running forming solves at once
+
+_settings = {"cell_mm": FULL_CELL_MM}
+_cache: dict[tuple, FormedGrid] = {}
+_stopped: dict[tuple, float] = {}  # travel (mm) reached by the runs that stopped short
+_CACHE_SIZE = 256
+
+
+@contextlib.contextmanager
+def resolution(cell_mm: float) -> Iterator[None]:
+    """Run the forming simulations of compare/diagnose on cells of ``cell_mm`` (mm) inside."""
+    old = _settings["cell_mm"]
+    _settings["cell_mm"] = float(cell_mm)
+    try:
+        yield
+    finally:
+        _settings["cell_mm"] = old
+
+
+def current_cell_mm() -> float:
+    """The unit cell (mm) of the forming runs now (:data:`FULL_CELL_MM` or :func:`resolution`)."""
+    return _settings["cell_mm"]
+
+
+def _key(case, model: Model) -> tuple:
+    params = tuple(sorted((k, float(v)) for k, v in model.parameters.items()))
+    return (repr(case), tuple(sorted(model.effects)), params,
+            tuple(str(p) for p in model.plugins))
+
+
+def _form(case, model: Model, comm=None) -> tuple[np.ndarray, np.ndarray, float | None]:
+    """One forming run (on this process alone by default): flat and formed quarter grids.
+
+    A model that cannot form the part to full travel (its solve fails at the smallest step)
+    is compared as far as it got: the third value is then the travel reached (mm), which
+    :func:`stopped_at` gives back, else None.
+    """
+    from mpi4py import MPI
+
+    from fenicsx_drape.forming.hemisphere import run_hemisphere
+
+    run = run_hemisphere(case, model, comm=comm or MPI.COMM_SELF, allow_incomplete=True)
+    return run.grid.X, run.grid.x, (run.travel_mm if run.stopped else None)
+
+
+def _in_workers(jobs: list[tuple[Any, Model]]) -> list[tuple]:
+    """Run forming jobs on :data:`WORKERS` persistent worker processes, a batch at a time.
+
+    Fresh processes (not forks: MPI is initialised here) started once and kept: each imports
+    DOLFINx and compiles the forms once, then reads pickled jobs on stdin and writes the
+    pickled grids on stdout. The MPI launcher's environment is left out so that each runs as
+    its own single-process MPI job.
+    """
+    import pickle
+
+    results: list = [None] * len(jobs)
+    pending = list(enumerate(jobs))
+    while pending:
+        batch, pending = pending[:WORKERS], pending[WORKERS:]
+        workers = _pool(len(batch))
+        for (_, job), proc in zip(batch, workers):
+            pickle.dump(job, proc.stdin)
+            proc.stdin.flush()
+        for (i, _), proc in zip(batch, workers):
+            try:
+                status, value = pickle.load(proc.stdout)
+            except EOFError:
+                _workers.remove(proc)
+                raise RuntimeError(f"forming worker failed (exit status {proc.wait()})") from None
+            if status == "error":
+                raise value
+            results[i] = value
+    return results
+
+
+_workers: list = []  # the persistent worker processes of _in_workers
+
+
+def _pool(n: int) -> list:
+    """``n`` live worker processes, started on first use and stopped at exit."""
+    import subprocess
+    import sys
+
+    _workers[:] = [p for p in _workers if p.poll() is None]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
+    command = [sys.executable, "-c",
+               "from fenicsx_drape.diagnosis.forming_runs import _worker; _worker()"]
+    while len(_workers) < n:
+        _workers.append(subprocess.Popen(command, stdin=subprocess.PIPE,
+                                         stdout=subprocess.PIPE, env=env))
+    return _workers[:n]
+
+
+@atexit.register
+def _stop_workers() -> None:
+    for proc in _workers:
+        proc.stdin.close()
+        proc.wait()
+    _workers.clear()
+
+
+def _worker() -> None:
+    """Entry point of a worker process (:func:`_in_workers`): jobs until stdin closes."""
+    import pickle
+    import sys
+
+    jobs, result = sys.stdin.buffer, os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)  # whatever the solver prints goes to stderr, not into the pickles
+    while True:
+        try:
+            case, model = pickle.load(jobs)
+        except EOFError:
+            return
+        try:
+            reply = ("ok", _form(case, model))
+        except Exception as error:  # sent back and raised in the parent
+            reply = ("error", error)
+        try:
+            data = pickle.dumps(reply)
+        except Exception:
+            data = pickle.dumps(("error", RuntimeError(f"forming worker: {reply[1]!r}")))
+        result.write(data)
+        result.flush()
+
+
+def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
+    """Formed quarter sheets of ``(case, model)`` jobs: cached, the new ones in parallel.
+
+    With one MPI process the new runs go to :data:`WORKERS` worker processes; under
+    ``mpirun`` they run one after the other on all ranks.
+    """
+    from mpi4py import MPI
+
+    from fenicsx_drape.forming.post import FormedGrid
+
+    keys = [_key(case, model) for case, model in jobs]
+    todo = {k: job for k, job in zip(keys, jobs) if k not in _cache}
+    if todo:
+        comm = MPI.COMM_WORLD
+        if comm.size > 1 or WORKERS == 1 or len(todo) == 1:
+            results = [_form(c, m, comm) for c, m in todo.values()]
+        else:
+            results = _in_workers(list(todo.values()))
+        for k, (X, x, stopped_mm) in zip(todo, results):
+            if len(_cache) >= _CACHE_SIZE:
+                oldest = next(iter(_cache))
+                del _cache[oldest]
+                _stopped.pop(oldest, None)
+            _cache[k] = FormedGrid(X, x, True)
+            if stopped_mm is not None:
+                _stopped[k] = stopped_mm
+    return [_cache[k] for k in keys]
+
+
+def stopped_at(case, model: Model) -> float | None:
+    """The travel (mm) a cached run of ``(case, model)`` reached if it stopped short, else None."""
+    return _stopped.get(_key(case, model))
