@@ -28,7 +28,6 @@ if TYPE_CHECKING:
     from fenicsx_drape.model import Model
 
 
-
 def _coupon_noise(test: Test) -> tuple[float, str]:
     from fenicsx_drape.calibration.coupons import test_noise
 

@@ -76,7 +76,6 @@ TOOL_KEYS = ("punch_radius_mm", "fillet_radius_mm", "holder_opening_mm", "sheet_
              "travel_mm")
 
 
-
 # --------------------------------------------------------------------------------------------
 # Simulation
 
