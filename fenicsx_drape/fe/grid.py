@@ -19,6 +19,13 @@ edge), and of those only the cells joined side by side to the centre cell (a cel
 a corner would turn freely about it). The grid stays structured in (i, j) along the tows:
 :attr:`TrussGrid.cells` and :attr:`TrussGrid.present` mask the kept cells and nodes.
 
+A blank of any outline (:func:`outline_grid`: a polygon in the sheet plane, e.g. sampled from
+a Gmsh curve) is clipped the same way (``outline_mm``): the cells with four corners in the
+polygon, of those the largest group joined side by side (a cell hanging by a corner, or an
+island cut off by a narrow neck, would move freely), on a lattice trimmed to the kept cells.
+Symmetry planes (``symmetry``: ``"x"`` the plane x = 0, ``"y"`` the plane y = 0) are the
+lattice's edges i = 0 and j = 0: the model keeps the half (or quarter) x ≥ 0, y ≥ 0.
+
 Node flags are bits, so a corner node can be on two edges at once:
 
 - :data:`SYMMETRY_X` — on the symmetry plane x = 0 (u_x = 0 there),
@@ -29,6 +36,7 @@ Node flags are bits, so a corner node can be on two edges at once:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from pathlib import Path
 
@@ -68,6 +76,23 @@ class TrussGrid:
     quarter: bool  # the edges x = 0 and y = 0 are symmetry planes
     rotation_deg: float = 0.0  # the grid is turned by this angle about the z axis
     clip_half_mm: float | None = None  # keep the cells inside |x|, |y| <= this (mm)
+    # Keep the cells inside this polygon ((x, y) vertices in mm, either orientation).
+    outline_mm: tuple[tuple[float, float], ...] | None = None
+    # Symmetry planes on the edges i = 0 ("x": the plane x = 0) and j = 0 ("y": y = 0);
+    # None: both if ``quarter``, else none.
+    symmetry: tuple[str, ...] | None = None
+
+    @property
+    def planes(self) -> tuple[str, ...]:
+        """The symmetry planes of the model: ``"x"`` (x = 0, edge i = 0), ``"y"`` (y = 0)."""
+        if self.symmetry is not None:
+            return tuple(self.symmetry)
+        return ("x", "y") if self.quarter else ()
+
+    @property
+    def clipped(self) -> bool:
+        """Whether the lattice is clipped (a square or an outline): some cells may be absent."""
+        return self.clip_half_mm is not None or self.outline_mm is not None
 
     def _rotation(self) -> np.ndarray:
         c, s = np.cos(np.radians(self.rotation_deg)), np.sin(np.radians(self.rotation_deg))
@@ -84,19 +109,34 @@ class TrussGrid:
         ij = np.stack([i, j], axis=-1)
         return (ij * self.cell_mm + np.asarray(self.origin_mm)) @ self._rotation().T
 
-    @property
+    @functools.cached_property
     def cells(self) -> np.ndarray:
         """Mask of the unit cells of the sheet, shaped (nx, ny) (all, unless clipped)."""
-        if self.clip_half_mm is None:
+        if not self.clipped:
             return np.ones((self.nx, self.ny), dtype=bool)
-        a = self.clip_half_mm * (1.0 + 1e-12)
-        inside = np.all(np.abs(self._lattice_xy()) <= a, axis=-1)
-        keep = inside[:-1, :-1] & inside[1:, :-1] & inside[:-1, 1:] & inside[1:, 1:]
         from scipy import ndimage
 
-        labels, _ = ndimage.label(keep)  # side-joined groups of cells
-        centre = labels[self.nx // 2, self.ny // 2]
-        return labels == centre if centre else np.zeros_like(keep)
+        if self.outline_mm is not None:
+            inside = inside_polygon(self._lattice_xy().reshape(-1, 2), np.asarray(self.outline_mm))
+            inside = inside.reshape(self.nx + 1, self.ny + 1)
+        else:
+            a = self.clip_half_mm * (1.0 + 1e-12)
+            inside = np.all(np.abs(self._lattice_xy()) <= a, axis=-1)
+        keep = inside[:-1, :-1] & inside[1:, :-1] & inside[:-1, 1:] & inside[1:, 1:]
+        labels, n = ndimage.label(keep)  # side-joined groups of cells
+        if self.outline_mm is None:
+            centre = labels[self.nx // 2, self.ny // 2]
+            return labels == centre if centre else np.zeros_like(keep)
+        if n == 0:
+            return keep
+        # The largest group; of equal ones, the one nearest the frame's origin.
+        sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
+        xy = self._lattice_xy()
+        centres = 0.25 * (xy[:-1, :-1] + xy[1:, :-1] + xy[:-1, 1:] + xy[1:, 1:])
+        r = np.hypot(centres[..., 0], centres[..., 1])
+        near = ndimage.minimum(r, labels, index=np.arange(1, n + 1))
+        best = min(range(n), key=lambda k: (-sizes[k], near[k]))
+        return labels == best + 1
 
     @property
     def present(self) -> np.ndarray:
@@ -128,7 +168,7 @@ class TrussGrid:
         """Grid indices ``(i, j)`` of every node, shaped (n_nodes, 2)."""
         j, i = np.divmod(np.arange((self.nx + 1) * (self.ny + 1)), self.nx + 1)
         ij = np.column_stack([i, j])
-        return ij if self.clip_half_mm is None else ij[self._flat(self.present)]
+        return ij if not self.clipped else ij[self._flat(self.present)]
 
     @property
     def nodes(self) -> np.ndarray:
@@ -158,7 +198,7 @@ class TrussGrid:
         ]
         bars = np.concatenate([np.column_stack([a[m], b[m]]) for a, b, _, m in pairs])
         kinds = np.concatenate([np.full(m.sum(), k, dtype=np.int32) for *_, k, m in pairs])
-        if self.clip_half_mm is not None:  # lattice indices → indices of the present nodes
+        if self.clipped:  # lattice indices → indices of the present nodes
             bars = (np.cumsum(self._flat(self.present)) - 1)[bars]
         return bars.astype(np.int64), kinds
 
@@ -166,16 +206,20 @@ class TrussGrid:
     def node_flags(self) -> np.ndarray:
         """Bitwise node flags (n_nodes,): symmetry planes and free border."""
         c = np.pad(self.cells, 1)  # cell (i, j) at [i + 1, j + 1]; outside the lattice: none
-        if self.quarter:  # the mirrored cells across the symmetry planes
+        planes = self.planes
+        if "x" in planes:  # the mirrored cells across the symmetry planes
             c[0, :] = c[1, :]
+        if "y" in planes:
             c[:, 0] = c[:, 1]
         whole = c[:-1, :-1] & c[1:, :-1] & c[:-1, 1:] & c[1:, 1:]  # all four cells around
         i, j = np.meshgrid(np.arange(self.nx + 1), np.arange(self.ny + 1), indexing="ij")
         flags = np.where(whole, 0, BORDER).astype(np.int32)
-        if self.quarter:
-            flags |= np.where(i == 0, SYMMETRY_X, 0) | np.where(j == 0, SYMMETRY_Y, 0)
+        if "x" in planes:
+            flags |= np.where(i == 0, SYMMETRY_X, 0)
+        if "y" in planes:
+            flags |= np.where(j == 0, SYMMETRY_Y, 0)
         flags = self._flat(flags)
-        return flags if self.clip_half_mm is None else flags[self._flat(self.present)]
+        return flags if not self.clipped else flags[self._flat(self.present)]
 
 
 def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = False,
@@ -216,6 +260,140 @@ def sheet_grid(size_mm: float = 240.0, cell_mm: float = 10.0, quarter: bool = Fa
         return TrussGrid(n_half, n_half, Δ, (0.0, 0.0), True, rotation_deg)
     return TrussGrid(2 * n_half, 2 * n_half, Δ, (-size_mm / 2, -size_mm / 2), False,
                      rotation_deg)
+
+
+def inside_polygon(points: np.ndarray, polygon: np.ndarray, tol_mm: float | None = None
+                   ) -> np.ndarray:
+    """Which ``points`` (n, 2) lie in the closed ``polygon`` (m, 2) or on its boundary.
+
+    Even-odd ray casting, plus the points within ``tol_mm`` of an edge (default 1e-9 of the
+    polygon's size), so that nodes on the outline count as inside.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
+    a = np.asarray(polygon, dtype=float)
+    b = np.roll(a, -1, axis=0)
+    if tol_mm is None:
+        tol_mm = 1e-9 * max(np.ptp(a, axis=0).max(), 1.0)
+    x, y = p[:, :1], p[:, 1:]
+    # Edges that straddle the horizontal line through the point, crossed to its right.
+    straddle = (a[:, 1] > y) != (b[:, 1] > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cross_x = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+    inside = np.count_nonzero(straddle & (x < cross_x), axis=1) % 2 == 1
+    return inside | (polygon_distance(p, a) <= tol_mm)
+
+
+def polygon_distance(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Distance (mm) of ``points`` (n, 2) from the boundary of the closed ``polygon`` (m, 2)."""
+    p = np.asarray(points, dtype=float).reshape(-1, 2)[:, None, :]
+    a = np.asarray(polygon, dtype=float)
+    e = np.roll(a, -1, axis=0) - a
+    s = np.clip(np.einsum("nmk,mk->nm", p - a, e) / np.maximum(np.sum(e * e, 1), 1e-300), 0, 1)
+    d = p - a - s[..., None] * e
+    return np.sqrt(np.min(np.sum(d * d, axis=-1), axis=1))
+
+
+def polygon_area(polygon: np.ndarray) -> float:
+    """Area (mm², ≥ 0) of a simple polygon (m, 2), either orientation."""
+    a = np.asarray(polygon, dtype=float)
+    b = np.roll(a, -1, axis=0)
+    return 0.5 * abs(float(np.sum(a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1])))
+
+
+def outline_grid(polygon_mm, cell_mm: float, *, origin_mm=(0.0, 0.0), ply_angle_deg: float = 0.0,
+                 symmetry=()) -> TrussGrid:
+    """The net of unit cells Δ inside a blank outline, turned by the ply angle.
+
+    The lattice has a node at ``origin_mm`` and its warp at ``ply_angle_deg`` to x (turned
+    about ``origin_mm``); the cells with four corners in the polygon are kept, of those the
+    largest side-joined group (:attr:`TrussGrid.cells`), and the lattice is trimmed to them.
+    When every cell of the trimmed lattice is kept the grid is returned unclipped (a blank
+    whose sides are tow lines: the same grid as :func:`sheet_grid`'s).
+
+    Args:
+        polygon_mm: Vertices (m, 2) of the whole blank's outline (mm), m >= 3.
+        cell_mm: Unit-cell size Δ (mm), used as given.
+        origin_mm: A node of the net (mm).
+        ply_angle_deg: Warp direction, degrees from x.
+        symmetry: Symmetry planes kept, ``"x"`` (x = 0) and/or ``"y"`` (y = 0): the model is
+            the part x ≥ 0 and/or y ≥ 0 of the blank, which must be symmetric in them, and the
+            net needs nodes on them (tows along x and y, ``origin_mm`` a whole number of
+            cells from each plane).
+
+    Raises:
+        DrapeInputError: a bad outline, cell size, angle or symmetry, or no whole cell fits.
+    """
+    P = np.asarray(polygon_mm, dtype=float)
+    if P.ndim != 2 or P.shape[1] != 2 or len(P) < 3 or not np.isfinite(P).all():
+        raise DrapeInputError(f"outline: {P.shape} points; a polygon needs at least three "
+                              "finite (x, y) vertices in mm")
+    if not polygon_area(P) > 0.0:
+        raise DrapeInputError("outline: the polygon encloses no area")
+    if not (math.isfinite(cell_mm) and cell_mm > 0):
+        raise DrapeInputError(f"cell_mm = {cell_mm} must be a positive number")
+    o = np.asarray(origin_mm, dtype=float).reshape(2)
+    θ = float(ply_angle_deg)
+    if not (np.isfinite(o).all() and math.isfinite(θ)):
+        raise DrapeInputError(f"origin_mm = {tuple(o)}, ply_angle_deg = {θ}: not numbers")
+    planes = tuple(symmetry)
+    if not set(planes) <= {"x", "y"} or len(set(planes)) != len(planes):
+        raise DrapeInputError(f"symmetry = {list(planes)}: planes are \"x\" (x = 0) and/or "
+                              "\"y\" (y = 0), each once")
+    planes = tuple(p for p in ("x", "y") if p in planes)
+    Δ = float(cell_mm)
+    size = float(np.ptp(P, axis=0).max())
+    for axis, plane in enumerate(("x", "y")):
+        if plane not in planes:
+            continue
+        if θ:
+            raise DrapeInputError(f"ply_angle_deg = {θ:g} breaks the symmetry in the plane "
+                                  f"{plane} = 0; model the full blank (symmetry = [])")
+        if abs(o[axis] / Δ - round(o[axis] / Δ)) > 1e-9:
+            raise DrapeInputError(f"symmetry {plane!r}: the net has no nodes on the plane "
+                                  f"{plane} = 0 (origin_mm {plane} = {o[axis]:g} is not a whole "
+                                  f"number of cells Δ = {Δ:g} mm from it)")
+        mirrored = P.copy()
+        mirrored[:, axis] *= -1.0
+        if polygon_distance(mirrored, P).max() > 1e-6 * size:
+            raise DrapeInputError(f"symmetry {plane!r}: the outline is not symmetric in the "
+                                  f"plane {plane} = 0")
+        if not (P[:, axis].min() < 0.0 < P[:, axis].max()):
+            raise DrapeInputError(f"symmetry {plane!r}: the outline does not cross the plane "
+                                  f"{plane} = 0")
+    c, s = math.cos(math.radians(θ)), math.sin(math.radians(θ))
+    R = np.array([[c, -s], [s, c]])
+    a = o @ R  # the net's origin in the lattice frame (Rᵀ o)
+    Q = P @ R
+    tol = 1e-9
+    lo = np.ceil((Q.min(axis=0) - a) / Δ - tol).astype(int)
+    hi = np.floor((Q.max(axis=0) - a) / Δ + tol).astype(int)
+    corner = a + lo * Δ
+    for axis, plane in enumerate(("x", "y")):
+        if plane in planes:  # the lattice starts on the plane
+            lo[axis] = round(-o[axis] / Δ)
+            corner[axis] = 0.0
+    n = hi - lo
+    if (n < 1).any():
+        raise DrapeInputError(f"outline: no unit cell of Δ = {Δ:g} mm fits in the blank")
+    both = planes == ("x", "y")
+    grid = TrussGrid(int(n[0]), int(n[1]), Δ, (float(corner[0]), float(corner[1])), both, θ,
+                     outline_mm=tuple((float(x), float(y)) for x, y in P),
+                     symmetry=None if both or not planes else planes)
+    cells = grid.cells
+    if not cells.any():
+        raise DrapeInputError(f"outline: no unit cell of Δ = {Δ:g} mm fits in the blank")
+    (i0, j0), (i1, j1) = np.argwhere(cells).min(axis=0), np.argwhere(cells).max(axis=0) + 1
+    for plane, first in (("x", i0), ("y", j0)):
+        if plane in planes and first != 0:
+            raise DrapeInputError(f"symmetry {plane!r}: the net kept in the outline does not "
+                                  f"reach the plane {plane} = 0")
+    kept = cells[i0:i1, j0:j1]
+    origin = (float(grid.origin_mm[0] + i0 * Δ), float(grid.origin_mm[1] + j0 * Δ))
+    trimmed = dataclasses.replace(grid, nx=int(i1 - i0), ny=int(j1 - j0), origin_mm=origin,
+                                  outline_mm=None if kept.all() else grid.outline_mm)
+    if not kept.all() and not np.array_equal(trimmed.cells, kept):
+        raise AssertionError("outline_grid: trimming the lattice changed its cells")
+    return trimmed
 
 
 def gmsh_model(nodes: np.ndarray, bars: np.ndarray, kinds: np.ndarray, flags: np.ndarray):

@@ -1,30 +1,49 @@
-"""The blank holder as a nodal term: clamping in z and the friction bars of eq. 1.
+"""The blank holder as a nodal term: clamping on a surface and the friction bars of eq. 1.
 
-Two plates at z = 0 with a circular opening of radius R_o clamp the sheet. Every node whose
-distance from the axis exceeds R_o is *under the holder*:
+A clamping surface of any shape (a rigid tool that answers ``gap(x, t)`` and
+``covers(x, t)``; the paper's holder is :class:`FlatHolder`, the plane z = 0 outside a circular
+opening) holds the sheet. Every node that the surface *covers* (its closest point is an
+interior point of the surface: the node lies under it, not beyond its edge or opening) is
+*under the holder*:
 
-- **Clamping:** the plates hold it at z = 0 with a penalty spring ``k_z`` (N/mm), the same
-  stiffness as the tool contact (:mod:`fenicsx_drape.forming.contact`).
+- **Clamping:** the node is held on the surface along its normal n = ∇φ by a two-sided
+  penalty on the signed distance φ, ``f = −k φ n`` with the consistent stiffness
+  ``K = k n⊗n + k φ ∇∇φ`` (N/mm; the same stiffness k as the tool contact,
+  :mod:`fenicsx_drape.forming.contact`). On the plane z = 0: ``f_z = −k z``.
 - **Friction (eq. 1):** a perfectly plastic bar fixed at the node's initial position acts on
-  it in the sheet plane. The paper's bar has yield stress σ_y = F_tot μ / (A_f n_s), so it
-  carries at most the force A_f σ_y = F_tot μ / n_s: the holding force times the friction
-  coefficient, shared by the n_s nodes under the holder. As in the paper the bar lies along
-  the node's *total* in-plane displacement u (not the slip velocity):
+  it in the surface's tangent plane. The paper's bar has yield stress σ_y = F_tot μ / (A_f n_s),
+  so it carries at most the force A_f σ_y = F_tot μ / n_s: the holding force times the
+  friction coefficient, shared by the n_s nodes under the holder. As in the paper the bar lies
+  along the node's *total* tangential displacement relative to the surface (not the slip
+  velocity),
 
-      N = N(|u|) from the friction law,  f = −N u/|u|,
+      u = x − X − d_tool(x; 0, t),  s = P u,  P = I − n⊗n,
+      N = N(|s|) from the friction law,  f = −N s/|s|,
 
   with the law (``"paper_friction"``, :class:`~fenicsx_drape.materials.FrictionLaw`, or a
   user law of role ``"friction"``) elastic up to the slip ``holder_slip_mm`` and then
-  perfectly plastic at N = F_tot μ / n_s; its sliding slip is committed with the step.
+  perfectly plastic at N = F_tot μ / n_s; its sliding slip is committed with the step. The
+  stiffness is consistent in x through s (with ∂s/∂x = P − (n·u) ∇∇φ − n ⊗ (∇∇φ u)); the
+  tool's own displacement d_tool is taken as independent of x, which is exact for a holder
+  that is fixed or translates. On the plane z = 0 the bar acts in x and y along the in-plane
+  displacement, exactly the paper's.
 
 ``n_s`` follows the sheet as it draws in: the set of nodes under the holder, and n_s with it,
 is re-evaluated from the converged positions after every step (so it lags by one step, which
 keeps Newton's residual smooth within a step). A node that leaves the holder loses its bar.
 
-**Symmetric models.** ``F_tot`` is the holding force carried by the modelled part of the
-sheet: a quarter model carries F/4. Nodes on a symmetry plane stand for half a node of the
-full sheet, so they count with weight w = 1/2 in n_s = Σ w and carry w times the force of an
-interior node; a quarter model then reproduces the full sheet's force per node, F μ / n_s.
+**Force share** (issue 15: the paper does not say how a symmetric model shares F_tot).
+``force_N`` is the force the modelled part carries, and a node's share is its weight w in
+n_s = Σ w:
+
+- ``"symmetric_part"`` (default): the model is a symmetric part of the whole sheet and
+  carries its share of the holding force (a quarter F/4, a half F/2;
+  :func:`part_force_N`); nodes on a symmetry plane stand for half a node of the whole sheet,
+  so they count w = ½ per plane and carry w times the force of an interior node; a quarter
+  then reproduces the full sheet's force per node, F μ / n_s.
+- ``"model"``: eq. 1 read for the model as built: the whole F is shared over the model's own
+  nodes under the holder, every node counts one (a quarter's nodes each see about four times
+  the force of the whole sheet's).
 """
 
 from __future__ import annotations
@@ -36,37 +55,128 @@ import numpy as np
 from fenicsx_drape.errors import ParameterError
 from fenicsx_drape.materials.base import MaterialLaw
 
+FORCE_SHARES = ("symmetric_part", "model")
+
+
+def part_force_N(force_N: float, planes: int, force_share: str = "symmetric_part") -> float:
+    """The holding force (N) carried by a model with ``planes`` symmetry planes.
+
+    ``"symmetric_part"``: F / 2^planes (a quarter F/4); ``"model"``: the whole F.
+    """
+    check_force_share(force_share)
+    return force_N / 2.0**planes if force_share == "symmetric_part" else force_N
+
+
+def check_force_share(force_share: str, where: str = "holder force_share") -> None:
+    """Raise a :class:`ParameterError` unless ``force_share`` is a known reading of eq. 1."""
+    if force_share not in FORCE_SHARES:
+        raise ParameterError(f"{where} = {force_share!r}: choose \"symmetric_part\" (a symmetric "
+                             "part carries its share of F; symmetry-plane nodes count ½) or "
+                             "\"model\" (the whole F over the model's own nodes)")
+
+
+@dataclasses.dataclass(frozen=True)
+class Gap:
+    """Signed distance ``phi`` (n,), normal ``normal`` (n, 3) = ∇φ, ``hessian`` (n, 3, 3)."""
+
+    phi: np.ndarray
+    normal: np.ndarray
+    hessian: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class FlatHolder:
+    """The paper's blank holder: the plane z = ``z_mm`` outside a circular opening (fixed).
+
+    A clamping surface for :class:`BlankHolder`: φ = z − z_mm (normal +z), and it covers the
+    nodes farther than ``opening_radius_mm`` from the z axis.
+    """
+
+    opening_radius_mm: float
+    z_mm: float = 0.0
+    name: str = "holder"
+    flat = True  # a plane: the clamping and friction stiffness are symmetric
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.opening_radius_mm) and self.opening_radius_mm >= 0.0):
+            raise ParameterError(f"FlatHolder: opening_radius_mm = {self.opening_radius_mm} "
+                                 "must be finite and >= 0")
+
+    def gap(self, x: np.ndarray, t: float) -> Gap:
+        """Signed distance to the plane, its normal +z and zero curvature."""
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        normal = np.zeros_like(x)
+        normal[:, 2] = 1.0
+        return Gap(x[:, 2] - self.z_mm, normal, np.zeros((len(x), 3, 3)))
+
+    def covers(self, x: np.ndarray, t: float) -> np.ndarray:
+        """The nodes outside the opening (r > R_o)."""
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        return np.hypot(x[:, 0], x[:, 1]) > self.opening_radius_mm
+
+    def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
+        """The holder does not move."""
+        return np.zeros((len(x), 3))
+
+
+def _tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit tangents t₁, t₂ (n, 3) with (t₁, t₂, n) right-handed; e_x, e_y for n = e_z."""
+    e = np.zeros_like(n)
+    use_y = np.abs(n[:, 0]) > 0.9  # e_x too close to the normal: start from e_y
+    e[~use_y, 0] = 1.0
+    e[use_y, 1] = 1.0
+    t1 = e - np.einsum("ni,ni->n", e, n)[:, None] * n
+    t1 /= np.linalg.norm(t1, axis=1)[:, None]
+    return t1, np.cross(n, t1)
+
 
 class BlankHolder:
-    """Clamping plates with a circular opening and eq. 1 friction bars (a :class:`NodalTerm`).
+    """Clamping on a surface and eq. 1 friction bars under it (a :class:`NodalTerm`).
 
     Args:
         law: the friction bar's law (role ``"friction"``; force in N against slip in mm),
             e.g. ``model.laws()["friction"]``; its conditions ``holder_force_N`` and
             ``holder_nodes`` are set here, node by node and step by step.
-        opening_radius_mm: radius of the plates' opening, R_o.
-        force_N: holding force F_tot carried by the modelled part (F/4 for a quarter).
-        clamp_stiffness_N_per_mm: penalty stiffness ``k_z`` holding the nodes at z = 0.
+        force_N: holding force carried by the modelled part (:func:`part_force_N`: F/4 for a
+            quarter under ``"symmetric_part"``, F under ``"model"``).
+        clamp_stiffness_N_per_mm: penalty stiffness ``k`` holding the nodes on the surface.
+        surface: the clamping surface: ``gap(x, t)``, ``covers(x, t)`` and optionally
+            ``displacement(x, t0, t1)`` (a tool of role holder).
+        opening_radius_mm: instead of ``surface``: the paper's plates at z = 0 with a circular
+            opening of this radius (:class:`FlatHolder`).
         symmetry_axes: coordinate axes normal to the model's symmetry planes (0 for x = 0,
-            1 for y = 0): nodes on them count with weight 1/2.
+            1 for y = 0): under ``"symmetric_part"`` nodes on them count with weight 1/2.
+        force_share: ``"symmetric_part"`` or ``"model"`` (module docstring).
     """
 
-    def __init__(self, law: MaterialLaw, *, opening_radius_mm: float, force_N: float,
-                 clamp_stiffness_N_per_mm: float, symmetry_axes: tuple[int, ...] = ()) -> None:
+    def __init__(self, law: MaterialLaw, *, force_N: float, clamp_stiffness_N_per_mm: float,
+                 surface=None, opening_radius_mm: float | None = None,
+                 symmetry_axes: tuple[int, ...] = (),
+                 force_share: str = "symmetric_part") -> None:
         if law.role != "friction":
             raise ParameterError(f"BlankHolder: the law {type(law).__name__} has role "
                                  f"{law.role!r}, expected 'friction'")
-        for name, value in (("opening_radius_mm", opening_radius_mm), ("force_N", force_N),
+        if (surface is None) == (opening_radius_mm is None):
+            raise ParameterError("BlankHolder: give either a clamping surface or "
+                                 "opening_radius_mm (the flat holder), not both")
+        for name, value in (("force_N", force_N),
                             ("clamp_stiffness_N_per_mm", clamp_stiffness_N_per_mm)):
             if not (np.isfinite(value) and value >= 0.0):
                 raise ParameterError(f"BlankHolder: {name} = {value} must be finite and >= 0")
         if clamp_stiffness_N_per_mm <= 0.0:
             raise ParameterError("BlankHolder: clamp_stiffness_N_per_mm must be positive")
+        check_force_share(force_share, "BlankHolder: force_share")
         self.law = law
-        self.R_o = float(opening_radius_mm)
+        self.surface = surface if surface is not None else FlatHolder(float(opening_radius_mm))
         self.F = float(force_N)
         self.k_z = float(clamp_stiffness_N_per_mm)
         self.symmetry_axes = tuple(symmetry_axes)
+        self.force_share = force_share
+
+    @property
+    def flat(self) -> bool:
+        """Whether the clamping surface is a plane (then the holder's stiffness is symmetric)."""
+        return bool(getattr(self.surface, "flat", False))
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
         """Reference positions, ownership and the communicator (for the global n_s)."""
@@ -75,15 +185,16 @@ class BlankHolder:
         self.comm = comm
         scale = max(np.abs(self.X[:, :2]).max(initial=0.0), 1.0)
         self.w = np.ones(len(self.X))
-        for axis in self.symmetry_axes:
-            self.w[np.abs(self.X[:, axis]) < 1e-9 * scale] *= 0.5
+        if self.force_share == "symmetric_part":
+            for axis in self.symmetry_axes:
+                self.w[np.abs(self.X[:, axis]) < 1e-9 * scale] *= 0.5
         self.state = self.law.initial_state(len(self.X))  # the bars' history (sliding slip)
-        self._trial: tuple[np.ndarray, np.ndarray] | None = None
-        self._hold(self.X)
+        self._trial: tuple[np.ndarray, float, np.ndarray] | None = None
+        self._hold(self.X, 0.0)
 
-    def _hold(self, x: np.ndarray) -> None:
+    def _hold(self, x: np.ndarray, t: float) -> None:
         """Re-evaluate which nodes are under the holder and n_s (collective under MPI)."""
-        self.under = np.hypot(x[:, 0], x[:, 1]) > self.R_o
+        self.under = np.asarray(self.surface.covers(x, t), dtype=bool)
         local = float(self.w[self.under & self.owned].sum())
         self.n_s = self.comm.allreduce(local) if self.comm is not None else local
         self.bars = np.flatnonzero(self.under)
@@ -103,31 +214,45 @@ class BlankHolder:
         n, b = len(x), self.bars
         f = np.zeros((n, 3))
         K = np.zeros((n, 3, 3))
-        f[b, 2] = -self.k_z * x[b, 2]
-        K[b, 2, 2] = self.k_z
-        # Friction bars along the total in-plane displacement (eq. 1).
-        u = x[b, :2] - self.X[b, :2]
-        e = np.hypot(u[:, 0], u[:, 1])
+        xb = x[b]
+        g = self.surface.gap(xb, t)
+        φ, nrm, H = g.phi, g.normal, g.hessian
+        f[b] = -self.k_z * φ[:, None] * nrm
+        K[b] = self.k_z * (np.einsum("ni,nj->nij", nrm, nrm) + φ[:, None, None] * H)
+        # Friction bars along the total tangential displacement (eq. 1), in the tangent
+        # basis (t₁, t₂) of the surface: e_x, e_y on the plane z = 0.
+        u = xb - self.X[b]
+        move = getattr(self.surface, "displacement", None)
+        if move is not None:
+            u = u - move(xb, 0.0, t)
+        t1, t2 = _tangent_basis(nrm)
+        u1, u2 = np.einsum("ni,ni->n", u, t1), np.einsum("ni,ni->n", u, t2)
+        e = np.hypot(u1, u2)
         N, dN, state = self._law.update(e, dt, self.state[b])
         # N/e and the direction; at e → 0 the elastic bar is isotropic: N/e → dN/de.
         small = e < 1e-9 * getattr(self.law, "holder_slip_mm", 1.0)
-        û = u / np.where(small, 1.0, e)[:, None]
         N_e = np.where(small, dN, N / np.where(small, 1.0, e))
-        uu = np.einsum("ni,nj->nij", û, û)
-        f[b, :2] = -N_e[:, None] * u
-        K[b, :2, :2] = N_e[:, None, None] * (np.eye(2) - uu) + dN[:, None, None] * uu
+        s = u1[:, None] * t1 + u2[:, None] * t2  # P u
+        ŝ = s / np.where(small, 1.0, e)[:, None]
+        ss = np.einsum("ni,nj->nij", ŝ, ŝ)
+        P = np.eye(3) - np.einsum("ni,nj->nij", nrm, nrm)
+        f[b] += -N_e[:, None] * s
+        K_s = N_e[:, None, None] * (P - ss) + dN[:, None, None] * ss  # ∂(−f)/∂s
+        ds = P - np.einsum("n,nij->nij", np.einsum("ni,ni->n", nrm, u), H) \
+            - np.einsum("ni,nj->nij", nrm, np.einsum("nij,nj->ni", H, u))
+        K[b] += np.einsum("nik,nkj->nij", K_s, ds)
         new = self.state.copy()
         new[b] = state
-        self._trial = (np.array(x, dtype=float), new)
+        self._trial = (np.array(x, dtype=float), t, new)
         return f, K
 
     def commit(self) -> None:
         """Keep the bars' sliding, then let the set under the holder follow the sheet."""
         if self._trial is None:
             return
-        x, self.state = self._trial
+        x, t, self.state = self._trial
         self._trial = None
-        self._hold(x)
+        self._hold(x, t)
         self.state[~self.under] = 0.0  # a node that left the holder has lost its bar
 
     def revert(self) -> None:

@@ -37,12 +37,23 @@ class FormedGrid:
     """A formed sheet on its structured grid (mm).
 
     ``quarter`` grids cover x, y ≥ 0 with the apex at [0, 0]; full grids are centred on the
-    apex at [n_i // 2, n_j // 2]. Absent nodes (a clipped net) are NaN in ``X`` and ``x``.
+    apex at [n_i // 2, n_j // 2]. A half model (``symmetry = ("x",)`` or ``("y",)``) covers
+    x ≥ 0 (or y ≥ 0) with its symmetry plane on the edge i = 0 (or j = 0). Absent nodes (a
+    clipped net) are NaN in ``X`` and ``x``.
     """
 
     X: np.ndarray  # (n_i, n_j, 3) nodes on the flat sheet
     x: np.ndarray  # (n_i, n_j, 3) formed nodes
     quarter: bool
+    # Symmetry planes on the edges i = 0 ("x") and j = 0 ("y"); None: both if quarter.
+    symmetry: tuple[str, ...] | None = None
+
+    @property
+    def planes(self) -> tuple[str, ...]:
+        """The symmetry planes the grid is a part of the whole sheet by (``"x"``, ``"y"``)."""
+        if self.symmetry is not None:
+            return tuple(self.symmetry)
+        return ("x", "y") if self.quarter else ()
 
     @classmethod
     def from_nodes(cls, X: np.ndarray, x: np.ndarray, cell_mm: float,
@@ -92,21 +103,24 @@ class FormedGrid:
 
         For a ply at an angle, the quadrant of the tow frame.
         """
-        if self.quarter:
+        if self.planes == ("x", "y"):
             return self
-        r = np.linalg.norm(self.X[..., :2], axis=-1)
+        g = self.full()
+        r = np.linalg.norm(g.X[..., :2], axis=-1)
         c = np.unravel_index(np.nanargmin(r), r.shape)
-        return FormedGrid(self.X[c[0]:, c[1]:], self.x[c[0]:, c[1]:], True)
+        return FormedGrid(g.X[c[0]:, c[1]:], g.x[c[0]:, c[1]:], True)
 
     def full(self) -> FormedGrid:
-        """The full sheet: a quarter grid mirrored in the planes x = 0 and y = 0."""
-        if not self.quarter:
+        """The full sheet: a quarter (or half) grid mirrored in its symmetry planes."""
+        planes = self.planes
+        if not planes:
             return self
         n_i, n_j = self.X.shape[:2]
-        i = np.abs(np.arange(1 - n_i, n_i))
-        j = np.abs(np.arange(1 - n_j, n_j))
-        si = np.where(np.arange(1 - n_i, n_i) < 0, -1.0, 1.0)
-        sj = np.where(np.arange(1 - n_j, n_j) < 0, -1.0, 1.0)
+        k_i = np.arange(1 - n_i, n_i) if "x" in planes else np.arange(n_i)
+        k_j = np.arange(1 - n_j, n_j) if "y" in planes else np.arange(n_j)
+        i, j = np.abs(k_i), np.abs(k_j)
+        si = np.where(k_i < 0, -1.0, 1.0)
+        sj = np.where(k_j < 0, -1.0, 1.0)
         out = []
         for A in (self.X, self.x):
             B = A[i[:, None], j[None, :]].copy()

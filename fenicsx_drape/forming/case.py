@@ -1,0 +1,1081 @@
+"""A forming case as a file: ``case.toml`` (tools, blank, holder, duration, model).
+
+The format is documented in ``docs/case-format.md`` and the README ("Forming cases"); a case
+is one folder in ``meshes/`` (``meshes/hemisphere/case.toml``) holding the case file and its
+tool geometry. :func:`load_case` reads and checks a case file and returns a
+:class:`FormingCase` (frozen dataclasses, units in the names); every problem is reported with
+the file and the key (``case.toml: [[tool]] 2 'geometry': no such file 'punch.stp'``), all
+problems of a file at once. Paths in the file are relative to the case file.
+
+Keyword *overrides* change a loaded case the way a measured forming test's keys override the
+case it names (``shared/spec/measurements.md``, "forming tests on any part"):
+``load_case(path, duration_s=8.0, holder_force_N=500.0)``; :data:`OVERRIDES` lists the names.
+
+This module is plain NumPy (Gmsh only to sample an outline curve); the tools are built from
+the case by :func:`build_tools`, the run is :func:`fenicsx_drape.forming.run.run_case`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import os
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fenicsx_drape.errors import DrapeInputError, ParameterError
+from fenicsx_drape.fe.grid import TrussGrid, outline_grid, polygon_area
+from fenicsx_drape.forming.holder import FORCE_SHARES
+
+ROLES = ("punch", "die", "holder", "surface")
+BUILTIN = "builtin:hemisphere"
+# Tool geometry sources (load_surface) and outline curves (Gmsh), by suffix.
+GEOMETRY_SUFFIXES = (".geo", ".py", ".step", ".stp", ".iges", ".igs", ".brep", ".stl", ".msh")
+OUTLINE_SUFFIXES = (".geo", ".geo_unrolled", ".msh", ".step", ".stp", ".iges", ".igs", ".brep")
+SHEET_SIDES = ("+x", "-x", "+y", "-y", "+z", "-z")
+DEFAULT_SHEET_SIDE = {"punch": "+z", "die": "-z", "holder": "+z", "surface": "+z"}
+
+# Names a measured test (or a command line) may override, besides tool parameter names.
+OVERRIDES = ("duration_s", "step_mm", "penalty_factor", "stabilisation_N_per_mm", "cell_mm",
+             "ply_angle_deg", "symmetry", "sheet_mm", "holder_force_N", "holder_mu",
+             "holder_force_share", "travel_mm")
+
+
+class CaseError(DrapeInputError):
+    """A case file (or case) that cannot be used; ``problems`` lists every problem."""
+
+    def __init__(self, problems: list[str]):
+        self.problems = list(problems)
+        if len(problems) == 1:
+            message = problems[0]
+        else:
+            message = f"{len(problems)} problems:\n  " + "\n  ".join(problems)
+        super().__init__(message)
+
+
+# --------------------------------------------------------------------------------------------
+# The case
+
+
+@dataclasses.dataclass(frozen=True)
+class Motion:
+    """A tool's prescribed rigid motion: a table, linear between rows.
+
+    A material point at X (its position at t = 0) is at ``R(t) (X − c) + c + T(t)``: T the
+    translation, R the rotation by ``rotation_deg`` about ``axis`` through ``centre_mm``. Before
+    the first row and after the last the tool rests.
+    """
+
+    time_s: tuple[float, ...]  # increasing, from 0
+    x_mm: tuple[float, ...]
+    y_mm: tuple[float, ...]
+    z_mm: tuple[float, ...]
+    rotation_deg: tuple[float, ...] | None = None
+    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    centre_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def translation(self, t: float) -> np.ndarray:
+        """T(t) (mm)."""
+        return np.array([np.interp(t, self.time_s, c) for c in (self.x_mm, self.y_mm, self.z_mm)])
+
+    def angle_deg(self, t: float) -> float:
+        """The rotation angle (deg) at time ``t``."""
+        return 0.0 if self.rotation_deg is None else float(np.interp(t, self.time_s,
+                                                                     self.rotation_deg))
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(R, T) at time ``t``: x = R (X − c) + c + T."""
+        return _rotation(self.axis, self.angle_deg(t)), self.translation(t)
+
+    def place(self, X: np.ndarray, t: float) -> np.ndarray:
+        """Positions at time ``t`` of material points at ``X`` (n, 3) at t = 0."""
+        R, T = self.at(t)
+        c = np.asarray(self.centre_mm)
+        R0 = _rotation(self.axis, self.angle_deg(0.0))
+        X0 = (np.asarray(X, float) - c - self.translation(0.0)) @ R0  # the table's frame
+        return X0 @ R.T + c + T
+
+    def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
+        """How far the material point at ``x`` at ``t1`` moved since ``t0`` (mm, (n, 3))."""
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        R0, T0 = self.at(t0)
+        R1, T1 = self.at(t1)
+        c = np.asarray(self.centre_mm)
+        X = (x - c - T1) @ R1  # R1ᵀ (x − c − T1)
+        return x - (X @ R0.T + c + T0)
+
+    def max_speed_mm_per_s(self, reach_mm: float = 0.0) -> float:
+        """Fastest travel (mm/s) of a point within ``reach_mm`` of the rotation centre."""
+        t = np.asarray(self.time_s)
+        dt = np.diff(t)
+        if not len(dt):
+            return 0.0
+        d = np.diff(np.column_stack([self.x_mm, self.y_mm, self.z_mm]), axis=0)
+        v = np.linalg.norm(d, axis=1) / dt
+        if self.rotation_deg is not None:
+            v = v + np.radians(np.abs(np.diff(self.rotation_deg))) / dt * reach_mm
+        return float(v.max(initial=0.0))
+
+    def travel_mm(self, t: float, reach_mm: float = 0.0) -> float:
+        """Distance travelled by the tool since t = 0: |T(t) − T(0)| (+ arc at ``reach_mm``)."""
+        d = float(np.linalg.norm(self.translation(t) - self.translation(0.0)))
+        return d + math.radians(abs(self.angle_deg(t) - self.angle_deg(0.0))) * reach_mm
+
+    def scaled(self, time: float = 1.0, travel: float = 1.0) -> Motion:
+        """The same motion with times × ``time`` and translations and rotations × ``travel``."""
+        rot = None if self.rotation_deg is None else tuple(travel * a for a in self.rotation_deg)
+        return dataclasses.replace(
+            self, time_s=tuple(time * v for v in self.time_s),
+            x_mm=tuple(travel * v for v in self.x_mm), y_mm=tuple(travel * v for v in self.y_mm),
+            z_mm=tuple(travel * v for v in self.z_mm), rotation_deg=rot)
+
+
+def _rotation(axis, angle_deg: float) -> np.ndarray:
+    """The rotation matrix about ``axis`` by ``angle_deg`` (Rodrigues)."""
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    θ = math.radians(angle_deg)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(θ) * K + (1 - math.cos(θ)) * K @ K
+
+
+@dataclasses.dataclass(frozen=True)
+class ToolSpec:
+    """One rigid tool of a case: its geometry source, role and motion."""
+
+    name: str
+    role: str  # punch | die | holder | surface
+    geometry: str  # "builtin:hemisphere" or the file as written in the case
+    path: Path | None = None  # the geometry file (absolute), None for builtin tools
+    parameters: tuple[tuple[str, float], ...] = ()  # numbers for the geometry source
+    mesh_mm: float | None = None  # tool mesh size for sources Gmsh meshes
+    order: int | None = None  # 1 or 2 (second-order triangles split into four)
+    sheet_side: str | None = None  # side of the surface the sheet is on (default by role)
+    motion: Motion | None = None  # fixed when None (builtin tools move as the hemisphere's)
+
+    @property
+    def builtin(self) -> bool:
+        """Whether the tool is a closed-form builtin tool."""
+        return self.geometry == BUILTIN
+
+    @property
+    def params(self) -> dict[str, float]:
+        """The parameters as a dict."""
+        return dict(self.parameters)
+
+    @property
+    def side(self) -> str:
+        """The sheet side (given, or the role's default)."""
+        return self.sheet_side or DEFAULT_SHEET_SIDE[self.role]
+
+
+@dataclasses.dataclass(frozen=True)
+class BlankSpec:
+    """The blank: its outline, the tow net (Δ, ply angle, origin) and symmetry planes."""
+
+    outline: str  # "rectangle" | "polygon" | the curve file as written in the case
+    cell_mm: float  # unit-cell size Δ (mm)
+    size_mm: tuple[float, float] | None = None  # rectangle: sides along x, y
+    centre_mm: tuple[float, float] = (0.0, 0.0)  # rectangle: centre
+    points_mm: tuple[tuple[float, float], ...] | None = None  # polygon (or the sampled curve)
+    path: Path | None = None  # the outline curve file (absolute)
+    ply_angle_deg: float = 0.0  # warp at this angle to x, the net turned about origin_mm
+    origin_mm: tuple[float, float] = (0.0, 0.0)  # a node of the net
+    symmetry: tuple[str, ...] = ()  # "x" (x = 0) and/or "y" (y = 0)
+
+    def polygon(self) -> np.ndarray:
+        """The whole blank's outline as polygon vertices (m, 2) in mm."""
+        if self.outline == "rectangle":
+            (a, b), (cx, cy) = self.size_mm, self.centre_mm
+            return np.array([[cx - a / 2, cy - b / 2], [cx + a / 2, cy - b / 2],
+                             [cx + a / 2, cy + b / 2], [cx - a / 2, cy + b / 2]])
+        return np.asarray(self.points_mm, dtype=float)
+
+    @property
+    def area_mm2(self) -> float:
+        """Area of the outline (mm²)."""
+        return polygon_area(self.polygon())
+
+    def grid(self) -> TrussGrid:
+        """The structured net of the blank (the modelled part of it, by symmetry).
+
+        A rectangle centred on the net's origin with the tows along its sides is the paper's
+        sheet: Δ is adjusted so that a whole number of cells fits each half of the x side
+        (:func:`~fenicsx_drape.fe.grid.sheet_grid`'s rule), and the y side holds the whole
+        cells that fit. Any other blank uses Δ as given and keeps the whole cells inside
+        the outline (:func:`~fenicsx_drape.fe.grid.outline_grid`).
+        """
+        planes = tuple(p for p in ("x", "y") if p in self.symmetry)
+        if (self.outline == "rectangle" and self.ply_angle_deg == 0.0
+                and tuple(self.centre_mm) == tuple(self.origin_mm)):
+            (a, b), (cx, cy) = self.size_mm, self.centre_mm
+            n_x = max(1, round(a / 2 / self.cell_mm))
+            Δ = a / 2 / n_x
+            n_y = max(1, math.floor(b / 2 / Δ + 1e-9))
+            half_b = b / 2 if abs(n_y * Δ - b / 2) <= 1e-9 * b else n_y * Δ
+            for axis, plane in enumerate(("x", "y")):
+                if plane in planes and (cx, cy)[axis] != 0.0:
+                    raise DrapeInputError(f"blank: symmetry {plane!r} needs the rectangle "
+                                          f"centred on the plane {plane} = 0")
+            both = planes == ("x", "y")
+            symmetry = None if both or not planes else planes
+            return TrussGrid(n_x if "x" in planes else 2 * n_x,
+                             n_y if "y" in planes else 2 * n_y, Δ,
+                             (0.0 if "x" in planes else cx - a / 2,
+                              0.0 if "y" in planes else cy - half_b),
+                             both, symmetry=symmetry)
+        return outline_grid(self.polygon(), self.cell_mm, origin_mm=self.origin_mm,
+                            ply_angle_deg=self.ply_angle_deg, symmetry=planes)
+
+
+@dataclasses.dataclass(frozen=True)
+class HolderSpec:
+    """The blank holder: the tool whose surface clamps, the force and eq. 1's reading."""
+
+    tool: str  # name of the clamping tool (role holder)
+    force_N: float  # total holding force on the whole part (N)
+    mu: float | None = None  # overrides the model's μ (eq. 1)
+    force_share: str = "symmetric_part"  # "symmetric_part" | "model" (issue 15)
+
+
+@dataclasses.dataclass(frozen=True)
+class FormingCase:
+    """A forming case: tools, blank, holder, duration, model and numerical choices."""
+
+    name: str
+    duration_s: float  # forming time of the whole motion (s)
+    blank: BlankSpec
+    tools: tuple[ToolSpec, ...]
+    holder: HolderSpec | None = None
+    description: str = ""
+    model: Path | None = None  # MODEL.toml (absolute); None: the paper's model
+    step_mm: float = 1.0  # travel of the fastest tool per load step (mm)
+    penalty_factor: float = 0.3  # contact (and clamping) stiffness in units of l_t E_o
+    stabilisation_N_per_mm: float = 1.25  # out-of-plane spring to the extrapolated motion
+    path: Path | None = None  # the case file it was read from
+
+    def __post_init__(self) -> None:
+        problems = _case_problems(self)
+        if problems:
+            raise CaseError([f"forming case {self.name!r}: {p}" for p in problems])
+
+    def tool(self, name: str) -> ToolSpec:
+        """The tool of this name."""
+        for t in self.tools:
+            if t.name == name:
+                return t
+        raise KeyError(name)
+
+    @property
+    def planes(self) -> tuple[str, ...]:
+        """The blank's symmetry planes, in the order ("x", "y")."""
+        return tuple(p for p in ("x", "y") if p in self.blank.symmetry)
+
+    @property
+    def folder(self) -> Path:
+        """The folder of the case file (where relative paths start), else the working one."""
+        return self.path.parent if self.path is not None else Path.cwd()
+
+    def reach_mm(self) -> float:
+        """Largest distance of the blank from the frame's origin (for rotating tools)."""
+        return float(np.linalg.norm(self.blank.polygon(), axis=1).max())
+
+    def speed_mm_per_s(self, spec: ToolSpec) -> float:
+        """Fastest speed (mm/s) of a tool over the forming time."""
+        if spec.builtin:
+            travel = _builtin_tools(spec).travel_mm
+            return travel / self.duration_s if spec.role == "punch" else 0.0
+        if spec.motion is None:
+            return 0.0
+        c = np.asarray(spec.motion.centre_mm)[:2]
+        reach = float(np.linalg.norm(self.blank.polygon() - c, axis=1).max())
+        return spec.motion.max_speed_mm_per_s(reach)
+
+    @property
+    def max_speed_mm_per_s(self) -> float:
+        """Speed of the fastest tool (mm/s): load steps move it ``step_mm``."""
+        return max((self.speed_mm_per_s(t) for t in self.tools), default=0.0)
+
+    def travel_mm(self, t: float) -> float:
+        """Travel (mm) of the fastest-moving tool at time ``t`` (the progress measure)."""
+        best = 0.0
+        for spec in self.tools:
+            if spec.builtin:
+                if spec.role == "punch":
+                    best = max(best, self.speed_mm_per_s(spec) * t)
+            elif spec.motion is not None:
+                c = np.asarray(spec.motion.centre_mm)[:2]
+                reach = float(np.linalg.norm(self.blank.polygon() - c, axis=1).max())
+                best = max(best, spec.motion.travel_mm(t, reach))
+        return best
+
+    @property
+    def total_travel_mm(self) -> float:
+        """Travel of the fastest-moving tool at the end of the forming time (mm)."""
+        return self.travel_mm(self.duration_s)
+
+
+def _case_problems(case: FormingCase) -> list[str]:
+    """Consistency of a case built in Python (the loader reports the same with keys)."""
+    out = []
+    for name in ("duration_s", "step_mm", "penalty_factor"):
+        if not (_finite(getattr(case, name)) and getattr(case, name) > 0):
+            out.append(f"{name} = {getattr(case, name)!r} must be a positive number")
+    if not (_finite(case.stabilisation_N_per_mm) and case.stabilisation_N_per_mm >= 0):
+        out.append(f"stabilisation_N_per_mm = {case.stabilisation_N_per_mm!r} must be >= 0")
+    names = [t.name for t in case.tools]
+    if len(set(names)) != len(names):
+        out.append(f"tool names must be unique: {names}")
+    for t in case.tools:
+        if t.role not in ROLES:
+            out.append(f"tool {t.name!r}: role {t.role!r} is not one of {', '.join(ROLES)}")
+    holders = [t.name for t in case.tools if t.role == "holder"]
+    if case.holder is not None:
+        h = case.holder
+        if h.tool not in names:
+            out.append(f"holder: no tool named {h.tool!r} (tools: {', '.join(names)})")
+        elif case.tool(h.tool).role != "holder":
+            out.append(f"holder: tool {h.tool!r} has role {case.tool(h.tool).role!r}, not "
+                       "'holder'")
+        if not (_finite(h.force_N) and h.force_N >= 0):
+            out.append(f"holder: force_N = {h.force_N!r} must be >= 0")
+        if h.mu is not None and not (_finite(h.mu) and h.mu >= 0):
+            out.append(f"holder: mu = {h.mu!r} must be >= 0")
+        if h.force_share not in FORCE_SHARES:
+            out.append(f"holder: force_share = {h.force_share!r} is not one of "
+                       f"{', '.join(FORCE_SHARES)}")
+    for name in holders:
+        if case.holder is None or case.holder.tool != name:
+            out.append(f"tool {name!r} has role 'holder' but no [holder] names it")
+    if not [t for t in case.tools if t.role != "holder"]:
+        out.append("no punch, die or surface: nothing forms the sheet")
+    elif not out and not case.max_speed_mm_per_s > 0:
+        out.append("no tool moves: nothing forms the sheet")
+    b = case.blank
+    if not (_finite(b.cell_mm) and b.cell_mm > 0):
+        out.append(f"blank: cell_mm = {b.cell_mm!r} must be a positive number")
+    if not set(b.symmetry) <= {"x", "y"}:
+        out.append(f"blank: symmetry = {list(b.symmetry)}: planes are \"x\" and \"y\"")
+    return out
+
+
+def _finite(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _builtin_tools(spec: ToolSpec):
+    from fenicsx_drape.forming.tools import HemisphereTools
+
+    return HemisphereTools(**spec.params)
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+
+
+class _Reader:
+    """Collects the problems of one case file, each named by file and key."""
+
+    def __init__(self, fname: str):
+        self.fname = fname
+        self.problems: list[str] = []
+
+    def add(self, where: str, message: str) -> None:
+        self.problems.append(f"{self.fname}: {where}{': ' if where else ''}{message}")
+
+    def raise_if_any(self) -> None:
+        if self.problems:
+            raise CaseError(self.problems)
+
+    # Typed getters: add a problem and return the default when the value is bad.
+
+    def number(self, table: Mapping, key: str, where: str, *, default=None, positive=False,
+               nonnegative=False, required=False):
+        if key not in table:
+            if required:
+                self.add(where, f"'{key}' is required")
+            return default
+        v = table[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            self.add(f"{where} '{key}'".strip(), f"{v!r} is not a number")
+            return default
+        if positive and not v > 0:
+            self.add(f"{where} '{key}'".strip(), f"{v!r} must be > 0")
+            return default
+        if nonnegative and not v >= 0:
+            self.add(f"{where} '{key}'".strip(), f"{v!r} must be >= 0")
+            return default
+        return float(v)
+
+    def string(self, table: Mapping, key: str, where: str, *, default=None, required=False,
+               choices=None):
+        if key not in table:
+            if required:
+                self.add(where, f"'{key}' is required")
+            return default
+        v = table[key]
+        if not isinstance(v, str) or not v:
+            self.add(f"{where} '{key}'".strip(), f"{v!r} is not a (non-empty) string")
+            return default
+        if choices is not None and v not in choices:
+            self.add(f"{where} '{key}'".strip(),
+                     f"{v!r} is not one of {', '.join(repr(c) for c in choices)}")
+            return default
+        return v
+
+    def vector(self, table: Mapping, key: str, where: str, n: int, *, default=None,
+               positive=False, required=False):
+        if key not in table:
+            if required:
+                self.add(where, f"'{key}' is required")
+            return default
+        v = table[key]
+        at = f"{where} '{key}'".strip()
+        if (not isinstance(v, list) or len(v) != n
+                or not all(_finite(c) for c in v)):
+            self.add(at, f"{v!r} must be a list of {n} numbers")
+            return default
+        if positive and not all(c > 0 for c in v):
+            self.add(at, f"{v!r}: sizes must be > 0")
+            return default
+        return tuple(float(c) for c in v)
+
+    def unknown(self, table: Mapping, known, where: str) -> None:
+        for key in table:
+            if key not in known:
+                self.add(where, f"unknown key '{key}' (known: {', '.join(sorted(known))})")
+
+    def table(self, raw: Mapping, key: str, where: str, required=False) -> dict | None:
+        if key not in raw:
+            if required:
+                self.add("", f"[{key}] is required")
+            return None
+        v = raw[key]
+        if not isinstance(v, dict):
+            self.add(where, f"'{key}' must be a table")
+            return None
+        return v
+
+
+def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
+    """Read and check a forming case file; ``overrides`` change it (:data:`OVERRIDES`).
+
+    Args:
+        path: The ``case.toml`` file.
+        **overrides: e.g. ``duration_s=8.0, holder_force_N=500.0, cell_mm=20.0`` or a tool
+            parameter by name (``punch_radius_mm=50.0``): see :func:`with_overrides`.
+
+    Raises:
+        CaseError: with every problem of the file, each naming the file and the key.
+    """
+    path = Path(path)
+    fname = str(path)
+    if not path.is_file():
+        raise CaseError([f"{fname}: no such case file"])
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as err:
+        raise CaseError([f"{fname}: cannot read the case file ({err})"]) from err
+    except tomllib.TOMLDecodeError as err:
+        raise CaseError([f"{fname}: not valid TOML ({err})"]) from err
+    r = _Reader(fname)
+    folder = path.resolve().parent
+    r.unknown(raw, ("case", "blank", "holder", "tool"), "")
+
+    c = r.table(raw, "case", "[case]", required=True) or {}
+    r.unknown(c, ("name", "description", "duration_s", "model", "step_mm", "penalty_factor",
+                  "stabilisation_N_per_mm"), "[case]")
+    name = r.string(c, "name", "[case]", required=True, default="case")
+    description = r.string(c, "description", "[case]", default="") if "description" in c else ""
+    duration = r.number(c, "duration_s", "[case]", positive=True, required=True, default=1.0)
+    step = r.number(c, "step_mm", "[case]", positive=True, default=1.0)
+    penalty = r.number(c, "penalty_factor", "[case]", positive=True, default=0.3)
+    stab = r.number(c, "stabilisation_N_per_mm", "[case]", nonnegative=True, default=1.25)
+    model = None
+    if (m := r.string(c, "model", "[case]")) is not None:
+        model = (folder / m).resolve()
+        if not model.is_file():
+            r.add("[case] 'model'", f"no such file {m!r}")
+
+    blank = _read_blank(r, raw, folder)
+    tools = _read_tools(r, raw, folder, duration)
+    holder = None
+    if (h := r.table(raw, "holder", "[holder]")) is not None:
+        r.unknown(h, ("tool", "force_N", "mu", "force_share"), "[holder]")
+        tool = r.string(h, "tool", "[holder]", required=True, default="")
+        force = r.number(h, "force_N", "[holder]", nonnegative=True, required=True, default=0.0)
+        mu = r.number(h, "mu", "[holder]", nonnegative=True)
+        share = r.string(h, "force_share", "[holder]", choices=FORCE_SHARES,
+                         default="symmetric_part")
+        holder = HolderSpec(tool, force, mu, share)
+        names = {t.name: t for t in tools}
+        if tool and tool not in names:
+            r.add("[holder] 'tool'", f"no tool named {tool!r} (tools: "
+                                     f"{', '.join(names) or 'none'})")
+        elif tool in names and names[tool].role != "holder":
+            r.add("[holder] 'tool'", f"tool {tool!r} has role {names[tool].role!r}; the "
+                                     "clamping tool needs role = \"holder\"")
+    r.raise_if_any()
+    try:
+        case = FormingCase(name=name, duration_s=duration, blank=blank, tools=tuple(tools),
+                           holder=holder, description=description, model=model, step_mm=step,
+                           penalty_factor=penalty, stabilisation_N_per_mm=stab, path=path)
+    except CaseError as err:
+        raise CaseError([f"{fname}: {p.split(': ', 1)[1]}" for p in err.problems]) from None
+    try:
+        case.blank.grid()
+    except DrapeInputError as err:
+        raise CaseError([f"{fname}: [blank]: {err}"]) from None
+    return with_overrides(case, **overrides) if overrides else case
+
+
+def _read_blank(r: _Reader, raw: Mapping, folder: Path) -> BlankSpec:
+    b = r.table(raw, "blank", "[blank]", required=True) or {}
+    at = "[blank]"
+    r.unknown(b, ("outline", "size_mm", "centre_mm", "points_mm", "cell_mm", "ply_angle_deg",
+                  "origin_mm", "symmetry"), at)
+    outline = r.string(b, "outline", at, required=True, default="rectangle")
+    cell = r.number(b, "cell_mm", at, positive=True, required=True, default=10.0)
+    angle = r.number(b, "ply_angle_deg", at, default=0.0)
+    origin = r.vector(b, "origin_mm", at, 2, default=(0.0, 0.0))
+    symmetry: tuple[str, ...] = ()
+    if "symmetry" in b:
+        s = b["symmetry"]
+        if (not isinstance(s, list) or not all(p in ("x", "y") for p in s)
+                or len(set(s)) != len(s)):
+            r.add(f"{at} 'symmetry'", f"{s!r} must be a list of planes \"x\" (x = 0) and/or "
+                                      "\"y\" (y = 0), each once")
+        else:
+            symmetry = tuple(p for p in ("x", "y") if p in s)
+    size = centre = points = path = None
+    centre = (0.0, 0.0)
+    rect_keys, poly_keys = ("size_mm", "centre_mm"), ("points_mm",)
+    if outline == "rectangle":
+        size = r.vector(b, "size_mm", at, 2, positive=True, required=True, default=(1.0, 1.0))
+        centre = r.vector(b, "centre_mm", at, 2, default=(0.0, 0.0))
+        wrong = poly_keys
+    elif outline == "polygon":
+        wrong = rect_keys
+        if "points_mm" not in b:
+            r.add(at, "'points_mm' is required for outline = \"polygon\"")
+        else:
+            v = b["points_mm"]
+            if (not isinstance(v, list) or len(v) < 3
+                    or not all(isinstance(p, list) and len(p) == 2 and all(_finite(c) for c in p)
+                               for p in v)):
+                r.add(f"{at} 'points_mm'", "must be a list of at least three [x, y] points (mm)")
+            else:
+                points = tuple((float(x), float(y)) for x, y in v)
+                if not polygon_area(np.array(points)) > 0:
+                    r.add(f"{at} 'points_mm'", "the polygon encloses no area")
+    else:
+        wrong = rect_keys + poly_keys
+        path = (folder / outline).resolve()
+        if path.suffix.lower() not in OUTLINE_SUFFIXES:
+            r.add(f"{at} 'outline'", f"{outline!r} is not \"rectangle\", \"polygon\" or a Gmsh "
+                                     f"file ({', '.join(OUTLINE_SUFFIXES)})")
+        elif not path.is_file():
+            r.add(f"{at} 'outline'", f"no such file {outline!r}")
+        elif cell is not None:
+            try:
+                points = sample_outline(path, spacing_mm=cell / 4)
+            except DrapeInputError as err:
+                r.add(f"{at} 'outline'", str(err))
+    for key in wrong:
+        if key in b:
+            r.add(f"{at} '{key}'", f"does not apply to outline = {outline!r}")
+    return BlankSpec(outline=outline, cell_mm=cell, size_mm=size, centre_mm=centre,
+                     points_mm=points, path=path, ply_angle_deg=angle, origin_mm=origin,
+                     symmetry=symmetry)
+
+
+def _read_tools(r: _Reader, raw: Mapping, folder: Path, duration: float) -> list[ToolSpec]:
+    if "tool" not in raw:
+        r.add("", "no [[tool]]: a case needs at least one tool")
+        return []
+    items = raw["tool"]
+    if not isinstance(items, list) or not all(isinstance(t, dict) for t in items):
+        r.add("", "'tool' must be an array of tables [[tool]]")
+        return []
+    tools, seen = [], set()
+    for k, t in enumerate(items, start=1):
+        at = f"[[tool]] {k}"
+        r.unknown(t, ("name", "role", "geometry", "parameters", "mesh_mm", "order",
+                      "sheet_side", "motion"), at)
+        name = r.string(t, "name", at, required=True, default=f"tool{k}")
+        if name in seen:
+            r.add(f"{at} 'name'", f"{name!r} is used by another tool")
+        seen.add(name)
+        role = r.string(t, "role", at, required=True, choices=ROLES, default="surface")
+        geometry = r.string(t, "geometry", at, required=True, default=BUILTIN)
+        params: dict[str, float] = {}
+        if "parameters" in t:
+            p = t["parameters"]
+            if not isinstance(p, dict):
+                r.add(f"{at} 'parameters'", "must be a table of numbers")
+            else:
+                for key, v in p.items():
+                    if not _finite(v):
+                        r.add(f"{at} 'parameters' '{key}'", f"{v!r} is not a number")
+                    else:
+                        params[key] = float(v)
+        mesh = r.number(t, "mesh_mm", at, positive=True)
+        order = None
+        if "order" in t:
+            if t["order"] not in (1, 2) or isinstance(t["order"], bool):
+                r.add(f"{at} 'order'", f"{t['order']!r} must be 1 or 2")
+            else:
+                order = int(t["order"])
+        side = r.string(t, "sheet_side", at, choices=SHEET_SIDES)
+        motion = None
+        if "motion" in t:
+            motion = _read_motion(r, t["motion"], f"{at} [tool.motion]", duration)
+        path = None
+        if geometry.startswith("builtin:"):
+            if geometry != BUILTIN:
+                r.add(f"{at} 'geometry'", f"{geometry!r}: the builtin geometry is {BUILTIN!r}")
+            else:
+                _check_builtin(r, at, role, params, mesh, order, side, motion)
+        else:
+            path = (folder / geometry).resolve()
+            if path.suffix.lower() not in GEOMETRY_SUFFIXES:
+                r.add(f"{at} 'geometry'", f"{geometry!r}: unknown kind of file (known: "
+                                          f"{', '.join(GEOMETRY_SUFFIXES)}, or {BUILTIN!r})")
+            elif not path.is_file():
+                r.add(f"{at} 'geometry'", f"no such file {geometry!r}")
+        tools.append(ToolSpec(name=name, role=role, geometry=geometry, path=path,
+                              parameters=tuple(params.items()), mesh_mm=mesh, order=order,
+                              sheet_side=side, motion=motion))
+    return tools
+
+
+def _check_builtin(r: _Reader, at: str, role, params, mesh, order, side, motion) -> None:
+    from fenicsx_drape.forming.tools import HemisphereTools
+
+    if role not in ("punch", "die", "holder"):
+        r.add(f"{at} 'role'", f"{BUILTIN!r} gives the hemisphere's punch, die or holder, "
+                              f"not a {role!r}")
+    known = [f.name for f in dataclasses.fields(HemisphereTools)]
+    for key in params:
+        if key not in known:
+            r.add(f"{at} 'parameters' '{key}'", f"not a parameter of {BUILTIN!r} (known: "
+                                                f"{', '.join(known)})")
+    for key, value in (("mesh_mm", mesh), ("order", order), ("sheet_side", side),
+                       ("motion", motion)):
+        if value is not None:
+            r.add(f"{at} '{key}'", f"does not apply to {BUILTIN!r} (its tools are exact "
+                                   "surfaces and move as the paper's)")
+    if all(key in known for key in params):
+        try:
+            HemisphereTools(**params)
+        except ParameterError as err:
+            r.add(f"{at} 'parameters'", str(err))
+
+
+def _read_motion(r: _Reader, m, at: str, duration: float | None) -> Motion | None:
+    if not isinstance(m, dict):
+        r.add(at, "must be a table")
+        return None
+    r.unknown(m, ("time_s", "x_mm", "y_mm", "z_mm", "rotation_deg", "axis", "centre_mm"), at)
+    before = len(r.problems)
+    columns = {}
+    for key in ("time_s", "x_mm", "y_mm", "z_mm", "rotation_deg"):
+        if key not in m:
+            continue
+        v = m[key]
+        if not isinstance(v, list) or not v or not all(_finite(c) for c in v):
+            r.add(f"{at} '{key}'", f"{v!r} must be a list of numbers")
+        else:
+            columns[key] = tuple(float(c) for c in v)
+    if "time_s" not in m:
+        r.add(at, "'time_s' is required")
+    if not any(k in m for k in ("x_mm", "y_mm", "z_mm", "rotation_deg")):
+        r.add(at, "needs at least one of x_mm, y_mm, z_mm, rotation_deg")
+    if len(r.problems) > before:
+        return None
+    t = columns["time_s"]
+    for key, col in columns.items():
+        if len(col) != len(t):
+            r.add(f"{at} '{key}'", f"{len(col)} values for {len(t)} times in 'time_s'")
+    if t[0] != 0.0:
+        r.add(f"{at} 'time_s'", f"must start at 0 (the start of forming), not {t[0]:g}")
+    if any(b <= a for a, b in itertools.pairwise(t)):
+        r.add(f"{at} 'time_s'", "must increase from row to row")
+    if duration is not None and t[-1] > duration * (1 + 1e-12):
+        r.add(f"{at} 'time_s'", f"the motion runs to {t[-1]:g} s, past [case] duration_s = "
+                                f"{duration:g}")
+    axis = r.vector(m, "axis", at, 3, default=(0.0, 0.0, 1.0))
+    centre = r.vector(m, "centre_mm", at, 3, default=(0.0, 0.0, 0.0))
+    if not np.linalg.norm(axis) > 0:
+        r.add(f"{at} 'axis'", "must not be zero")
+    if "rotation_deg" not in columns:
+        for key in ("axis", "centre_mm"):
+            if key in m:
+                r.add(f"{at} '{key}'", "applies only with 'rotation_deg'")
+    if len(r.problems) > before:
+        return None
+    zeros = (0.0,) * len(t)
+    return Motion(time_s=t, x_mm=columns.get("x_mm", zeros), y_mm=columns.get("y_mm", zeros),
+                  z_mm=columns.get("z_mm", zeros), rotation_deg=columns.get("rotation_deg"),
+                  axis=axis, centre_mm=centre)
+
+
+def sample_outline(path: str | os.PathLike, spacing_mm: float) -> tuple[tuple[float, float], ...]:
+    """The closed curve loop of a Gmsh-readable file as a polygon in the sheet plane.
+
+    The file (a ``.geo`` script, ``.msh``, STEP, IGES or BREP) must hold one closed chain of
+    curves at z = 0; its curves are meshed with segments of ``spacing_mm`` (a mesh in the file
+    is used as it is) and the segments chained into one loop.
+
+    Raises:
+        DrapeInputError: no curve, not one closed loop, or not in the plane z = 0.
+    """
+    import gmsh
+
+    path = Path(path)
+    initialised = gmsh.isInitialized()
+    if not initialised:
+        gmsh.initialize(interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    try:
+        gmsh.model.add("outline")
+        try:
+            gmsh.open(str(path))
+        except Exception as err:  # Gmsh raises plain Exceptions with its message
+            raise DrapeInputError(f"Gmsh cannot read {path.name} ({err})") from err
+        if not gmsh.model.getEntities(1):
+            raise DrapeInputError(f"{path.name} holds no curve")
+        if not len(gmsh.model.mesh.getElements(1)[0]):
+            gmsh.option.setNumber("Mesh.MeshSizeMax", spacing_mm)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
+            gmsh.model.mesh.generate(1)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        xyz = dict(zip(tags.tolist(), np.asarray(coords).reshape(-1, 3)))
+        edges = []
+        for etype, _, nodes in zip(*gmsh.model.mesh.getElements(1)):
+            n = gmsh.model.mesh.getElementProperties(etype)[3]
+            edges.append(np.asarray(nodes).reshape(-1, n)[:, :2])  # the end nodes
+    finally:
+        gmsh.model.remove()
+        if not initialised:
+            gmsh.finalize()
+    edges = np.concatenate(edges) if edges else np.zeros((0, 2), int)
+    edges = edges[edges[:, 0] != edges[:, 1]]
+    loop = _chain(edges, path.name)
+    P = np.array([xyz[k] for k in loop])
+    size = max(np.ptp(P[:, :2], axis=0).max(), 1e-300)
+    if np.abs(P[:, 2]).max() > 1e-6 * size:
+        raise DrapeInputError(f"{path.name}: the curve loop is not in the sheet plane z = 0 "
+                              f"(|z| up to {np.abs(P[:, 2]).max():g} mm)")
+    return tuple((float(x), float(y)) for x, y in P[:, :2])
+
+
+def _chain(edges: np.ndarray, name: str) -> list[int]:
+    """The nodes of one closed loop of line segments, in order."""
+    if not len(edges):
+        raise DrapeInputError(f"{name}: no curve segment")
+    neighbours: dict[int, list[int]] = {}
+    for a, b in edges.tolist():
+        neighbours.setdefault(a, []).append(b)
+        neighbours.setdefault(b, []).append(a)
+    if any(len(v) != 2 for v in neighbours.values()):
+        raise DrapeInputError(f"{name}: the curves are not one closed loop (a curve end meets "
+                              "no other curve, or three curves meet)")
+    start = edges[0, 0]
+    loop, previous, node = [start], None, start
+    while True:
+        a, b = neighbours[node]
+        nxt = b if a == previous else a
+        if nxt == start:
+            break
+        loop.append(nxt)
+        previous, node = node, nxt
+    if len(loop) != len(neighbours):
+        raise DrapeInputError(f"{name}: the curves form {len(neighbours) - len(loop)} more "
+                              "node(s) than one loop: the outline must be one closed curve loop")
+    return loop
+
+
+# --------------------------------------------------------------------------------------------
+# Overrides
+
+
+def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
+    """The case with some values changed, as a measured test's keys override its case.
+
+    Names (:data:`OVERRIDES`): ``duration_s`` (motion tables are stretched to it),
+    ``step_mm``, ``penalty_factor``, ``stabilisation_N_per_mm``, ``cell_mm``,
+    ``ply_angle_deg``, ``symmetry`` (a list of planes; ``[]`` for the full blank),
+    ``sheet_mm`` (a square rectangle blank), ``holder_force_N``, ``holder_mu``,
+    ``holder_force_share``, ``travel_mm`` (builtin tools' parameter; motion tables are
+    scaled so that the fastest tool travels it), and any tool parameter by name (every tool
+    that has it, e.g. ``punch_radius_mm``). None values are ignored.
+    """
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    where = str(case.path) if case.path is not None else f"case {case.name!r}"
+    param_names = {k for t in case.tools for k, _ in t.parameters}
+    builtin_names = set()
+    if any(t.builtin for t in case.tools):
+        from fenicsx_drape.forming.tools import HemisphereTools
+
+        builtin_names = {f.name for f in dataclasses.fields(HemisphereTools)}
+    problems = []
+    for key in overrides:
+        if key not in OVERRIDES and key not in param_names | builtin_names:
+            problems.append(f"{where}: override {key!r}: not a case value (known: "
+                            f"{', '.join(OVERRIDES)}, or a tool parameter)")
+    if problems:
+        raise CaseError(problems)
+    changes: dict[str, Any] = {}
+    blank = case.blank
+    tools = list(case.tools)
+    holder = case.holder
+    for key in ("step_mm", "penalty_factor", "stabilisation_N_per_mm"):
+        if key in overrides:
+            changes[key] = float(overrides[key])
+    if "duration_s" in overrides:
+        new = float(overrides["duration_s"])
+        if not (_finite(new) and new > 0):
+            raise CaseError([f"{where}: override duration_s = {new!r} must be > 0"])
+        f = new / case.duration_s
+        tools = [dataclasses.replace(t, motion=t.motion.scaled(time=f)) if t.motion else t
+                 for t in tools]
+        changes["duration_s"] = new
+    if "cell_mm" in overrides:
+        blank = dataclasses.replace(blank, cell_mm=float(overrides["cell_mm"]))
+    if "ply_angle_deg" in overrides:
+        blank = dataclasses.replace(blank, ply_angle_deg=float(overrides["ply_angle_deg"]))
+    if "symmetry" in overrides:
+        blank = dataclasses.replace(blank, symmetry=tuple(overrides["symmetry"]))
+    if "sheet_mm" in overrides:
+        if blank.outline != "rectangle":
+            raise CaseError([f"{where}: override sheet_mm: the blank is not a rectangle"])
+        s = float(overrides["sheet_mm"])
+        blank = dataclasses.replace(blank, size_mm=(s, s))
+    if holder is None and any(k.startswith("holder_") and k in OVERRIDES for k in overrides):
+        raise CaseError([f"{where}: holder overrides given, but the case has no [holder]"])
+    if holder is not None:
+        holder = dataclasses.replace(
+            holder, force_N=float(overrides.get("holder_force_N", holder.force_N)),
+            mu=overrides.get("holder_mu", holder.mu),
+            force_share=overrides.get("holder_force_share", holder.force_share))
+    params = {k: float(v) for k, v in overrides.items() if k in param_names | builtin_names}
+    if "travel_mm" in overrides:
+        travel = float(overrides["travel_mm"])
+        moving = [t for t in tools if not t.builtin and t.motion is not None]
+        if moving:
+            now = max(t.motion.travel_mm(t.motion.time_s[-1]) for t in moving)
+            if not now > 0:
+                raise CaseError([f"{where}: override travel_mm: no tool translates"])
+            tools = [dataclasses.replace(t, motion=t.motion.scaled(travel=travel / now))
+                     if t in moving else t for t in tools]
+        if any(t.builtin for t in tools):
+            params["travel_mm"] = travel
+    if params:
+        def applies(t: ToolSpec, k: str) -> bool:
+            return (t.builtin and k in builtin_names) or k in t.params
+
+        tools = [dataclasses.replace(t, parameters=tuple({**t.params, **{
+            k: v for k, v in params.items() if applies(t, k)}}.items())) for t in tools]
+    try:
+        new_case = dataclasses.replace(case, blank=blank, tools=tuple(tools), holder=holder,
+                                       **changes)
+        new_case.blank.grid()
+        for t in new_case.tools:
+            if t.builtin:
+                _builtin_tools(t)
+    except DrapeInputError as err:
+        raise CaseError([f"{where}: with overrides {overrides}: {err}"]) from None
+    return new_case
+
+
+# --------------------------------------------------------------------------------------------
+# Tools
+
+
+def build_tools(case: FormingCase, skip: tuple[str, ...] = ()) -> dict[str, object]:
+    """The rigid tools of a case by name (builtin: closed form; files: meshed surfaces).
+
+    A builtin punch moves ``travel_mm`` in the case's ``duration_s``; the builtin die is fixed
+    at the punch's final position; the builtin holder is the plane z = 0 outside the opening
+    (:class:`~fenicsx_drape.forming.holder.FlatHolder`). Tools named in ``skip`` are left out.
+    """
+    from fenicsx_drape.forming.holder import FlatHolder
+
+    out: dict[str, object] = {}
+    for spec in case.tools:
+        if spec.name in skip:
+            continue
+        if spec.builtin:
+            tools = _builtin_tools(spec)
+            if spec.role == "punch":
+                tool = tools.punch(case.duration_s)
+            elif spec.role == "die":
+                tool = tools.die()
+            else:
+                tool = FlatHolder(tools.opening_radius_mm, name=spec.name)
+            if getattr(tool, "name", spec.name) != spec.name and spec.role != "holder":
+                tool = dataclasses.replace(tool, name=spec.name)
+            out[spec.name] = tool
+        else:
+            out[spec.name] = _meshed_tool(case, spec)
+    return out
+
+
+def _meshed_tool(case: FormingCase, spec: ToolSpec):
+    """A tool from a geometry file (issue 13's meshed surfaces: forming.surfaces)."""
+    k = case.tools.index(spec) + 1
+    where = f"{case.path or case.name}: [[tool]] {k} 'geometry'"
+    try:
+        from fenicsx_drape.forming import surfaces
+        from fenicsx_drape.forming.motion import RigidMotion
+    except ImportError as err:
+        raise CaseError([f"{where}: {spec.geometry!r}: meshed tool geometry needs "
+                         f"fenicsx_drape.forming.surfaces and .motion, not in this build "
+                         f"({err})"]) from None
+    MeshedTool = getattr(surfaces, "MeshedTool", None)
+    if MeshedTool is None:
+        from fenicsx_drape.forming.tools import MeshedTool
+    surface = surfaces.load_surface(spec.path, parameters=spec.params or None,
+                                    mesh_size_mm=spec.mesh_mm, order=spec.order or 1,
+                                    sheet_side=spec.side)
+    m = spec.motion
+    if m is None:
+        motion = RigidMotion.fixed() if hasattr(RigidMotion, "fixed") else RigidMotion(
+            time_s=(0.0, case.duration_s), x_mm=(0.0, 0.0), y_mm=(0.0, 0.0), z_mm=(0.0, 0.0))
+    else:
+        motion = RigidMotion(time_s=m.time_s, x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm,
+                             rotation_deg=m.rotation_deg, axis=m.axis, centre_mm=m.centre_mm)
+    return MeshedTool(spec.name, surface, motion)
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+
+
+def case_dict(case: FormingCase, relative_to: str | os.PathLike | None = None) -> dict:
+    """The case as the plain tables of its file (paths relative to ``relative_to``)."""
+    base = Path(relative_to).resolve() if relative_to is not None else None
+
+    def rel(p: Path | None, written: str) -> str:
+        if p is None or base is None:
+            return written
+        return os.path.relpath(p, base)
+
+    c: dict[str, Any] = {"name": case.name}
+    if case.description:
+        c["description"] = case.description
+    c["duration_s"] = case.duration_s
+    if case.model is not None:
+        c["model"] = rel(case.model, str(case.model))
+    c.update(step_mm=case.step_mm, penalty_factor=case.penalty_factor,
+             stabilisation_N_per_mm=case.stabilisation_N_per_mm)
+    b = case.blank
+    blank: dict[str, Any] = {"outline": rel(b.path, b.outline) if b.path else b.outline}
+    if b.outline == "rectangle":
+        blank.update(size_mm=list(b.size_mm), centre_mm=list(b.centre_mm))
+    elif b.outline == "polygon":
+        blank["points_mm"] = [list(p) for p in b.points_mm]
+    blank.update(cell_mm=b.cell_mm, ply_angle_deg=b.ply_angle_deg, origin_mm=list(b.origin_mm),
+                 symmetry=list(b.symmetry))
+    out: dict[str, Any] = {"case": c, "blank": blank}
+    if case.holder is not None:
+        h = case.holder
+        out["holder"] = {"tool": h.tool, "force_N": h.force_N, "force_share": h.force_share}
+        if h.mu is not None:
+            out["holder"]["mu"] = h.mu
+    tools = []
+    for t in case.tools:
+        d: dict[str, Any] = {"name": t.name, "role": t.role,
+                             "geometry": rel(t.path, t.geometry) if t.path else t.geometry}
+        if t.parameters:
+            d["parameters"] = dict(t.parameters)
+        for key in ("mesh_mm", "order", "sheet_side"):
+            if getattr(t, key) is not None:
+                d[key] = getattr(t, key)
+        if t.motion is not None:
+            m = t.motion
+            d["motion"] = {"time_s": list(m.time_s), "x_mm": list(m.x_mm),
+                           "y_mm": list(m.y_mm), "z_mm": list(m.z_mm)}
+            if m.rotation_deg is not None:
+                d["motion"].update(rotation_deg=list(m.rotation_deg), axis=list(m.axis),
+                                   centre_mm=list(m.centre_mm))
+        tools.append(d)
+    out["tool"] = tools
+    return out
+
+
+def _toml(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def case_toml(case: FormingCase, relative_to: str | os.PathLike | None = None,
+              comment: str = "") -> str:
+    """The text of a case file for ``case`` (the format :func:`load_case` reads)."""
+    d = case_dict(case, relative_to)
+    lines = [f"# {line}" for line in comment.splitlines()]
+    for table in ("case", "blank", "holder"):
+        if table in d:
+            lines += ["", f"[{table}]"] if lines else [f"[{table}]"]
+            lines += [f"{k} = {_toml(v)}" for k, v in d[table].items()]
+    for t in d["tool"]:
+        lines += ["", "[[tool]]"]
+        lines += [f"{k} = {_toml(v)}" for k, v in t.items() if k != "motion"]
+        if "motion" in t:
+            lines.append("[tool.motion]")
+            lines += [f"{k} = {_toml(v)}" for k, v in t["motion"].items()]
+    return "\n".join(lines) + "\n"
+
+
+def write_case(case: FormingCase, folder: str | os.PathLike, *, name: str = "case.toml",
+               comment: str = "") -> Path:
+    """Write the case into ``folder`` with copies of its geometry files: a self-contained case.
+
+    Tool geometry and the outline curve are copied next to the case file (renamed on a
+    clash) and named relative to it; the model file is not copied (a bundle names no model).
+    Returns the written case file.
+    """
+    from fenicsx_drape.provenance import atomic_write_bytes, atomic_write_text
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    used: set[str] = {name}
+    copies: dict[Path, Path] = {}
+
+    def copy(p: Path) -> Path:
+        if p in copies:
+            return copies[p]
+        target = p.name
+        k = 1
+        while target in used:
+            target = f"{p.stem}_{k}{p.suffix}"
+            k += 1
+        used.add(target)
+        atomic_write_bytes(folder / target, p.read_bytes())
+        copies[p] = folder / target
+        return copies[p]
+
+    tools = tuple(dataclasses.replace(t, path=copy(t.path)) if t.path else t for t in case.tools)
+    blank = case.blank
+    if blank.path is not None:
+        blank = dataclasses.replace(blank, path=copy(blank.path))
+    local = dataclasses.replace(case, tools=tools, blank=blank, model=None, path=None)
+    text = case_toml(local, relative_to=folder, comment=comment)
+    return atomic_write_text(folder / name, text)

@@ -1,0 +1,244 @@
+"""Run any forming case: the blank's truss, the tools, the holder, the load steps.
+
+:func:`run_case` sets a :class:`~fenicsx_drape.forming.case.FormingCase` up on the FE core and
+steps it to the end of its motion; :func:`~fenicsx_drape.forming.hemisphere.run_hemisphere`
+is the paper's hemisphere on top of it. The terms of the model, for any case:
+
+- the blank's structured net (:meth:`~fenicsx_drape.forming.case.BlankSpec.grid`), with the
+  symmetry conditions u_x = 0 on x = 0 and/or u_y = 0 on y = 0 of a half or quarter model;
+- penalty contact with every punch, die and surface (:mod:`~fenicsx_drape.forming.contact`)
+  of stiffness k = ``penalty_factor`` · l_t E_o (l_t E_o: the axial stiffness of one tow bar),
+  with ``tool_friction`` when the model has it;
+- the blank holder (:mod:`~fenicsx_drape.forming.holder`) on the clamping tool's surface:
+  clamping with the same k and eq. 1 friction bars, the force shared as ``force_share`` says;
+- the out-of-plane stabilisation of the slack net (:mod:`~fenicsx_drape.forming.stabilisation`)
+  along the nearest tool's normal.
+
+Load steps move the fastest tool ``step_mm``; a step whose Newton solve fails is halved, and
+steps grow back (×1.5, up to ``step_mm``) after solves of at most 15 iterations. The solver's
+residual tolerance is 1e-6 N (forces on a node are 0.01-1 N). The Jacobian is symmetric unless
+tool friction or the shear-tension coupling acts or the holder's surface is curved: it is then
+factored with MUMPS's symmetric LDLᵀ (about 20 % less time than LU).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Mapping
+
+import numpy as np
+
+from fenicsx_drape.errors import SolverError
+from fenicsx_drape.forming.case import CaseError, FormingCase, build_tools
+from fenicsx_drape.forming.contact import PenaltyContact
+from fenicsx_drape.forming.holder import BlankHolder, part_force_N
+from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.forming.stabilisation import ExtrapolationSpring
+
+CONTACT_ROLES = ("punch", "die", "surface")
+
+
+@dataclasses.dataclass
+class FormingRun:
+    """A finished run: the formed sheet and how it went."""
+
+    case: FormingCase
+    grid: FormedGrid  # the formed sheet (the modelled part) on its structured grid
+    problem: object  # the TrussProblem at the end (fields, reactions)
+    steps: int  # converged load steps
+    cutbacks: int  # failed (halved) steps
+    iterations: int  # Newton iterations of all attempts
+    wall_time_s: float
+    max_penetration_mm: float  # deepest penetration into any contact tool at the end
+    draw_in_mm: dict[str, float] | None  # rectangle blanks: mid-side and corner draw-in
+    edge_displacement_mm: dict[str, float]  # in-plane displacement of the free edge
+    contact: list[PenaltyContact]
+    holder: BlankHolder | None
+    tools: dict[str, object] = dataclasses.field(default_factory=dict)  # built tools by name
+    stopped: str | None = None  # why the run stopped short of full travel (allow_incomplete)
+
+    @property
+    def travel_mm(self) -> float:
+        """Travel of the fastest tool reached (mm): the full travel unless stopped short."""
+        return self.case.travel_mm(self.problem.t)
+
+
+def contact_stiffness(model, options, factor: float = 1.0) -> float:
+    """Penalty stiffness k = factor · l_t E_o (N/mm): the axial stiffness of one tow bar."""
+    E_o = float(np.max(model.parameters["E_o"]))
+    return factor * options.tows_per_mm * E_o
+
+
+def case_model(case: FormingCase):
+    """The case's material model: its MODEL.toml, else the paper's (Table 2)."""
+    from fenicsx_drape.model import default_model, load_model
+
+    return load_model(case.model) if case.model is not None else default_model()
+
+
+def run_case(case: FormingCase, model=None, options=None, *,
+             tools: Mapping[str, object] | None = None,
+             progress: Callable[[str], None] | None = None,
+             on_step: Callable[[object], None] | None = None, comm=None,
+             allow_incomplete: bool = False) -> FormingRun:
+    """Form a case: build the blank's truss, tools and terms, then step to the end.
+
+    Args:
+        case: The forming case (:func:`~fenicsx_drape.forming.case.load_case`).
+        model: The material :class:`~fenicsx_drape.model.Model` (default: the case's
+            ``model``, else the paper's); the holder's ``mu``, if given, replaces its μ.
+        options: :class:`~fenicsx_drape.fe.solver.SolverOptions` of the truss (default: the
+            forming defaults above).
+        tools: Built tools by name that replace those the case would build (e.g. a surface
+            given in Python); each must be a tool of the case.
+        progress: Called with a line of text after every load step (rank 0 only).
+        on_step: Called with the problem after every converged step (e.g. field output).
+        comm: MPI communicator (default ``COMM_WORLD``).
+        allow_incomplete: When a step fails at the smallest step, return the sheet at the
+            last converged step (``stopped`` says why) instead of raising ``SolverError``.
+
+    Returns:
+        The formed sheet and the run's statistics.
+    """
+    from mpi4py import MPI
+
+    from fenicsx_drape.fe.mesh import grid_to_sheet
+    from fenicsx_drape.fe.solver import SolverOptions, TrussProblem
+    from fenicsx_drape.fe.stepping import RunReport
+
+    model = model or case_model(case)
+    if case.holder is not None and case.holder.mu is not None:
+        model = model.with_parameters(mu=case.holder.mu)
+    given = dict(tools or {})
+    for name in given:
+        if name not in {t.name for t in case.tools}:
+            raise CaseError([f"run_case: tool {name!r} is not a tool of case {case.name!r}"])
+    built = {**build_tools(case, skip=tuple(given)), **given}
+    built = {t.name: built[t.name] for t in case.tools}  # in the case's order
+    holder_surface = built[case.holder.tool] if case.holder is not None else None
+    μ_t = float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
+    if options is None:
+        # The Jacobian is symmetric unless tool friction, the shear-tension coupling or a
+        # curved clamping surface acts: a symmetric (indefinite LDLᵀ) factorisation then costs
+        # about 20 % less time.
+        flat = holder_surface is None or bool(getattr(holder_surface, "flat", False))
+        symmetric = μ_t == 0.0 and "shear_tension_coupling" not in model.effects and flat
+        options = SolverOptions(snes_atol=1e-6,
+                                petsc_options={"pc_type": "cholesky"} if symmetric else {})
+    comm = comm or MPI.COMM_WORLD
+    start = time.perf_counter()
+    planes = case.planes
+
+    k = contact_stiffness(model, options, case.penalty_factor)
+    slip = float(model.parameters.get("tool_slip_mm", 0.1))
+    contact = [PenaltyContact(built[t.name], k, friction=μ_t, slip_regularisation_mm=slip)
+               for t in case.tools if t.role in CONTACT_ROLES]
+    holder = None
+    if case.holder is not None:
+        h = case.holder
+        holder = BlankHolder(model.laws()["friction"], surface=holder_surface,
+                             force_N=part_force_N(h.force_N, len(planes), h.force_share),
+                             clamp_stiffness_N_per_mm=k, force_share=h.force_share,
+                             symmetry_axes=tuple({"x": 0, "y": 1}[p] for p in planes))
+    grid = case.blank.grid()  # the same on every rank (plain NumPy)
+    sheet = grid_to_sheet(grid, comm)
+    terms = [*contact, *([holder] if holder is not None else [])]
+    if case.stabilisation_N_per_mm:
+        terms.append(ExtrapolationSpring(case.stabilisation_N_per_mm, sheet_normal(contact)))
+    problem = TrussProblem(sheet, model, terms, options)
+    if planes == ("x", "y"):
+        problem.symmetry()
+    elif planes:
+        problem.fix(f"symmetry_{planes[0]}", ({"x": 0, "y": 1}[planes[0]],))
+
+    def report(step) -> None:
+        if progress is not None and comm.rank == 0:
+            travel = case.travel_mm(step.time_s)
+            state = "ok" if step.converged else f"cut back ({step.reason})"
+            progress(f"step {len(problem.steps):4d}  t = {step.time_s:7.3f} s  travel = "
+                     f"{travel:6.2f} mm  Newton {step.iterations:2d}  {state}")
+
+    dt = case.step_mm / case.max_speed_mm_per_s
+    stopped = None
+    try:
+        problem.run(case.duration_s, dt, dt_max_s=dt, easy_iterations=15, progress=report,
+                    on_step=on_step)
+    except SolverError as error:
+        if not allow_incomplete:
+            raise
+        stopped = str(error)
+    res = problem.results()
+    both = planes == ("x", "y")
+    formed = FormedGrid(res.X, res.x, both, None if both or not planes else planes)
+    x = problem.positions()[: problem.num_owned]
+    t = problem.t
+    depth = max((float(c.penetration(x, t).max(initial=0.0)) for c in contact), default=0.0)
+    run = RunReport(problem.steps)  # every attempt, also when the run stopped short
+    return FormingRun(
+        case=case, grid=formed, problem=problem, steps=len(run.accepted), cutbacks=run.cutbacks,
+        iterations=run.iterations, wall_time_s=time.perf_counter() - start,
+        max_penetration_mm=comm.allreduce(depth, op=MPI.MAX),
+        draw_in_mm=draw_in(formed) if case.blank.outline == "rectangle" else None,
+        edge_displacement_mm=edge_displacement(formed), contact=contact, holder=holder,
+        tools=built, stopped=stopped)
+
+
+def sheet_normal(contact: list[PenaltyContact], near_mm: float = 3.0):
+    """An estimate of the sheet's normal at every node, for the out-of-plane stabilisation.
+
+    The normal of the nearest tool surface where a tool is within ``near_mm`` (the sheet
+    lies on it, or will), else the z axis (the flat sheet and the holder). The sheet's own
+    normal, from its grid, was tried: it cost 50 % more Newton iterations on the 2.5 mm mesh
+    (wrinkled cells tilt it from node to node).
+    """
+
+    def direction(x: np.ndarray, t: float) -> np.ndarray:
+        d = np.zeros_like(x)
+        d[:, 2] = 1.0
+        best = np.full(len(x), near_mm)
+        for c in contact:
+            g = c.tool.gap(x, t)
+            closer = np.abs(g.phi) < best
+            d[closer] = g.normal[closer]
+            best = np.where(closer, np.abs(g.phi), best)
+        return d
+
+    return direction
+
+
+def draw_in(grid: FormedGrid) -> dict[str, float]:
+    """Inward in-plane displacement (mm) of the middle of a side and of a corner.
+
+    The nodes of the flat sheet nearest the middle of the side x = max and the corner
+    x = max, y = max (for a ply at an angle, on its ragged edge).
+    """
+    X, x = grid.X[..., :2], grid.x[..., :2]
+    a, b = np.nanmax(X[..., 0]), np.nanmax(X[..., 1])
+
+    def inward(target: tuple[float, float]) -> float:
+        d = np.linalg.norm(X - target, axis=-1)
+        k = np.unravel_index(np.nanargmin(d), d.shape)
+        return float(np.linalg.norm(X[k]) - np.linalg.norm(x[k]))
+
+    return {"mid_side_mm": inward((a, 0.0)), "corner_mm": inward((a, b))}
+
+
+def free_edge(grid: FormedGrid) -> np.ndarray:
+    """Mask (n_i, n_j) of the nodes on the blank's free edge (not on a symmetry plane)."""
+    cells = np.pad(np.isfinite(grid.shear_deg()), 1)
+    if "x" in grid.planes:
+        cells[0, :] = cells[1, :]
+    if "y" in grid.planes:
+        cells[:, 0] = cells[:, 1]
+    whole = cells[:-1, :-1] & cells[1:, :-1] & cells[:-1, 1:] & cells[1:, 1:]
+    return grid.present & ~whole
+
+
+def edge_displacement(grid: FormedGrid) -> dict[str, float]:
+    """In-plane displacement (mm) of the blank's free edge: largest and mean (draw-in)."""
+    edge = free_edge(grid)
+    u = np.linalg.norm((grid.x - grid.X)[..., :2][edge], axis=-1)
+    if not len(u):
+        return {"max_mm": 0.0, "mean_mm": 0.0}
+    return {"max_mm": float(u.max()), "mean_mm": float(u.mean())}
