@@ -24,7 +24,7 @@ COMMANDS: dict[str, str] = {
     "compare": "fit, then show how far and where a model misses a bundle",
     "diagnose": "find which physical effect a model is missing (REPORT.json contract)",
     "history": "the ledger of model versions and their errors",
-    "form": "run a forming case (hemisphere) and write fields, pictures and a bundle",
+    "form": "run a forming case (case.toml, or hemisphere): fields, pictures, a bundle",
     "mesh": "build a truss mesh of the woven sheet with Gmsh and write it",
 }
 

@@ -109,3 +109,177 @@ def test_without_holder_friction_the_plates_only_clamp():
     h.bind(X, np.ones(len(X), bool), None)
     f, _ = h.forces(X * 0.98, 1.0, 1.0)
     assert np.abs(f).max() == 0.0
+
+
+# -- a clamping surface of any shape (issue 13) and eq. 1's force share (issue 15) ------------
+
+
+class SquareOpening:
+    """A test clamping surface: the plane z = 0 outside a square opening |x|, |y| <= a."""
+
+    flat = True
+
+    def __init__(self, a_mm, velocity=(0.0, 0.0, 0.0)):
+        self.a = a_mm
+        self.v = np.asarray(velocity, float)
+
+    def gap(self, x, t):
+        from fenicsx_drape.forming.holder import Gap
+
+        n = np.zeros_like(x)
+        n[:, 2] = 1.0
+        return Gap(x[:, 2] - self.v[2] * t, n, np.zeros((len(x), 3, 3)))
+
+    def covers(self, x, t):
+        return np.maximum(np.abs(x[:, 0] - self.v[0] * t), np.abs(x[:, 1] - self.v[1] * t)) > self.a
+
+    def displacement(self, x, t0, t1):
+        return np.broadcast_to(self.v * (t1 - t0), x.shape)
+
+
+class Cylinder:
+    """A curved clamping surface: the cylinder y² + (z − R)² = R² seen from below (the
+    sheet on its outside near z = 0), covering |x| > a."""
+
+    def __init__(self, R=200.0, a=30.0):
+        self.R, self.a = R, a
+
+    def gap(self, x, t):
+        from fenicsx_drape.forming.holder import Gap
+
+        c = np.column_stack([np.zeros(len(x)), x[:, 1], x[:, 2] - self.R])
+        ρ = np.linalg.norm(c, axis=1)
+        n = -c / ρ[:, None]  # outward from the cylinder's material (inside it is the tool)
+        P = np.eye(3)[None] - np.einsum("ni,nj->nij", n, n)
+        P[:, 0, :] = 0.0
+        P[:, :, 0] = 0.0
+        return Gap(self.R - ρ, n, -P / ρ[:, None, None])
+
+    def covers(self, x, t):
+        return np.abs(x[:, 0]) > self.a
+
+
+def generic(surface, force=133.0, axes=(), share="symmetric_part", slip=0.05):
+    law = FrictionLaw(mu=0.3, holder_slip_mm=slip)
+    return BlankHolder(law, surface=surface, force_N=force, clamp_stiffness_N_per_mm=2.4e3,
+                       symmetry_axes=axes, force_share=share)
+
+
+def test_a_square_opening_clamps_exactly_the_nodes_under_it():
+    X = sheet(quarter=False)
+    h = generic(SquareOpening(65.0))
+    h.bind(X, np.ones(len(X), bool), None)
+    under = np.maximum(np.abs(X[:, 0]), np.abs(X[:, 1])) > 65.0
+    np.testing.assert_array_equal(h.under, under)
+    assert h.n_s == under.sum() and h.flat
+    x = X.copy()
+    x[:, 2] = 0.2  # lifted: the clamp pulls back the nodes under the plates only
+    f, K = h.forces(x, 1.0, 1.0)
+    np.testing.assert_allclose(f[under, 2], -2.4e3 * 0.2)
+    assert np.abs(f[~under]).max() == 0.0 and np.abs(K[~under]).max() == 0.0
+    # Drawn in by 12 mm along x: the nodes that crossed the opening's edge lose their bars.
+    x = X.copy()
+    x[:, 0] -= 12.0 * np.sign(X[:, 0])
+    h.forces(x, 1.0, 1.0)
+    h.commit()
+    np.testing.assert_array_equal(h.under, np.maximum(np.abs(x[:, 0]), np.abs(x[:, 1])) > 65.0)
+    assert h.yield_force_N[h.under].sum() == pytest.approx(133.0 * 0.3)
+
+
+def test_the_flat_holder_is_the_circular_opening():
+    """surface=FlatHolder(R) and opening_radius_mm=R are one and the same holder."""
+    from fenicsx_drape.forming.holder import FlatHolder
+
+    X = sheet()
+    a, b = holder(33.25, (0, 1)), generic(FlatHolder(85.0), 33.25, (0, 1))
+    for h in (a, b):
+        h.bind(X, np.ones(len(X), bool), None)
+    rng = np.random.default_rng(1)
+    x = X + rng.uniform(-2, 2, X.shape) * [1, 1, 0.05]
+    for fa, fb in zip(a.forces(x, 1.0, 1.0), b.forces(x, 1.0, 1.0)):
+        np.testing.assert_array_equal(fa, fb)
+
+
+@pytest.mark.parametrize("planes", [(0, 1), (0,)])
+def test_force_share_changes_the_yield_force_per_node_by_the_expected_factor(planes):
+    """symmetric_part: the part carries F/2^k, symmetry-plane nodes count ½ in n_s = Σ w;
+    model: the whole F over the model's own n nodes. Ratio per node: 2^k Σw / n."""
+    from fenicsx_drape.forming.holder import part_force_N
+
+    F = 133.0
+    quarter = len(planes) == 2
+    X = sheet(quarter=quarter)
+    if not quarter:
+        X = X[X[:, 0] >= 0]  # the half x >= 0
+    hs = generic(SquareOpening(65.0), part_force_N(F, len(planes), "symmetric_part"), planes)
+    hm = generic(SquareOpening(65.0), part_force_N(F, len(planes), "model"), planes, "model")
+    for h in (hs, hm):
+        h.bind(X, np.ones(len(X), bool), None)
+    under = hs.under
+    n = under.sum()
+    w = np.ones(len(X))
+    for axis in planes:
+        w[X[:, axis] == 0] *= 0.5
+    assert hs.n_s == pytest.approx(w[under].sum()) and hm.n_s == n
+    interior = under & np.all(X[:, list(planes)] > 0, axis=1)
+    factor = 2 ** len(planes) * w[under].sum() / n
+    np.testing.assert_allclose(hm.yield_force_N[interior], factor * hs.yield_force_N[interior])
+    np.testing.assert_allclose(hs.yield_force_N[interior], F * 0.3 / (2 ** len(planes)
+                                                                       * w[under].sum()))
+    np.testing.assert_allclose(hm.yield_force_N[under], F * 0.3 / n)  # every node alike
+    assert hm.yield_force_N.sum() == pytest.approx(F * 0.3)
+    assert hs.yield_force_N.sum() == pytest.approx(F * 0.3 / 2 ** len(planes))
+
+
+def test_hemisphere_force_share_option():
+    from fenicsx_drape.errors import ParameterError
+    from fenicsx_drape.forming.hemisphere import HemisphereCase
+
+    assert HemisphereCase().holder_force_share == "symmetric_part"  # today's reading
+    assert HemisphereCase().part_force_N == pytest.approx(133.0 / 4)
+    assert HemisphereCase(holder_force_share="model").part_force_N == 133.0
+    assert HemisphereCase(quarter=False).part_force_N == 133.0
+    assert HemisphereCase(holder_force_share="model").to_case().holder.force_share == "model"
+    with pytest.raises(ParameterError, match="holder_force_share"):
+        HemisphereCase(holder_force_share="quarter")
+
+
+@pytest.mark.parametrize("u_mm", [0.01, 3.0])  # sticking and sliding bars
+def test_a_curved_clamping_surface_clamps_along_its_normal_with_a_consistent_jacobian(u_mm):
+    rng = np.random.default_rng(7)
+    X = sheet(cell=20.0, half=100.0, quarter=False)
+    X[:, 2] = 200.0 - np.sqrt(200.0**2 - X[:, 1] ** 2)  # on the cylinder
+    h = generic(Cylinder())
+    h.bind(X, np.ones(len(X), bool), None)
+    assert h.under.sum() == np.count_nonzero(np.abs(X[:, 0]) > 30.0) and not h.flat
+    x = X + rng.uniform(-u_mm, u_mm, X.shape)
+    f, K = h.forces(x, 1.0, 1.0)
+    g = h.surface.gap(x, 1.0)
+    b = h.under
+    # Clamping along the normal: f·n = −k φ; friction in the tangent plane, against the
+    # tangential displacement.
+    np.testing.assert_allclose(np.einsum("ni,ni->n", f[b], g.normal[b]), -2.4e3 * g.phi[b],
+                               rtol=1e-10, atol=1e-12)
+    friction = f[b] + 2.4e3 * g.phi[b, None] * g.normal[b]
+    u = (x - X)[b]
+    s = u - np.einsum("ni,ni->n", u, g.normal[b])[:, None] * g.normal[b]
+    cos = np.einsum("ni,ni->n", friction, s) / (np.linalg.norm(friction, axis=1)
+                                                * np.linalg.norm(s, axis=1))
+    np.testing.assert_allclose(cos, -1.0, atol=1e-10)
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = 1e-6
+        dfk = -(h.forces(x + e, 1.0, 1.0)[0] - h.forces(x - e, 1.0, 1.0)[0]) / 2e-6
+        np.testing.assert_allclose(K[:, :, k], dfk, atol=1e-5 * np.abs(K).max())
+
+
+def test_a_moving_holder_measures_the_slip_relative_to_itself():
+    X = sheet(quarter=False)
+    h = generic(SquareOpening(65.0, velocity=(0.5, 0.0, 0.0)))
+    h.bind(X, np.ones(len(X), bool), None)
+    f, _ = h.forces(X + np.array([1.0, 0.0, 0.0]), 2.0, 2.0)  # carried along by the holder: no slip
+    assert np.abs(f).max() < 1e-9
+    f, _ = h.forces(X, 2.0, 2.0)  # held back: every bar at its yield force, along +x
+    b = h.under
+    np.testing.assert_allclose(np.linalg.norm(f[b], axis=1), h.yield_force_N[b])
+    assert (f[b, 0] > 0).all()

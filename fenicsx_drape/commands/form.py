@@ -1,13 +1,17 @@
-"""``drape form hemisphere``: form the paper's hemisphere and write fields, pictures, a bundle.
+"""``drape form``: form a case (a ``case.toml``, or the paper's hemisphere) and write its outputs.
 
 Example::
 
+    ./drape form meshes/hemisphere/case.toml --out results/case
+    ./drape form my_part/case.toml --out out --cell-mm 5 --duration-s 20 --holder-force-N 300
     ./drape form hemisphere --out results/hemisphere
     ./drape --np 2 form hemisphere --out results/full --full --cell-mm 5
     ./drape form hemisphere --out results/ply3 --full --ply-angle-deg 3
 
 The outputs are listed in :mod:`fenicsx_drape.forming.outputs`; the same is one call in
-Python: :func:`fenicsx_drape.forming.outputs.form_hemisphere`.
+Python: :func:`~fenicsx_drape.forming.outputs.form_case` (any case) or
+:func:`~fenicsx_drape.forming.outputs.form_hemisphere`. Options given on the command line
+override the case file's values (:func:`~fenicsx_drape.forming.case.with_overrides`).
 """
 
 from __future__ import annotations
@@ -23,32 +27,45 @@ CASES = ("hemisphere",)
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Options of ``drape form``."""
-    parser.add_argument("case", choices=CASES, help="the forming case")
+    parser.add_argument("case", metavar="CASE",
+                        help="a case file (case.toml, see the README's 'Forming cases') or "
+                        "'hemisphere' (the paper's, with the options below)")
     parser.add_argument("--out", required=True, type=Path, help="output folder")
-    parser.add_argument("--cell-mm", type=float, default=10.0, help="unit-cell size Δ (mm)")
-    parser.add_argument("--duration-s", type=float, default=40.0,
-                        help="forming time for the 80 mm travel (s)")
-    parser.add_argument("--holder-force-N", type=float, default=133.0,
-                        help="total blank-holder force on the whole sheet (N)")
+    parser.add_argument("--cell-mm", type=float, default=None,
+                        help="unit-cell size Δ (mm; hemisphere default 10)")
+    parser.add_argument("--duration-s", type=float, default=None,
+                        help="forming time of the whole motion (s; hemisphere default 40)")
+    parser.add_argument("--holder-force-N", type=float, default=None,
+                        help="total blank-holder force on the whole part (N; hemisphere "
+                        "default 133)")
+    parser.add_argument("--holder-force-share", choices=("symmetric_part", "model"),
+                        default=None,
+                        help="eq. 1's reading: a symmetric model carries its share of the "
+                        "force, symmetry-plane nodes counting ½ (symmetric_part, the default), "
+                        "or the whole force over the model's own nodes (model)")
     parser.add_argument("--mu", type=float, default=None,
-                        help="textile-tool friction coefficient of eq. 1 (default: the model's)")
+                        help="textile-tool friction coefficient of eq. 1 (default: the case's "
+                        "holder mu, else the model's)")
     parser.add_argument("--model", type=Path, default=None,
-                        help="MODEL.toml (default: the paper's model, Table 2)")
+                        help="MODEL.toml (default: the case's, else the paper's, Table 2)")
     parser.add_argument("--with", dest="with_effects", action="append", default=[],
                         metavar="EFFECT", help="switch an effect on (repeatable), e.g. "
                         "tool_friction")
     parser.add_argument("--without", dest="without_effects", action="append", default=[],
                         metavar="EFFECT", help="switch an effect off (repeatable)")
     parser.add_argument("--full", action="store_true",
-                        help="model the full sheet (default: a symmetric quarter)")
-    parser.add_argument("--ply-angle-deg", type=float, default=0.0, metavar="THETA",
-                        help="initial ply angle: the tows at THETA to the sheet's edges "
-                        "(degrees; needs --full)")
-    parser.add_argument("--no-die", action="store_true", help="leave the matched die out")
-    parser.add_argument("--penalty-factor", type=float, default=0.3,
-                        help="contact stiffness in units of l_t E_o (default 0.3)")
+                        help="model the whole blank, without symmetry planes (hemisphere "
+                        "default: a symmetric quarter)")
+    parser.add_argument("--ply-angle-deg", type=float, default=None, metavar="THETA",
+                        help="initial ply angle: the tows at THETA to x (degrees; needs a "
+                        "model without symmetry planes, --full)")
+    parser.add_argument("--no-die", action="store_true", help="leave the die(s) out")
+    parser.add_argument("--penalty-factor", type=float, default=None,
+                        help="contact stiffness in units of l_t E_o (hemisphere default 0.3)")
     parser.add_argument("--stabilisation", type=float, default=None, metavar="N_PER_MM",
                         help="out-of-plane stabilisation stiffness (default 1.25 N/mm)")
+    parser.add_argument("--step-mm", type=float, default=None,
+                        help="travel of the fastest tool per load step (mm; default 1)")
     parser.add_argument("--grid-mm", type=float, default=10.0,
                         help="spacing of the drawn grid written to the bundle (mm)")
     parser.add_argument("--no-fields", action="store_true",
@@ -56,15 +73,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run ``drape form``."""
-    from mpi4py import MPI
+def _model(args: argparse.Namespace, default):
+    from fenicsx_drape.model import load_model
 
-    from fenicsx_drape.forming.hemisphere import HemisphereCase
-    from fenicsx_drape.forming.outputs import form_hemisphere
-    from fenicsx_drape.model import default_model, load_model
-
-    model = load_model(args.model) if args.model else default_model()
+    model = load_model(args.model) if args.model else default
     if args.with_effects:
         model = model.with_effects(*args.with_effects)
     if args.without_effects:
@@ -73,20 +85,75 @@ def run(args: argparse.Namespace) -> int:
         if not args.mu >= 0:
             raise DrapeInputError(f"--mu {args.mu}: a friction coefficient must be >= 0")
         model = model.with_parameters(mu=args.mu)
-    extra = {} if args.stabilisation is None else {"stabilisation_N_per_mm": args.stabilisation}
-    case = HemisphereCase(cell_mm=args.cell_mm, duration_s=args.duration_s,
-                          holder_force_N=args.holder_force_N, quarter=not args.full,
-                          die=not args.no_die, penalty_factor=args.penalty_factor,
-                          ply_angle_deg=args.ply_angle_deg, **extra)
+    return model
+
+
+def _hemisphere(args: argparse.Namespace):
+    from fenicsx_drape.forming.hemisphere import HemisphereCase
+
+    given = {"cell_mm": args.cell_mm, "duration_s": args.duration_s,
+             "holder_force_N": args.holder_force_N, "penalty_factor": args.penalty_factor,
+             "stabilisation_N_per_mm": args.stabilisation, "step_mm": args.step_mm,
+             "ply_angle_deg": args.ply_angle_deg,
+             "holder_force_share": args.holder_force_share}
+    return HemisphereCase(quarter=not args.full, die=not args.no_die,
+                          **{k: v for k, v in given.items() if v is not None})
+
+
+def _case(args: argparse.Namespace):
+    import dataclasses
+
+    from fenicsx_drape.forming.case import CaseError, load_case
+
+    path = Path(args.case)
+    if path.suffix.lower() != ".toml":
+        raise DrapeInputError(f"{args.case!r}: not a case file (.toml) nor one of "
+                              f"{', '.join(CASES)}")
+    case = load_case(path, cell_mm=args.cell_mm, duration_s=args.duration_s,
+                     holder_force_N=args.holder_force_N,
+                     holder_force_share=args.holder_force_share,
+                     penalty_factor=args.penalty_factor,
+                     stabilisation_N_per_mm=args.stabilisation, step_mm=args.step_mm,
+                     ply_angle_deg=args.ply_angle_deg, symmetry=[] if args.full else None)
+    if args.no_die:
+        dies = [t.name for t in case.tools if t.role == "die"]
+        if not dies:
+            raise CaseError([f"{path}: --no-die: the case has no tool of role 'die'"])
+        case = dataclasses.replace(case, tools=tuple(t for t in case.tools if t.role != "die"))
+    if args.mu is not None and case.holder is not None and case.holder.mu is not None:
+        # The command line wins over the case file's holder mu.
+        case = dataclasses.replace(case, holder=dataclasses.replace(case.holder, mu=None))
+    return case
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``drape form``."""
+    from mpi4py import MPI
+
+    from fenicsx_drape.model import default_model
+
     rank0 = MPI.COMM_WORLD.rank == 0
 
     def progress(line: str) -> None:
         print(line, flush=True)
 
+    hemisphere = args.case in CASES
     try:
-        _, result = form_hemisphere(args.out, case, model, grid_mm=args.grid_mm,
-                                    fields=not args.no_fields,
-                                    progress=None if args.quiet else progress)
+        if hemisphere:
+            from fenicsx_drape.forming.outputs import form_hemisphere
+
+            case = _hemisphere(args)
+            _, result = form_hemisphere(args.out, case, _model(args, default_model()),
+                                        grid_mm=args.grid_mm, fields=not args.no_fields,
+                                        progress=None if args.quiet else progress)
+        else:
+            from fenicsx_drape.forming.outputs import form_case
+            from fenicsx_drape.forming.run import case_model
+
+            case = _case(args)
+            _, result = form_case(args.out, case, _model(args, case_model(case)),
+                                  grid_mm=args.grid_mm, fields=not args.no_fields,
+                                  progress=None if args.quiet else progress)
     except SolverError as err:
         if rank0:
             print(f"drape form: the forming solve failed: {err}", file=sys.stderr)
@@ -97,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
               f"{result['min_wrinkling_strain']:.3f}, {result['steps']} steps, "
               f"{result['snes_iterations']} Newton iterations, {result['wall_time_s']:.1f} s",
               file=sys.stderr if args.quiet else sys.stdout)
-        print(f"pictures: {args.out / 'shear.png'}, {args.out / 'wrinkling.png'}, "
-              f"{args.out / 'paths.png'}; summary: {args.out / 'summary.json'}")
+        pictures = ["shear.png", "wrinkling.png"] + (["paths.png"] if hemisphere else [])
+        print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "
+              f"{args.out / 'summary.json'}")
     return 0

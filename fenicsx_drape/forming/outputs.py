@@ -1,4 +1,19 @@
-"""Everything a hemisphere run writes: summary, fields, forming bundle, tools, pictures.
+"""Everything a forming run writes: summary, fields, forming bundle, tools, pictures.
+
+:func:`form_case` is the Python twin of ``drape form CASE.toml``: it runs any case
+(:func:`~fenicsx_drape.forming.run.run_case`) and writes into one folder
+
+- ``summary.json``: max shear angle, total and minimum wrinkling strain, the free edge's
+  in-plane displacement (and a rectangle's mid-side and corner draw-in), nodes, steps,
+  cut-backs, Newton iterations, wall time, penetration, ranks, travel and the case;
+- ``fields.xdmf`` (+ ``.h5``) every 5 mm of the fastest tool's travel; ``tools/*.vtk``: the
+  tools at the end of their motion;
+- ``bundle/``: the formed part's drawn grid as a forming bundle whose test names a copy of
+  the case (``case = "case/case.toml"``, with its geometry files in ``bundle/case/``), so that
+  it can be compared later like a measured part;
+- ``shear.png``, ``wrinkling.png``: the formed sheet (mirrored to the whole part for a
+  symmetric model) coloured by shear angle, and the wrinkled tows;
+- ``provenance.json``: version, command, model, solver options and the case.
 
 :func:`form_hemisphere` is the Python twin of ``drape form hemisphere``: it runs the case
 (:func:`~fenicsx_drape.forming.hemisphere.run_hemisphere`) and writes into one folder
@@ -22,15 +37,18 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from fenicsx_drape.forming.case import FormingCase, case_dict, write_case
 from fenicsx_drape.forming.hemisphere import HemisphereCase, HemisphereRun, run_hemisphere
 from fenicsx_drape.forming.kinematic import kinematic_drape
 from fenicsx_drape.forming.plots import plot_paths, plot_shear, plot_wrinkling
 from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.forming.run import FormingRun, run_case
 from fenicsx_drape.measurements.bundle import Bundle, Test, write_bundle
 from fenicsx_drape.provenance import write_json, write_provenance
 
@@ -165,3 +183,185 @@ def form_hemisphere(out_dir: str | os.PathLike, case: HemisphereCase | None = No
 
 def _plain(d: dict) -> dict:
     return {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in d.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# Any case
+
+
+def case_summary(run: FormingRun) -> dict:
+    """The numbers of a run of any case (the content of its ``summary.json``)."""
+    g, case = run.grid, run.case
+    warp, weft = g.tow_strains()
+    out = {
+        "case_name": case.name,
+        "max_shear_deg": float(np.nanmax(np.abs(g.shear_deg()))),
+        "total_wrinkling_strain": g.total_wrinkling_strain(),
+        "min_wrinkling_strain": float(min(np.nanmin(warp), np.nanmin(weft), 0.0)),
+        "edge_displacement_mm": run.edge_displacement_mm,
+    }
+    if run.draw_in_mm is not None:
+        out["draw_in_mm"] = run.draw_in_mm
+    b = case.blank
+    out["ply_angle_deg"] = b.ply_angle_deg
+    if b.outline == "rectangle" and b.centre_mm[0] == 0.0:
+        out["mirror_asymmetry_deg"] = g.mirror_asymmetry_deg()
+    out.update({
+        "symmetry": list(case.planes),
+        "nodes": int(g.present.sum()),
+        "steps": run.steps,
+        "cutbacks": run.cutbacks,
+        "snes_iterations": run.iterations,
+        "wall_time_s": run.wall_time_s,
+        "ranks": run.problem.comm.size,
+        "max_penetration_mm": run.max_penetration_mm,
+        "travel_mm": run.travel_mm,
+        "full_travel_mm": case.total_travel_mm,
+        "stopped": run.stopped,
+    })
+    if case.holder is not None:
+        out["holder_force_share"] = case.holder.force_share
+        out["holder_nodes"] = float(run.holder.n_s)
+    out["case"] = case_dict(case, case.folder)
+    return out
+
+
+def case_bundle(run: FormingRun, friction: float, grid_mm: float = 10.0,
+                case_file: str = "case/case.toml", name: str = "") -> Bundle:
+    """The formed part as a one-test forming bundle whose test names its case file.
+
+    The test's keys (``duration_s``, ``holder_force_N``, ``travel_mm``, ``grid_mm``) repeat
+    the case's values; ``case_file`` is relative to the bundle folder (write the case there
+    with :func:`~fenicsx_drape.forming.case.write_case`). μ is the condition
+    ``friction_coefficient``.
+    """
+    case = run.case
+    table = run.grid.drawn_grid(grid_mm)
+    columns = {k: np.asarray(v, dtype=float) for k, v in table.items()}
+    setup = {"travel_mm": case.total_travel_mm, "duration_s": case.duration_s}
+    if case.holder is not None:
+        setup["holder_force_N"] = case.holder.force_N
+    setup["grid_mm"] = grid_mm
+    force = f"-{case.holder.force_N:g}N" if case.holder is not None else ""
+    test_id = f"{case.name}{force}-{case.duration_s:g}s"
+    test = Test(id=test_id, kind="forming", file=f"{case.name}_grid.csv", columns=columns,
+                forming=setup, conditions={"friction_coefficient": friction},
+                notes={"case": case_file})
+    return Bundle(name=name or f"simulated-{test_id}", tests=(test,),
+                  material="simulated by fenicsx_drape")
+
+
+def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options=None, *,
+              tools=None, grid_mm: float = 10.0, fields: bool = True, pictures: bool = True,
+              progress: Callable[[str], None] | None = None,
+              comm=None) -> tuple[FormingRun, dict]:
+    """Run a forming case and write all its outputs into ``out_dir`` (module docstring).
+
+    Args:
+        out_dir: Output folder (created).
+        case: The forming case (:func:`~fenicsx_drape.forming.case.load_case`).
+        model: The material model (default: the case's, else the paper's).
+        options: Solver options of the truss.
+        tools: Built tools by name replacing the case's (see :func:`run_case`).
+        grid_mm: Spacing of the drawn grid of the bundle.
+        fields: Write the XDMF fields and the tool meshes.
+        pictures: Write the PNG pictures.
+        progress: Called with a line per load step (rank 0).
+        comm: MPI communicator (default ``COMM_WORLD``).
+
+    Returns:
+        The run and its summary.
+    """
+    from mpi4py import MPI
+
+    from fenicsx_drape.forming.run import case_model
+
+    comm = comm or MPI.COMM_WORLD
+    model = model or case_model(case)
+    out = Path(out_dir)
+    writer = {}
+    total = case.total_travel_mm
+
+    def frame(problem) -> None:
+        from fenicsx_drape.fe.output import FieldWriter
+
+        if "file" not in writer:
+            writer["file"] = FieldWriter(problem, out / "fields.xdmf")
+            writer["next"] = 0.0
+        travel = case.travel_mm(problem.t)
+        if travel >= writer["next"] - 1e-9 or travel >= total - 1e-9:
+            writer["file"].write()
+            writer["next"] = (np.floor(travel / FRAME_MM + 1e-9) + 1.0) * FRAME_MM
+
+    try:
+        run = run_case(case, model, options, tools=tools, progress=progress,
+                       on_step=frame if fields else None, comm=comm)
+    finally:
+        if "file" in writer:
+            writer["file"].close()
+    result = case_summary(run)
+    if comm.rank == 0:
+        write_json(out / "summary.json", result)
+        given = case.holder.mu if case.holder is not None else None
+        μ = float(np.max(given if given is not None else model.parameters.get("mu", 0.0)))
+        note = (f"simulated by fenicsx_drape (drape form): case {case.name!r}, cell "
+                f"{case.blank.cell_mm:g} mm, symmetry {list(case.planes) or 'none'}")
+        write_case(case, out / "bundle" / "case", comment=note)
+        write_bundle(case_bundle(run, μ, grid_mm), out / "bundle", comment=note)
+        if pictures:
+            plot_shear(run.grid, out / "shear.png",
+                       f"{case.name}: shear angle (max {result['max_shear_deg']:.1f}°)")
+            plot_wrinkling(run.grid, out / "wrinkling.png")
+        if fields:
+            result["tool_files"] = [str(p.relative_to(out)) for p in
+                                    write_case_tools(run, out / "tools")]
+            write_json(out / "summary.json", result)
+        write_provenance(out, model={"effects": list(model.effects),
+                                     "parameters": _plain(model.parameters)},
+                         case=case_dict(case, case.folder),
+                         case_file=str(case.path) if case.path else None,
+                         solver=_plain(vars(run.problem.options)))
+    comm.Barrier()
+    return run, result
+
+
+def write_case_tools(run: FormingRun, folder: str | os.PathLike) -> list[Path]:
+    """Write the tools at the end of their motion as VTK surfaces into ``folder``.
+
+    Builtin hemisphere tools are drawn with Gmsh
+    (:func:`~fenicsx_drape.forming.tool_models.write_tool_meshes`); a meshed tool with a
+    triangle ``surface`` and a ``motion`` is written moved to the end. Other tools (e.g. an
+    analytic surface given in Python) are not drawn.
+    """
+    import meshio
+
+    from fenicsx_drape.forming.case import _builtin_tools
+    from fenicsx_drape.provenance import atomic_write_bytes
+
+    folder = Path(folder)
+    case, t = run.case, run.problem.t
+    written = []
+    builtin = [s for s in case.tools if s.builtin]
+    if builtin:
+        from fenicsx_drape.forming.tool_models import write_tool_meshes
+
+        tools = _builtin_tools(next((s for s in builtin if s.role == "punch"), builtin[0]))
+        written += write_tool_meshes(tools, folder, travel_mm=case.travel_mm(t))
+    for spec in case.tools:
+        if spec.builtin:
+            continue
+        tool = run.tools.get(spec.name)
+        surface, motion = getattr(tool, "surface", None), getattr(tool, "motion", None)
+        if surface is None or not hasattr(surface, "triangles"):
+            continue
+        points = np.asarray(surface.points, dtype=float)
+        if motion is not None and hasattr(motion, "at"):
+            R, T = motion.at(t)
+            c = np.asarray(getattr(motion, "centre_mm", (0.0, 0.0, 0.0)), dtype=float)
+            points = (points - c) @ np.asarray(R).T + c + np.asarray(T)
+        mesh = meshio.Mesh(points, [("triangle", np.asarray(surface.triangles))])
+        with tempfile.TemporaryDirectory() as tmp:  # meshio writes files only: then atomically
+            path = Path(tmp) / f"{spec.name}.vtk"
+            mesh.write(path)
+            written.append(atomic_write_bytes(folder / path.name, path.read_bytes()))
+    return written

@@ -1,4 +1,8 @@
-"""Pictures of a formed sheet, as the paper's Figs. 10-11 (Matplotlib, written atomically)."""
+"""Pictures of a formed sheet, as the paper's Figs. 10-11 (Matplotlib, written atomically).
+
+Any blank: a symmetric model is mirrored to the whole part (:meth:`FormedGrid.full`), and the
+absent nodes of a clipped net (NaN) are left out with the cells and bars they belong to.
+"""
 
 from __future__ import annotations
 
@@ -25,6 +29,13 @@ def _present(polygons: np.ndarray) -> np.ndarray:
     return np.isfinite(polygons).all(axis=(1, 2))
 
 
+def _limits(x: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The ranges of x and y (mm) of the present nodes, widened to a square about their centre."""
+    lo, hi = np.nanmin(x[..., :2], axis=(0, 1)), np.nanmax(x[..., :2], axis=(0, 1))
+    c, half = 0.5 * (lo + hi), 0.5 * max(float(np.max(hi - lo)), 1.0) * 1.02
+    return (c[0] - half, c[0] + half), (c[1] - half, c[1] + half)
+
+
 def _axis_labels(grid: FormedGrid) -> tuple[str, str]:
     """Labels of the x and y axes: the tows lie along them unless the ply is turned."""
     R = grid.tow_frame()[2]
@@ -49,18 +60,20 @@ def plot_shear(grid: FormedGrid, path: str | os.PathLike, title: str = "") -> Pa
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     ax.add_collection3d(Poly3DCollection(cells, facecolors=cmap(norm(γ)), edgecolors="k",
                                          linewidths=0.15))
-    lim = np.nanmax(np.abs(full.x[..., :2]))
-    top = max(np.nanmax(full.x[..., 2]), 1.0)
-    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(0, top), zticks=np.linspace(0, top, 3).round())
+    xlim, ylim = _limits(full.x)
+    bottom = min(np.nanmin(full.x[..., 2]), 0.0)
+    top = max(np.nanmax(full.x[..., 2]), bottom + 1.0)
+    ax.set(xlim=xlim, ylim=ylim, zlim=(bottom, top),
+           zticks=np.linspace(bottom, top, 3).round())
     xlabel, ylabel = _axis_labels(full)
     ax.set_xlabel(xlabel, labelpad=8)
     ax.set_ylabel(ylabel, labelpad=8)
-    ax.set_box_aspect((1, 1, max(top / (2 * lim), 0.15)))
+    ax.set_box_aspect((1, 1, max((top - bottom) / (xlim[1] - xlim[0]), 0.15)))
     ax.view_init(elev=28, azim=-60)
     ax2 = fig.add_subplot(1, 2, 2)
     ax2.add_collection(PolyCollection(cells[:, :, :2], facecolors=cmap(norm(γ)),
                                       edgecolors="k", linewidths=0.15))
-    ax2.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel=xlabel, ylabel=ylabel,
+    ax2.set(xlim=xlim, ylim=ylim, aspect="equal", xlabel=xlabel, ylabel=ylabel,
             title="top view")
     fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax2,
                  label="shear angle (deg)")
@@ -89,9 +102,9 @@ def plot_wrinkling(grid: FormedGrid, path: str | os.PathLike, title: str = "") -
     lines = LineCollection(bars[ε < 0], array=ε[ε < 0], cmap="inferno",
                            norm=plt.Normalize(low, 0.0), linewidths=1.6)
     ax.add_collection(lines)
-    lim = np.nanmax(np.abs(x[..., :2]))
+    xlim, ylim = _limits(x)
     xlabel, ylabel = _axis_labels(full)
-    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", xlabel=xlabel, ylabel=ylabel)
+    ax.set(xlim=xlim, ylim=ylim, aspect="equal", xlabel=xlabel, ylabel=ylabel)
     fig.colorbar(lines, ax=ax, label="Green-Lagrange wrinkling strain")
     ax.set_title(title or f"wrinkled tows (min {ε.min():.3f}, total "
                           f"{100 * grid.total_wrinkling_strain():.2f} %)")

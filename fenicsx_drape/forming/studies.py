@@ -1,7 +1,9 @@
 """Parameter studies of the hemisphere (the paper's Figs. 9 and 12): run a list, tabulate.
 
-Each study in ``demos/study_*.py`` builds a list of :class:`HemisphereCase` s, runs them with
-:func:`sweep` and writes the rows with :func:`write_rows` and a plot; rank 0 writes.
+Each study in ``demos/study_*.py`` builds a list of :class:`HemisphereCase` s (or forming
+cases of any part, :class:`~fenicsx_drape.forming.case.FormingCase`, e.g.
+``load_case(path, duration_s=d)``), runs them with :func:`sweep` and writes the rows with
+:func:`write_rows` and a plot; rank 0 writes.
 """
 
 from __future__ import annotations
@@ -13,16 +15,18 @@ from pathlib import Path
 
 import numpy as np
 
+from fenicsx_drape.forming.case import FormingCase
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
-from fenicsx_drape.forming.outputs import summary
+from fenicsx_drape.forming.outputs import case_summary, summary
 from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.forming.run import run_case
 from fenicsx_drape.provenance import atomic_write_text
 
 COLUMNS = ("max_shear_deg", "total_wrinkling_strain", "min_wrinkling_strain", "nodes", "steps",
            "cutbacks", "snes_iterations", "wall_time_s", "max_penetration_mm")
 
 
-def sweep(cases: Iterable[HemisphereCase], model=None, options=None,
+def sweep(cases: Iterable[HemisphereCase | FormingCase], model=None, options=None,
           progress: Callable[[str], None] | None = print) -> tuple[list[dict], list[FormedGrid]]:
     """Run every case; returns one summary row per case and the formed grids.
 
@@ -33,18 +37,20 @@ def sweep(cases: Iterable[HemisphereCase], model=None, options=None,
 
     rows, grids = [], []
     for case in cases:
+        generic = isinstance(case, FormingCase)
         try:
-            run = run_hemisphere(case, model, options)
+            run = (run_case if generic else run_hemisphere)(case, model, options)
         except SolverError as err:
             rows.append({"failed": str(err)})
             grids.append(None)
             if progress is not None:
                 progress(f"{case}: failed ({err})")
             continue
-        s = summary(run)
+        s = case_summary(run) if generic else summary(run)
         row = {k: s[k] for k in COLUMNS}
-        row["draw_in_mid_side_mm"] = s["draw_in_mm"]["mid_side_mm"]
-        row["draw_in_corner_mm"] = s["draw_in_mm"]["corner_mm"]
+        draw_in = s.get("draw_in_mm") or {}
+        row["draw_in_mid_side_mm"] = draw_in.get("mid_side_mm", np.nan)
+        row["draw_in_corner_mm"] = draw_in.get("corner_mm", np.nan)
         rows.append(row)
         grids.append(run.grid)
         if progress is not None:
