@@ -347,3 +347,24 @@ def test_an_outline_from_a_gmsh_curve(tmp_path):
 
 def _clockwise(P):
     return np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1]) < 0
+
+
+def test_a_motion_table_moves_rigidly_and_sets_the_load_steps():
+    from fenicsx_drape.forming.case import Motion
+
+    m = Motion(time_s=(0.0, 10.0, 20.0), x_mm=(0.0, 0.0, 0.0), y_mm=(0.0, 0.0, 0.0),
+               z_mm=(0.0, 30.0, 40.0), rotation_deg=(0.0, 0.0, 90.0), axis=(0.0, 0.0, 1.0))
+    # Fastest: the second segment, 1 mm/s of translation plus 90° in 10 s at 50 mm from the axis.
+    assert m.max_speed_mm_per_s(50.0) == pytest.approx(1.0 + math.radians(9.0) * 50.0)
+    assert m.travel_mm(10.0) == pytest.approx(30.0)
+    R, T = m.at(15.0)
+    np.testing.assert_allclose(R @ [1.0, 0.0, 0.0], [math.cos(math.pi / 4),
+                                                     math.sin(math.pi / 4), 0.0], atol=1e-12)
+    np.testing.assert_allclose(T, [0.0, 0.0, 35.0])
+    # displacement(x, t0, t1): where the tool's point now at x was at t0, by the motion.
+    x = np.array([[50.0, 0.0, 40.0]])
+    d = m.displacement(x, 10.0, 20.0)
+    np.testing.assert_allclose(x - d, [[0.0, -50.0, 30.0]], atol=1e-9)
+    slow = m.scaled(time=2.0, travel=0.5)
+    assert slow.time_s == (0.0, 20.0, 40.0) and slow.z_mm == (0.0, 15.0, 20.0)
+    assert slow.max_speed_mm_per_s(50.0) == pytest.approx(m.max_speed_mm_per_s(50.0) / 4)

@@ -66,9 +66,11 @@ class CaseError(DrapeInputError):
 class Motion:
     """A tool's prescribed rigid motion: a table, linear between rows.
 
-    A material point at X (its position at t = 0) is at ``R(t) (X − c) + c + T(t)``: T the
-    translation, R the rotation by ``rotation_deg`` about ``axis`` through ``centre_mm``. Before
-    the first row and after the last the tool rests.
+    A point X of the tool's geometry (in the coordinates of its file) is at time t at
+    ``R(t) (X − c) + c + T(t)``: T the translation, R the rotation by ``rotation_deg`` about
+    ``axis`` through ``centre_mm`` = c. Before the first row and after the last the tool
+    rests. The run builds the geometry developer's
+    :class:`~fenicsx_drape.forming.motion.RigidMotion` from it (the same convention).
     """
 
     time_s: tuple[float, ...]  # increasing, from 0
@@ -91,14 +93,6 @@ class Motion:
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(R, T) at time ``t``: x = R (X − c) + c + T."""
         return _rotation(self.axis, self.angle_deg(t)), self.translation(t)
-
-    def place(self, X: np.ndarray, t: float) -> np.ndarray:
-        """Positions at time ``t`` of material points at ``X`` (n, 3) at t = 0."""
-        R, T = self.at(t)
-        c = np.asarray(self.centre_mm)
-        R0 = _rotation(self.axis, self.angle_deg(0.0))
-        X0 = (np.asarray(X, float) - c - self.translation(0.0)) @ R0  # the table's frame
-        return X0 @ R.T + c + T
 
     def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
         """How far the material point at ``x`` at ``t1`` moved since ``t0`` (mm, (n, 3))."""
