@@ -368,3 +368,19 @@ def test_a_motion_table_moves_rigidly_and_sets_the_load_steps():
     slow = m.scaled(time=2.0, travel=0.5)
     assert slow.time_s == (0.0, 20.0, 40.0) and slow.z_mm == (0.0, 15.0, 20.0)
     assert slow.max_speed_mm_per_s(50.0) == pytest.approx(m.max_speed_mm_per_s(50.0) / 4)
+
+
+def test_tools_are_built_by_role(tmp_path):
+    """Builtin tools are the hemisphere's by role; file tools need the meshed surfaces."""
+    from fenicsx_drape.forming.case import build_tools
+    from fenicsx_drape.forming.holder import FlatHolder
+    from fenicsx_drape.forming.tools import HemisphereTools
+
+    tools = build_tools(load_case(HEMISPHERE, duration_s=20.0))
+    reference = HemisphereTools()
+    assert tools["punch"] == reference.punch(20.0) and tools["die"] == reference.die()
+    assert tools["holder"] == FlatHolder(reference.opening_radius_mm)
+    assert set(build_tools(load_case(HEMISPHERE), skip=("die",))) == {"punch", "holder"}
+    case = load_case(write(tmp_path, GOOD))
+    with pytest.raises(CaseError, match=r"\[\[tool\]\] 1 'geometry': 'punch\.stl'"):
+        build_tools(case)

@@ -922,30 +922,19 @@ def build_tools(case: FormingCase, skip: tuple[str, ...] = ()) -> dict[str, obje
 
 
 def _meshed_tool(case: FormingCase, spec: ToolSpec):
-    """A tool from a geometry file (issue 13's meshed surfaces: forming.surfaces)."""
+    """A tool from a geometry file: issue 13's meshed surfaces (not in this build yet).
+
+    The wiring, once ``forming/surfaces.py`` and ``forming/motion.py`` are in: the surface
+    ``load_surface(spec.path, parameters=spec.params, mesh_size_mm=spec.mesh_mm,
+    order=spec.order or 1, sheet_side=spec.side)`` moved by
+    ``RigidMotion(**table of spec.motion)`` (fixed when None) as a ``MeshedTool``. Until then
+    a file tool can be given in Python (``run_case(case, tools={name: tool})``).
+    """
     k = case.tools.index(spec) + 1
-    where = f"{case.path or case.name}: [[tool]] {k} 'geometry'"
-    try:
-        from fenicsx_drape.forming import surfaces
-        from fenicsx_drape.forming.motion import RigidMotion
-    except ImportError as err:
-        raise CaseError([f"{where}: {spec.geometry!r}: meshed tool geometry needs "
-                         f"fenicsx_drape.forming.surfaces and .motion, not in this build "
-                         f"({err})"]) from None
-    MeshedTool = getattr(surfaces, "MeshedTool", None)
-    if MeshedTool is None:
-        from fenicsx_drape.forming.tools import MeshedTool
-    surface = surfaces.load_surface(spec.path, parameters=spec.params or None,
-                                    mesh_size_mm=spec.mesh_mm, order=spec.order or 1,
-                                    sheet_side=spec.side)
-    m = spec.motion
-    if m is None:
-        motion = RigidMotion.fixed() if hasattr(RigidMotion, "fixed") else RigidMotion(
-            time_s=(0.0, case.duration_s), x_mm=(0.0, 0.0), y_mm=(0.0, 0.0), z_mm=(0.0, 0.0))
-    else:
-        motion = RigidMotion(time_s=m.time_s, x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm,
-                             rotation_deg=m.rotation_deg, axis=m.axis, centre_mm=m.centre_mm)
-    return MeshedTool(spec.name, surface, motion)
+    raise CaseError([f"{case.path or case.name}: [[tool]] {k} 'geometry': {spec.geometry!r}: "
+                     "meshed tool geometry (Gmsh/CAD/STL surfaces) is not in this build yet; "
+                     "use geometry = \"builtin:hemisphere\" or give the tool in Python "
+                     "(run_case(case, tools={...}))"])
 
 
 # --------------------------------------------------------------------------------------------
