@@ -53,7 +53,10 @@ import dataclasses
 import numpy as np
 
 from fenicsx_drape.errors import ParameterError
+from fenicsx_drape.forming.tools import Gap
 from fenicsx_drape.materials.base import MaterialLaw
+
+__all__ = ["FORCE_SHARES", "BlankHolder", "FlatHolder", "Gap", "part_force_N"]
 
 FORCE_SHARES = ("symmetric_part", "model")
 
@@ -73,15 +76,6 @@ def check_force_share(force_share: str, where: str = "holder force_share") -> No
         raise ParameterError(f"{where} = {force_share!r}: choose \"symmetric_part\" (a symmetric "
                              "part carries its share of F; symmetry-plane nodes count ½) or "
                              "\"model\" (the whole F over the model's own nodes)")
-
-
-@dataclasses.dataclass(frozen=True)
-class Gap:
-    """Signed distance ``phi`` (n,), normal ``normal`` (n, 3) = ∇φ, ``hessian`` (n, 3, 3)."""
-
-    phi: np.ndarray
-    normal: np.ndarray
-    hessian: np.ndarray
 
 
 @dataclasses.dataclass(frozen=True)
