@@ -8,6 +8,9 @@ A :class:`Model` is what ``MODEL.toml`` holds (measurement spec)::
     sigma_o = 0.0262
     [fit]
     fixed = ["E_p"]
+    [noise]                         # optional: the noise of tables that carry none
+    force_sd_rel = 0.02             # (one standard deviation: force_sd_N in N, or this
+                                    #  fraction of each coupon test's peak force)
 
 :meth:`Model.laws` builds the law of each role (``tow``, ``shear``, ``friction``): the paper's
 law, unless a registered user law whose name is among the effects replaces it. Parameters
@@ -55,6 +58,9 @@ PAPER_EFFECTS = ("rate_dependence", "strain_dependent_viscosity", "decrimping", 
 """The effects of the paper: its four coupon effects and the blank-holder friction."""
 
 _TABLE2 = Path(__file__).parent / "data" / "table2.toml"
+
+NOISE_KEYS = ("force_sd_N", "force_sd_rel")
+"""MODEL.toml [noise] keys (an addition to the spec): a declared noise for coupon tables."""
 
 
 @functools.cache
@@ -144,6 +150,9 @@ class Model:
         parameters: Values by name; missing ones take their defaults.
         plugins: Python files that register user laws; imported on construction.
         fixed: Parameters held at their value when fitting.
+        noise: A declared measurement noise for coupon tables without ``force_sd_N`` (and
+            without a declaration in bundle.toml): ``force_sd_N`` (N) or ``force_sd_rel``
+            (fraction of each test's peak force). An addition to the spec's MODEL.toml.
 
     Raises:
         DrapeInputError: an unknown effect, parameter or fixed name, two user laws of one
@@ -155,6 +164,7 @@ class Model:
     parameters: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     plugins: tuple[Path, ...] = ()
     fixed: tuple[str, ...] = ()
+    noise: Mapping[str, float] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if isinstance(self.effects, str) or isinstance(self.fixed, str):
@@ -191,6 +201,17 @@ class Model:
                 raise ParameterError(f"fixed parameter {name!r} is not a parameter of the "
                                      "model")
         object.__setattr__(self, "fixed", fixed)
+        noise = dict(self.noise)
+        for key, value in noise.items():
+            if key not in NOISE_KEYS:
+                raise DrapeInputError(f"unknown [noise] key {key!r} (expected "
+                                      f"{' or '.join(NOISE_KEYS)})")
+            if isinstance(value, bool) or not (isinstance(value, (int, float))
+                                               and 0 < value < np.inf):
+                raise DrapeInputError(f"[noise] {key} = {value!r} must be a positive number")
+        if len(noise) > 1:
+            raise DrapeInputError("[noise]: give force_sd_N or force_sd_rel, not both")
+        object.__setattr__(self, "noise", {k: float(v) for k, v in noise.items()})
         for name in EXTRA_PARAMETERS:
             lo, hi = parameter_info(name).bounds
             value = np.asarray(values[name])
@@ -290,6 +311,8 @@ class Model:
             lines.append(f"{name:<{width}} = {value!r}" + (f"  # {unit}" if unit else ""))
         if self.fixed:
             lines += ["", "[fit]", f"fixed = {_toml_list(self.fixed)}"]
+        if self.noise:
+            lines += ["", "[noise]"] + [f"{k} = {v!r}" for k, v in self.noise.items()]
         return "\n".join(lines) + "\n"
 
 
@@ -342,14 +365,17 @@ def load_model(path: str | Path) -> Model:
         return DrapeInputError(f"{where}: {problem}")
 
     for key in data:
-        if key not in ("effects", "plugins", "parameters", "fit"):
-            raise fail(key, f"unknown key {key!r} (expected effects, plugins, parameters, fit)")
+        if key not in ("effects", "plugins", "parameters", "fit", "noise"):
+            raise fail(key, f"unknown key {key!r} (expected effects, plugins, parameters, fit, "
+                            "noise)")
     effects = data.get("effects", [])
     plugins = data.get("plugins", [])
     parameters = data.get("parameters", {})
     fit = data.get("fit", {})
+    noise = data.get("noise", {})
     for key, value, kind in (("effects", effects, list), ("plugins", plugins, list),
-                             ("parameters", parameters, dict), ("fit", fit, dict)):
+                             ("parameters", parameters, dict), ("fit", fit, dict),
+                             ("noise", noise, dict)):
         if not isinstance(value, kind):
             raise fail(key, f"{key} must be a {'list' if kind is list else 'table'}")
     for key in fit:
@@ -378,10 +404,12 @@ def load_model(path: str | Path) -> Model:
             raise fail(name, f"unknown parameter {name!r} "
                              f"(known: {', '.join(known_parameters())})")
     try:
-        return Model(tuple(effects), parameters, plugin_paths, tuple(fixed))
+        return Model(tuple(effects), parameters, plugin_paths, tuple(fixed), noise)
     except DrapeInputError as err:
-        name = re.search(r"parameter (\w+)", str(err))
-        raise fail(name.group(1) if name else "parameters", str(err)) from None
+        name = re.search(r"parameter (\w+)|\[noise\] (\w+)", str(err))
+        key = (name.group(1) or name.group(2)) if name else (
+            "noise" if "[noise]" in str(err) else "parameters")
+        raise fail(key, str(err)) from None
 
 
 def _line_of(text: str, key: str) -> int | None:

@@ -15,13 +15,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements.bundle import Bundle, Test
-from fenicsx_drape.measurements.noise import noise_from_sd, noise_from_second_differences
+from fenicsx_drape.measurements.noise import (
+    FLOOR_RELATIVE,
+    implausible,
+    noise_from_sd,
+    noise_from_second_differences,
+)
 
 COUPON_KINDS = ("tensile", "bias_extension")
 # The law role whose parameters each coupon kind identifies (the paper's blocks).
@@ -62,14 +68,71 @@ def simulate(bundle_or_test: Bundle | Test, model) -> np.ndarray | dict[str, np.
 
 
 def test_noise(test: Test) -> tuple[np.ndarray, float, str]:
-    """Per-row noise (N), the test's noise (RMS, N) and its source (spec's definition)."""
+    """Per-row noise (N), the test's noise (RMS, N) and its source.
+
+    In this order: the ``force_sd_N`` column (the spec); a noise declared for the test
+    (bundle.toml ``force_sd_N`` in N or ``force_sd_rel`` of the peak |force|, in the test's
+    table or in [bundle]; MODEL.toml [noise], see :func:`declare_noise`), source
+    ``"declared"``; the model-free estimate from second differences (the spec), source
+    ``"second_differences"``, or -- when that estimate is implausible
+    (:func:`~fenicsx_drape.measurements.noise.implausible`: a smoothed or digitised curve) --
+    at least :data:`~fenicsx_drape.measurements.noise.FLOOR_RELATIVE` of the peak force,
+    source ``"relative_floor"``. :func:`noise_notes` says why, per test.
+    """
     if test.force_sd_N is not None:
         return np.asarray(test.force_sd_N), noise_from_sd(test.force_sd_N), "force_sd_N"
+    peak = float(np.max(np.abs(test.force_N)))
+    if test.noise_sd_N is not None or test.noise_rel is not None:
+        level = test.noise_sd_N if test.noise_sd_N is not None else test.noise_rel * peak
+        return np.full(test.n_rows, level), float(level), "declared"
     noise = noise_from_second_differences(test.time_s, test.force_N)
-    if not noise > 0:
+    if not noise > 0 and not peak > 0:
         raise DrapeInputError(f"test {test.id!r}: no noise can be estimated from the force "
                               "column (give force_sd_N)")
+    if implausible(test.time_s, test.force_N, noise) and noise < FLOOR_RELATIVE * peak:
+        level = FLOOR_RELATIVE * peak
+        return np.full(test.n_rows, level), level, "relative_floor"
     return np.full(test.n_rows, noise), noise, "second_differences"
+
+
+def noise_notes(tests: Sequence[Test]) -> dict[str, dict[str, Any]]:
+    """Per test: the noise used, its source and, in words, where it came from and why."""
+    out = {}
+    for test in tests:
+        _, level, source = test_noise(test)
+        record: dict[str, Any] = {"noise_N": level, "source": source}
+        if source == "declared":
+            what = (f"force_sd_N = {test.noise_sd_N:g} N" if test.noise_sd_N is not None
+                    else f"force_sd_rel = {test.noise_rel:g} of the peak force")
+            record["says"] = f"declared in {test.noise_declared_by}: {what}"
+        elif source in ("second_differences", "relative_floor"):
+            estimate = noise_from_second_differences(test.time_s, test.force_N)
+            why = implausible(test.time_s, test.force_N, estimate)
+            record["estimate_N"] = estimate
+            if why:
+                record["implausible"] = why
+            record["says"] = (
+                f"model-free estimate {estimate:.3g} N from second differences"
+                + (f", implausible: {why}" if why else "")
+                + (f"; the fit weighs the rows with {100 * FLOOR_RELATIVE:g} % of the peak "
+                   f"force ({level:.3g} N) instead: declare the noise (force_sd_N or "
+                   "force_sd_rel in bundle.toml, or [noise] in MODEL.toml)"
+                   if source == "relative_floor" else ""))
+        else:
+            record["says"] = "the force_sd_N column of the table"
+        out[test.id] = record
+    return out
+
+
+def declare_noise(bundle: Bundle, noise: Mapping[str, float] | None) -> Bundle:
+    """``bundle`` with MODEL.toml's [noise] declared on coupon tests that have none."""
+    from fenicsx_drape.measurements.bundle import declared_noise
+
+    if not noise:
+        return bundle
+    tests = tuple(declared_noise(t, noise, "MODEL.toml [noise]")
+                  if t.kind in COUPON_KINDS else t for t in bundle.tests)
+    return dataclasses.replace(bundle, tests=tests)
 
 
 # --------------------------------------------------------------------------------------------

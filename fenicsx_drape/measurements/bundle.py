@@ -36,11 +36,16 @@ COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     ),
 }
 
+# A declared noise for coupon tables without a force_sd_N column (an addition to the spec,
+# which may accept more): one standard deviation per row in N, or as a fraction of the test's
+# peak |force|. Given in a [[test]] table, or in [bundle] for every coupon test without its own.
+NOISE_KEYS = ("force_sd_N", "force_sd_rel")
+
 # Numeric keys of a [[test]] table that describe the test (not conditions), per kind.
 # Keys in REQUIRED_KEYS must be present; ``tows`` may instead be derived from tows_per_mm.
 SETUP_KEYS: dict[str, tuple[str, ...]] = {
-    "tensile": ("gauge_length_mm", "width_mm", "tows", "speed_mm_per_min"),
-    "bias_extension": ("length_mm", "width_mm", "tows", "speed_mm_per_min"),
+    "tensile": ("gauge_length_mm", "width_mm", "tows", "speed_mm_per_min", *NOISE_KEYS),
+    "bias_extension": ("length_mm", "width_mm", "tows", "speed_mm_per_min", *NOISE_KEYS),
     "forming": (
         "punch_radius_mm", "fillet_radius_mm", "holder_opening_mm", "sheet_mm", "travel_mm",
         "duration_s", "holder_force_N", "grid_mm",
@@ -111,6 +116,9 @@ class Test:
     tows: float | None = None  # tows sharing the force (per-tow force = force_N / tows)
     tows_derived: bool = False  # tows computed from tows_per_mm and the width
     speed_mm_per_min: float | None = None  # nominal crosshead speed (descriptive)
+    noise_sd_N: float | None = None  # declared noise, one standard deviation per row (N)
+    noise_rel: float | None = None  # declared noise as a fraction of the peak |force|
+    noise_declared_by: str | None = None  # where the declaration came from (for the report)
     geometry: str | None = None  # forming: tool set ("hemisphere")
     forming: Mapping[str, float] = dataclasses.field(default_factory=dict)  # forming keys
     conditions: Mapping[str, float] = dataclasses.field(default_factory=dict)  # e.g. temperature_C
@@ -315,8 +323,17 @@ def load_bundle(path: str | Path) -> Bundle:
                      f"tows_per_mm = {tows_per_mm!r} must be a positive number (tows/mm)")
         tows_per_mm = None
     extra = {k: v for k, v in data.items() if k not in ("bundle", "test")}
+    bundle_noise: dict[str, float] = {}
+    for key in NOISE_KEYS:
+        if key in head:
+            value = head[key]
+            if _is_number(value) and 0 < value < math.inf:
+                bundle_noise[key] = float(value)
+            else:
+                problems.add(fname, where("bundle", -1, key),
+                             f"[bundle] {key} = {value!r} must be a positive number")
     for key, value in head.items():
-        if key in ("name", "material", "tows_per_mm"):
+        if key in ("name", "material", "tows_per_mm", *NOISE_KEYS):
             continue
         if msg := _unit_problem(key):
             problems.add(fname, where("bundle", -1, key), msg)
@@ -336,6 +353,8 @@ def load_bundle(path: str | Path) -> Bundle:
                           notes)
         if test is None:
             continue
+        if bundle_noise and test.kind in ("tensile", "bias_extension"):
+            test = declared_noise(test, bundle_noise, f"{fname} [bundle]")
         at = where("test", index, "id")
         if test.id in seen:
             problems.add(fname, at, f"test id {test.id!r} is used twice (first on line "
@@ -450,13 +469,31 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
                          f"{label}: {problem} in {file}")
             return None
     forming = {k: v for k, v in setup.items() if kind == "forming"}
-    return Test(
+    if "force_sd_N" in setup and "force_sd_rel" in setup:
+        problems.add(fname, where("test", index, "force_sd_rel"),
+                     f"{label}: give force_sd_N or force_sd_rel, not both")
+        return None
+    test = Test(
         id=test_id, kind=kind, file=file, columns=columns, line=line,
         gauge_length_mm=setup.get("gauge_length_mm"), length_mm=setup.get("length_mm"),
         width_mm=setup.get("width_mm"), tows=tows, tows_derived=tows_derived,
         speed_mm_per_min=speed, geometry=geometry if kind == "forming" else None,
         forming=forming, conditions=conditions, notes=text_notes,
     )
+    own = {k: setup[k] for k in NOISE_KEYS if k in setup}
+    return declared_noise(test, own, f"{fname} [[test]] {test_id!r}") if own else test
+
+
+def declared_noise(test: Test, noise: Mapping[str, float], by: str) -> Test:
+    """``test`` with a declared noise (``force_sd_N`` in N, or ``force_sd_rel``).
+
+    Unless it already has one: its own column, or an earlier declaration (the test's own keys
+    come first, then [bundle], then MODEL.toml's [noise]).
+    """
+    if test.force_sd_N is not None or test.noise_declared_by is not None or not noise:
+        return test
+    return dataclasses.replace(test, noise_sd_N=noise.get("force_sd_N"),
+                               noise_rel=noise.get("force_sd_rel"), noise_declared_by=by)
 
 
 def _read_table(path: Path, kind: str, label: str, problems: _Problems):
@@ -622,6 +659,10 @@ def write_bundle(bundle: Bundle, path: str | Path, *, comment: str = "") -> Path
                 out.append(f"{key} = {_toml_value(value)}")
         if test.tows is not None and not test.tows_derived:
             out.append(f"tows = {_toml_value(test.tows)}")
+        if test.noise_sd_N is not None:
+            out.append(f"force_sd_N = {_toml_value(test.noise_sd_N)}")
+        if test.noise_rel is not None:
+            out.append(f"force_sd_rel = {_toml_value(test.noise_rel)}")
         out += [f"{k} = {_toml_value(v)}" for k, v in test.forming.items()]
         out += [f"{k} = {_toml_value(v)}" for k, v in test.notes.items()]
         if test.conditions:
