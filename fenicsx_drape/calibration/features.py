@@ -20,8 +20,9 @@ No parameter table is consulted, so a new material gets a sensible start:
   below ε̄_v fix only s_∞ exp(−α_v ε̄_v); the fit and its flags say how well each is
   determined). ``E_v`` (the Maxwell spring) cannot be seen without relaxation data: it is
   started ten times stiffer than ``E_p`` so the Maxwell relaxation time is short against the
-  test. With a single rate, σ_o is taken as 0.8 of the knee and the rise beyond it as
-  viscous.
+  test. With a single rate -- or curves whose spread does not grow with the rate (a dry
+  fabric, or specimen sizes that differ more than their rates) -- σ_o is taken as 0.8 of the
+  knee and the rise beyond it as viscous at the slowest rate.
 
 The per-tow force of a coupon is not exactly the bar stress (eqs. 17, 20), so after the
 features the force-like parameters (those in N/tow or N·s/tow) of each law are rescaled
@@ -155,20 +156,25 @@ def shear_guess(tests: Sequence[Test], eta_ref: float | None = None) -> dict[str
     # beyond the knee f_i(ε) ≈ σ_o + η(ε) ε̇_i: the spread with rate gives η(ε)
     grid = np.linspace(min(1.5 * b1, 0.5 * x_max), 0.98 * x_max, 40)
     F = np.array([np.interp(grid, xc, _smooth(fc)) for _, xc, fc in curves])
-    if len(curves) > 1:
+    rate_spread = len(curves) > 1 and np.ptp(rates) > 1e-6 * rates.max()
+    if rate_spread:
         V, intercept = np.polyfit(rates, F, 1)
         sigma_o = float(np.median(intercept[: len(grid) // 2]))
         if not 0.05 * level < sigma_o < level:
             sigma_o = 0.5 * level
-    else:
+        # Curves that do not rise with the rate (a dry fabric; sizes that differ more than
+        # the rates do) say nothing about the viscosity: read them as at one rate instead.
+        rate_spread = float(np.median(V)) > 0.0
+    if not rate_spread:
         sigma_o = 0.8 * level
         V = (F[0] - sigma_o) / rate_s
+        intercept = np.full_like(grid, sigma_o)
     # Low-intermediate strains, where the intercept σ_o holds (beyond, the Maxwell spring of
     # the fast tests stretches and their viscous strain lags: f is no longer linear in the
     # rate): η ≈ A (1 + s_o ε) + C exp(α (ε − ε_max)), eq. 8 below its transition, fitted on
     # a grid of (s_o, α) with non-negative least squares for the amplitudes A, C.
     steady = np.ones_like(grid, dtype=bool)
-    if len(curves) > 1:
+    if rate_spread:
         steady = intercept < 1.5 * np.median(intercept[: len(grid) // 4])
         steady[: len(grid) // 4] = True
     g, v = grid[steady], V[steady]

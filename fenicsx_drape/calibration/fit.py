@@ -28,8 +28,21 @@ Residuals, variables and Jacobian are those of :mod:`fenicsx_drape.calibration.c
   starting value and are flagged.
 - **start**: curve features (:mod:`fenicsx_drape.calibration.features`), then the best of six
   variants along the two directions the features leave open (η_o against s_o, s_inf against
-  eps_v_bar), judged in one vectorised call; or, with ``initial_guess_from_features=False``,
-  the given model's values (a warm start, e.g. a baseline being extended by one effect).
+  eps_v_bar), judged in one vectorised call; values outside a law's range are brought inside
+  and reported (``start_notes``). With ``initial_guess_from_features=False``, the given
+  model's values (a warm start, e.g. a baseline being extended by one effect).
+- **global stage** (a fresh fit; :mod:`fenicsx_drape.calibration.global_stage`): each block
+  is searched from the feature guess, Table 2, the MODEL.toml values and Sobol points in
+  lockstep; the :data:`POLISHED` lowest distinct minima are refined by the least squares and
+  the best kept. The block's record holds every start, the spread of the minima and which
+  starts reached the best (``"global"``).
+- **undetermined**: parameters the kinds and conditions of the tests cannot determine (the
+  tow law without a tensile test, η_o at one strain rate, E_a at one temperature;
+  :mod:`fenicsx_drape.calibration.identifiability`) are held at their starting value and
+  listed with the reason (``undetermined``).
+- **noise**: per test as in :func:`fenicsx_drape.calibration.coupons.test_noise` (column,
+  declared in bundle.toml or MODEL.toml, model-free estimate or its floor when implausible);
+  ``noise`` in the report says where it came from.
 
 After the fit, :mod:`fenicsx_drape.calibration.sensitivity` gives the Table 2 sensitivities and
 the parameter uncertainties from the Jacobian at the optimum, with flags on parameters the data
@@ -48,7 +61,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from fenicsx_drape.calibration import features, sensitivity
+from fenicsx_drape.calibration import features, global_stage, identifiability, sensitivity
 from fenicsx_drape.calibration.coupons import (
     BLOCK_ROLE,
     COUPON_KINDS,
@@ -56,6 +69,8 @@ from fenicsx_drape.calibration.coupons import (
     FD_STEP,
     Residuals,
     Variables,
+    declare_noise,
+    noise_notes,
     simulate,
     test_noise,
 )
@@ -69,6 +84,8 @@ COUPLING_THRESHOLD = 0.2
 # A parameter whose change by a factor e moves the simulated tests by less than this fraction
 # of their noise (RMS over the rows, averaged over tests) is one no test responds to.
 RESPONSE_FLOOR = 0.05
+# The global stage refines this many of its lowest distinct minima by the local least squares.
+POLISHED = 2
 # Stop when an iteration lowers the cost by less than this fraction (at the noise floor the
 # cost is half the number of tests, so with 100-1000 rows per test 1e-4 is a change of the
 # χ² of the data by 0.03-0.3, below the 1 that matters statistically), or moves
@@ -95,7 +112,7 @@ class TestError:
     mean_abs_pct: float  # the same in % of the mean |measured force|
     rmse_N: float  # root-mean-square error
     noise_N: float  # the test's noise (RMS of force_sd_N, or model-free estimate)
-    noise_source: str  # "force_sd_N" | "second_differences"
+    noise_source: str  # see calibration.coupons.test_noise
     normalised: float  # rmse_N / noise_N (1.0 = at the noise floor)
 
     def as_dict(self) -> dict[str, Any]:
@@ -121,6 +138,10 @@ class FitResult:
     flags: list[str]  # parameters the data cannot determine, and why
     notes: list[str]  # skipped tests, coupling decision, ...
     seconds: float  # wall time of the fit
+    # parameters held because the tests cannot determine them: parameter, reason, held_at
+    undetermined: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    start_notes: list[str] = dataclasses.field(default_factory=list)  # starts brought inside
+    noise: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)  # per test
 
     def report(self) -> dict[str, Any]:
         """A JSON-ready report (errors per test, sensitivities, uncertainties, flags).
@@ -139,6 +160,9 @@ class FitResult:
                       "per_test": {k: e.as_dict() for k, e in self.errors.items()},
                       "per_kind": self.errors_per_kind()},
             "blocks": self.blocks,
+            "undetermined": self.undetermined,
+            "start_notes": self.start_notes,
+            "noise": self.noise,
             "sensitivity": self.sensitivity,
             "uncertainty": self.uncertainty,
             "flags": self.flags,
@@ -201,7 +225,8 @@ def _laws_parameters(model) -> dict[str, tuple[str, ...]]:
             for role, cls in model.law_classes().items()}
 
 
-def plan_blocks(model, tests: Sequence[Test], names: Sequence[str]
+def plan_blocks(model, tests: Sequence[Test], names: Sequence[str],
+                alive: Sequence[str] = ()
                 ) -> tuple[list[tuple[tuple[str, ...], tuple[Test, ...]]], list[str], list[str]]:
     """Decide what is fitted to what (see the module docstring).
 
@@ -219,7 +244,7 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str]
         effect[kinds.index(t.kind)] += np.sum(J[rows[i]:rows[i + 1]] ** 2, axis=0)
     effect = np.sqrt(effect)
     strongest = effect.max(axis=0)
-    dead = [n for n, s in zip(names, strongest) if not s > RESPONSE_FLOOR]
+    dead = [n for n, s in zip(names, strongest) if not s > RESPONSE_FLOOR and n not in alive]
     notes = []
     if dead:
         notes.append("no test responds to " + ", ".join(dead) + ": kept at the start value")
@@ -227,7 +252,8 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str]
     if len(kinds) == 1:
         return [(tuple(names[j] for j in live), tuple(tests))], dead, notes
     home = {j: int(np.argmax(effect[:, j])) for j in live}
-    cross = max((np.delete(effect[:, j], home[j]).max() / effect[home[j], j] for j in live),
+    cross = max((np.delete(effect[:, j], home[j]).max() / effect[home[j], j] for j in live
+                 if effect[home[j], j] > 0),
                 default=0.0)
     if cross > COUPLING_THRESHOLD:
         notes.append(f"tow and shear laws coupled in these tests (cross effect {cross:.2g} > "
@@ -247,24 +273,37 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str]
 # Initial guess
 
 
-def initial_guess(model, tests: Sequence[Test], names: Sequence[str]):
-    """``model`` with the parameters ``names`` started from curve features (section 3.2)."""
+def initial_guess(model, tests: Sequence[Test], names: Sequence[str],
+                  notes: list[str] | None = None):
+    """``model`` with the parameters ``names`` started from curve features (section 3.2).
+
+    A feature value outside its law's allowed range (e.g. η_o from bias curves at one rate)
+    is brought inside (:func:`~fenicsx_drape.calibration.identifiability.inside_ranges`),
+    before and after the force rescaling; each change is appended to ``notes``.
+    """
     from fenicsx_drape.model import parameter_info
 
+    notes = [] if notes is None else notes
     guess: dict[str, float] = {}
     tensile = [t for t in tests if t.kind == "tensile"]
     bias = [t for t in tests if t.kind == "bias_extension"]
-    if tensile:
-        guess |= features.tow_guess(tensile, decrimping="decrimping" in model.effects)
     rate_independent = "rate_dependence" not in model.effects
-    if bias:
-        eta_ref = (float(model.parameters["eta_o"]) * float(model.parameters["rate_ref_per_s"])
-                   if rate_independent and "rate_ref_per_s" in model.parameters else None)
-        guess |= features.shear_guess(bias, eta_ref=eta_ref)
-    chosen = {n: v for n, v in guess.items() if n in names and math.isfinite(v) and v > 0}
-    for n, v in chosen.items():  # keep inside the physical range
-        lo, hi = parameter_info(n).bounds
-        chosen[n] = float(min(max(v, lo), hi))
+    try:
+        if tensile:
+            guess |= features.tow_guess(tensile, decrimping="decrimping" in model.effects)
+        if bias:
+            eta_ref = (float(model.parameters["eta_o"])
+                       * float(model.parameters["rate_ref_per_s"])
+                       if rate_independent and "rate_ref_per_s" in model.parameters else None)
+            guess |= features.shear_guess(bias, eta_ref=eta_ref)
+    except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError) as err:
+        # curves too short or too odd for the features: the other starts remain
+        notes.append(f"curve features failed ({type(err).__name__}: {err}); the feature "
+                     "start is the given values")
+        return model
+    guess = {n: v for n, v in guess.items() if math.isfinite(v)}
+    chosen = {n: float(v) for n, v in guess.items() if n in names}
+    chosen |= _inside(chosen, "curve features", notes)
     model = model.with_parameters(**chosen)
     # Rescale the force-like parameters of each law together (degree-one homogeneity); the
     # rate-independent lock-up η_o ε̇_ref (f - 1) scales with s_o and s_inf.
@@ -279,9 +318,17 @@ def initial_guess(model, tests: Sequence[Test], names: Sequence[str]):
         meas = np.concatenate([t.force_N for t in group])
         c = float(np.dot(sim, meas) / np.dot(sim, sim)) if np.dot(sim, sim) > 0 else 1.0
         if c > 0 and math.isfinite(c):
-            model = model.with_parameters(**{n: float(model.parameters[n]) * c
-                                             for n in force_like})
+            values = {n: float(model.parameters[n]) * c for n in force_like}
+            values |= _inside(values, "curve features (rescaled)", notes)
+            model = model.with_parameters(**values)
     return _best_start(model, bias, names) if bias else model
+
+
+def _inside(values: Mapping[str, float], what: str, notes: list[str]) -> dict[str, float]:
+    """The values of ``values`` that must change to lie inside their ranges (notes added)."""
+    changed, more = identifiability.inside_ranges(dict(values), list(values), what)
+    notes += more
+    return changed
 
 
 def _best_start(model, tests: Sequence[Test], names: Sequence[str]):
@@ -301,7 +348,9 @@ def _best_start(model, tests: Sequence[Test], names: Sequence[str]):
             variants.append({"eta_o": k * p["eta_o"], "s_o": s_o, "s_inf": s_inf,
                              "eps_v_bar": p["eps_v_bar"] + shift})
     varied = [n for n in variants[0] if n in names]
-    if not varied:
+    variants = [v for v in variants  # variants a law would reject are left out
+                if not identifiability.inside_ranges({n: v[n] for n in varied}, varied, "")[0]]
+    if not varied or not variants:
         return model
     sets = model.with_parameters(**{n: np.array([v[n] for v in variants]) for n in varied})
     cost = sum(np.sum(((np.atleast_2d(simulate(t, sets)) - t.force_N) / test_noise(t)[0]) ** 2,
@@ -317,13 +366,13 @@ def _best_start(model, tests: Sequence[Test], names: Sequence[str]):
 def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
         initial_guess_from_features: bool = True, tests: Sequence[str] | None = None,
         parameters: Sequence[str] | None = None, max_iterations: int = 200,
-        analyse: bool = True) -> FitResult:
+        analyse: bool = True, global_stage: bool | None = None) -> FitResult:
     """Fit ``model``'s active parameters to the coupon tests of ``bundle``.
 
     Args:
         bundle: The measurements (forming tests are skipped with a note).
-        model: The model to fit (effects, plugins, start values, fixed parameters); the
-            default model when None.
+        model: The model to fit (effects, plugins, start values, fixed parameters, declared
+            noise); the default model when None.
         progress: Called with one line of text per iteration and stage.
         initial_guess_from_features: Start from curve features (section 3.2); False starts
             from ``model``'s own values (a warm start).
@@ -331,6 +380,9 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
         parameters: Only these parameters; the model's active parameters when None.
         max_iterations: Cap on the optimiser's iterations per block.
         analyse: Also compute the Table 2 sensitivities and the uncertainties.
+        global_stage: Search from several starts before the local least squares
+            (:mod:`~fenicsx_drape.calibration.global_stage`); by default with the feature
+            guess (a fresh fit) and not for a warm start.
 
     Returns:
         The :class:`FitResult`.
@@ -340,6 +392,8 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
     start = time.perf_counter()
     say = progress or (lambda line: None)
     model = default_model() if model is None else model
+    bundle = declare_noise(bundle, getattr(model, "noise", None))
+    global_stage = initial_guess_from_features if global_stage is None else global_stage
     coupons = [t for t in bundle.tests if t.kind in COUPON_KINDS
                and (tests is None or t.id in tests)]
     notes = [f"forming test {t.id!r} not used by the coupon fit" for t in bundle.tests
@@ -357,17 +411,39 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
     if parameters is not None and set(parameters) - set(active):
         notes.append("not fitted (fixed or not used by the model's effects): "
                      + ", ".join(sorted(set(parameters) - set(active))))
+    held = identifiability.undetermined(model, coupons, names)
+    undetermined = [{"parameter": n, "reason": r, "held_at": float(model.parameters[n])}
+                    for n, r in held.items()]
+    for u in undetermined:
+        say(f"  undetermined: {u['parameter']} held at {u['held_at']:.4g} ({u['reason']})")
+    names = tuple(n for n in names if n not in held)
+    given, start_notes = model, []
     if initial_guess_from_features:
         say("initial guess from curve features (section 3.2)")
-        model = initial_guess(model, coupons, names)
+        model = initial_guess(model, coupons, names, start_notes)
     initial = model
     blocks, dead, block_notes = plan_blocks(model, coupons, names)
+    if global_stage and dead:
+        # dead at this start may live at another (a viscosity too small here to be felt)
+        alive = set()
+        for other in (given, _table2_start(given, names)):
+            alive |= set(dead) - set(plan_blocks(other, coupons, names)[1])
+        if alive:
+            blocks, dead, block_notes = plan_blocks(model, coupons, names, sorted(alive))
     notes += block_notes
     records = []
     for block_names, block_tests in blocks:
         label = f"{'+'.join(sorted({t.kind for t in block_tests}))} ← {', '.join(block_names)}"
-        say(f"fitting {label}")
-        model, record = _fit_block(model, block_names, block_tests, max_iterations, say)
+        if global_stage:
+            say(f"global stage for {label}")
+            starts = [("MODEL.toml", given), ("Table 2", _table2_start(given, block_names))]
+            if initial_guess_from_features:
+                starts.insert(0, ("curve features", initial))
+            model, record = global_stage_search(model, block_names, block_tests, starts,
+                                                max_iterations, say)
+        else:
+            say(f"fitting {label}")
+            model, record = _fit_block(model, block_names, block_tests, max_iterations, say)
         record["label"] = label
         records.append(record)
     simulated = {t.id: np.ravel(simulate(t, model)) for t in coupons}
@@ -377,9 +453,14 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
                                                    for t in coupons]))))
     for e in errors.values():
         say(f"  {e.id}: mean |error| {e.mean_abs_N:.3g} N ({e.mean_abs_pct:.2g} %), "
-            f"RMSE {e.rmse_N:.3g} N = {e.normalised:.3g} × noise")
+            f"RMSE {e.rmse_N:.3g} N = {e.normalised:.3g} × noise ({e.noise_source})")
     fitted = tuple(n for block, _ in blocks for n in block)
     sens, unc, flags = {}, {}, [f"{n}: no test responds to it (not determined)" for n in dead]
+    flags += [f"{u['parameter']}: undetermined, held at {u['held_at']:.4g} ({u['reason']})"
+              for u in undetermined]
+    for record in records:
+        flags += [f"{n}: at the bound of its search range (the data push it beyond; "
+                  "not determined)" for n in record["at_bound"]]
     if analyse:
         say("sensitivities (Table 2) and uncertainties")
         sens = sensitivity.table2(model, coupons)
@@ -387,10 +468,77 @@ def fit(bundle: Bundle, model=None, *, progress: Progress | None = None,
         flags += more
     for flag in flags:
         say(f"  flag: {flag}")
+    for note in start_notes:
+        say(f"  start: {note}")
     return FitResult(model=model, initial_model=initial, bundle=bundle, errors=errors,
                      simulated=simulated, normalised=normalised, rmse_N=rmse, fitted=fitted,
                      blocks=records, sensitivity=sens, uncertainty=unc, flags=flags,
-                     notes=notes, seconds=time.perf_counter() - start)
+                     notes=notes, seconds=time.perf_counter() - start,
+                     undetermined=undetermined, start_notes=start_notes,
+                     noise=noise_notes(coupons))
+
+
+def _table2_start(model, names: Sequence[str]):
+    """``model`` with ``names`` at the paper's values (Table 2) or their laws' defaults."""
+    from fenicsx_drape.model import default_parameters
+
+    defaults = default_parameters()
+    return model.with_parameters(**{n: defaults[n] for n in names if n in defaults})
+
+
+def global_stage_search(model, names: Sequence[str], tests: Sequence[Test],
+                        named: Sequence[tuple[str, Any]], max_iterations: int,
+                        say: Progress):
+    """The global stage of one block and the local least squares from its best minima.
+
+    ``named`` are the named starts (label, model); a start equal to an earlier one is dropped
+    (a MODEL.toml without [parameters] is Table 2). After the lockstep search
+    (:mod:`~fenicsx_drape.calibration.global_stage`), the :data:`POLISHED` lowest distinct
+    minima are each refined by the local least squares (:func:`_fit_block`); the best of
+    those is the fit. Returns the model and the block's record, with the search under
+    ``"global"``.
+    """
+    points, labels = [], []
+    for label, start in named:
+        p = np.array([float(start.parameters[n]) for n in names])
+        if not any(np.allclose(p, q, rtol=1e-12, atol=0.0) for q in points):
+            points.append(p)
+            labels.append(label)
+    variables = Variables.make(model, names)
+    for p in points:  # the search may go wherever any start's own range reaches
+        other = Variables.make(model.with_parameters(**dict(zip(names, map(float, p)))),
+                               names)
+        variables = dataclasses.replace(variables,
+                                        lower=np.minimum(variables.lower, other.lower),
+                                        upper=np.maximum(variables.upper, other.upper))
+    res = Residuals(model, tests, variables)
+    search = global_stage.search(res, [variables.to_x(p) for p in points], labels, FD_STEP)
+    best_model, best_record = None, None
+    order = sorted((s for s in search.starts if math.isfinite(s.cost)), key=lambda s: s.cost)
+    refined: list[tuple[np.ndarray, global_stage.Start]] = []  # (minimum before, refined)
+    for start in order:
+        twin = next((r for x, r in refined if np.linalg.norm(start.x - x) < 1e-6), None)
+        if twin is not None:  # the same minimum as one refined already
+            start.x, start.cost, start.polished = twin.x, twin.cost, True
+            continue
+        if len(refined) == POLISHED:
+            break
+        before = start.x.copy()
+        trial = model.with_parameters(**{n: float(v) for n, v in
+                                         zip(names, variables.to_p(start.x))})
+        trial, record = _fit_block(trial, names, tests, max_iterations, lambda line: None)
+        start.x = variables.to_x(np.array([float(trial.parameters[n]) for n in names]))
+        start.cost = 2.0 * record["cost"]
+        start.iterations += record["iterations"]
+        start.polished = True
+        refined.append((before, start))
+        if best_record is None or record["cost"] < best_record["cost"]:
+            best_model, best_record = trial, record
+    if best_model is None:  # every start failed: the local fit from the model itself
+        best_model, best_record = _fit_block(model, names, tests, max_iterations, say)
+    best_record["global"] = search.record(names, variables.to_p, len(tests))
+    say(f"  {search.statement()}")
+    return best_model, best_record
 
 
 def _fit_block(model, names: Sequence[str], tests: Sequence[Test], max_iterations: int,

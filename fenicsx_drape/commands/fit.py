@@ -17,6 +17,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warm-start", action="store_true",
                         help="start from the model's parameter values instead of the "
                         "curve-feature guess of section 3.2")
+    parser.add_argument("--no-global", action="store_true",
+                        help="skip the global stage (the starts from curve features, Table 2, "
+                        "MODEL.toml and Sobol points searched before the local least squares)")
     parser.add_argument("--tests", nargs="+", metavar="ID", help="fit only these tests")
     parser.add_argument("--max-iterations", type=int, default=200,
                         help="cap on the optimiser's iterations per block (default 200)")
@@ -34,9 +37,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {line}")
     model = load_model(args.model) if args.model else default_model()
     result = fit(bundle, model, progress=print, initial_guess_from_features=not args.warm_start,
-                 tests=args.tests, max_iterations=args.max_iterations)
+                 tests=args.tests, max_iterations=args.max_iterations,
+                 global_stage=False if args.no_global else None)
     for kind, e in result.errors_per_kind().items():
         print(f"{kind}: mean |error| {e['mean_abs_N']:.3g} N ({e['mean_abs_pct']:.2g} %)")
+    for test_id, noise in result.noise.items():
+        print(f"noise of {test_id}: {noise['says']}")
     print(f"normalised error {result.normalised:.3g} (1 = noise floor), "
           f"{result.seconds:.1f} s")
     print("sensitivities (Table 2: relative change per relative change of the parameter)")
