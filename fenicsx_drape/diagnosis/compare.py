@@ -386,8 +386,8 @@ def compare(bundle: Bundle, model: Model, *, fit: bool = True,
 
 def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
                parameters: Sequence[str] | None = None, max_iterations: int = 200,
-               from_features: bool = True, progress: Callable[[str], None] | None = None
-               ) -> Model:
+               from_features: bool = True, progress: Callable[[str], None] | None = None,
+               details: dict | None = None) -> Model:
     """Fit a model to a bundle that may mix test kinds: each kind's own ``fit`` in turn.
 
     The fits of the kinds present among the chosen tests run once each, in registration
@@ -405,18 +405,24 @@ def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = No
         from_features: Start the coupon fit from curve features (section 3.2) rather than
             the model's values.
         progress: Called with a line of text as the fits proceed.
+        details: Filled by the kinds' fits that take it with what they found (the coupons:
+            ``details["coupons"]``, the :class:`~fenicsx_drape.calibration.fit.FitResult`).
 
     Returns:
         The fitted model.
     """
+    import inspect
+
     present = {t.kind for t in bundle.tests if tests is None or t.id in tests}
     done: list[Callable[..., Model]] = []
     for name, kind in KINDS.items():
         if name in present and kind.fit is not None and kind.fit not in done:
             done.append(kind.fit)
+            extra = ({"details": details} if details is not None
+                     and "details" in inspect.signature(kind.fit).parameters else {})
             model = kind.fit(bundle, model, tests=tests, parameters=parameters,
                              max_iterations=max_iterations, from_features=from_features,
-                             progress=progress)
+                             progress=progress, **extra)
     return model
 
 

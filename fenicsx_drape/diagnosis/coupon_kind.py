@@ -153,12 +153,14 @@ def _coupon_regions(test: Test) -> list[Region]:
 
 def _coupon_fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
                 parameters: Sequence[str] | None = None, max_iterations: int = 200,
-                from_features: bool = True, progress: Callable[[str], None] | None = None
-                ) -> Model:
+                from_features: bool = True, progress: Callable[[str], None] | None = None,
+                details: dict | None = None) -> Model:
     """The coupons' fit (:class:`~fenicsx_drape.diagnosis.kinds.FitHook`): the material.
 
     The coupon tests fix the material (:func:`fenicsx_drape.calibration.fit.fit`) when some
-    of ``parameters`` (all when None) act on them.
+    of ``parameters`` (all when None) act on them. A fit from the features has the global
+    stage; ``details["coupons"]`` receives the :class:`~fenicsx_drape.calibration.fit.
+    FitResult` (its starts, undetermined parameters, noise) when ``details`` is given.
     """
     from fenicsx_drape.calibration.coupons import COUPON_KINDS
     from fenicsx_drape.calibration.fit import fit
@@ -166,9 +168,12 @@ def _coupon_fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     if parameters is not None and not set(parameters) & set(
             model.active_parameters(COUPON_KINDS)):
         return model
-    return fit(bundle, model, tests=tests, parameters=parameters,
-               initial_guess_from_features=from_features, max_iterations=max_iterations,
-               progress=progress, analyse=False).model
+    result = fit(bundle, model, tests=tests, parameters=parameters,
+                 initial_guess_from_features=from_features, max_iterations=max_iterations,
+                 progress=progress, analyse=False)
+    if details is not None:
+        details["coupons"] = result
+    return result.model
 
 
 COUPON = Kind(unit="N", measured=lambda test: test.force_N, noise=_coupon_noise,

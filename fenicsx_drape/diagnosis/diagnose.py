@@ -199,9 +199,10 @@ def _without_rows(test: Test, rows: np.ndarray) -> Test:
 
 def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
          parameters: Sequence[str] | None = None, max_iterations: int,
-         from_features: bool = False) -> Model:
+         from_features: bool = False, details: dict | None = None) -> Model:
     return fit_bundle(bundle, model, tests=tests, parameters=parameters,
-                      from_features=from_features, max_iterations=max_iterations)
+                      from_features=from_features, max_iterations=max_iterations,
+                      details=details)
 
 
 def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
@@ -322,14 +323,19 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         ``add_effects`` (the effects to add), ``heldout_scheme``, ``significance``,
         ``ranking``, ``trends``, ``conclusion``, ``notes`` and ``seconds``.
     """
+    from fenicsx_drape.calibration.coupons import declare_noise
     from fenicsx_drape.diagnosis.compare import kind_metrics
     from fenicsx_drape.effects import describe_effect
 
     start = time.perf_counter()
     say = progress or (lambda line: None)
-    data = _prepare(bundle)
-    say(f"baseline ({', '.join(model.effects) or 'no effects'}): fitting")
-    baseline = _fit(data.bundle, model, max_iterations=BASELINE_ITERATIONS, from_features=True)
+    data = _prepare(declare_noise(bundle, model.noise))
+    say(f"baseline ({', '.join(model.effects) or 'no effects'}): fitting (global stage)")
+    details: dict[str, Any] = {}
+    baseline = _fit(data.bundle, model, max_iterations=BASELINE_ITERATIONS, from_features=True,
+                    details=details)
+    optimiser = optimiser_record(details.get("coupons"))
+    say(f"  {optimiser['statement']}")
     base = data.compare(simulate(data.tests, baseline))
     say(f"  normalised error {normalised_error(base):.3g}; held-out folds")
     base_ho_cmp = data.compare(_heldout(data, baseline, say))
@@ -395,8 +401,8 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         "contract": CONTRACT,
         "bundle": bundle.name,
         "baseline": {**model_record(baseline), "error": error_record(base),
-                     "heldout_normalised": base_ho},
-        "noise_floor": noise_record(base),
+                     "heldout_normalised": base_ho, "optimiser": optimiser},
+        "noise_floor": noise_record(base) | _noise_notes(details.get("coupons")),
         "where": where(base),
         "trends": trends(base),
         "candidates": ranked,
@@ -409,7 +415,8 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
                     "the best, the one adding the fewest parameters first"),
         "missing_rule": (f"the first candidate if significant and its refit reaches "
                          f"normalised <= {ADEQUATE}"),
-        "conclusion": _conclusion(missing, best, base, pattern),
+        "conclusion": _conclusion(missing, best, base, pattern, optimiser,
+                                  details.get("coupons")),
         "metrics": {label: kind_metrics(data.tests, comparisons[label], models[label])
                     for label in models} if any(KINDS[t.kind].metrics for t in data.tests)
         else {},
@@ -516,15 +523,61 @@ def _explain(c: dict[str, Any], pattern: str, base_norm: float, base_ho: float) 
             f"evidence below {EVIDENCE_THRESHOLD}.")
 
 
-def _conclusion(missing, best, base: list[Comparison], pattern: str) -> str:
+def optimiser_record(coupons) -> dict[str, Any]:
+    """How the baseline's coupon fit knows it is at its best (the global stage's record).
+
+    ``at_best`` is true when every block's best minimum was reached from at least two of the
+    independent starts (curve features, Table 2, MODEL.toml, Sobol points); the
+    ``statement`` says so in words, block by block.
+    """
+    if coupons is None:
+        return {"global_stage": False, "at_best": None, "blocks": [],
+                "statement": "no coupon fit (the baseline has no coupon test)"}
+    blocks = [{"label": b["label"], **{k: b["global"][k] for k in
+                                       ("best_found_by", "n_best", "spread_normalised",
+                                        "statement")},
+               "starts": len(b["global"]["starts"])} for b in coupons.blocks if "global" in b]
+    at_best = bool(blocks) and all(b["n_best"] >= 2 for b in blocks)
+    parts = [f"{b['label']}: {b['statement']}" for b in blocks]
+    head = ("the baseline is at the best minimum the global stage found from independent "
+            "starts" if at_best else "the baseline's best minimum was reached from a single "
+            "start only, so the optimiser may have stopped short of the model's best")
+    undetermined = [u["parameter"] for u in coupons.undetermined]
+    tail = (f"; held (undetermined by these tests): {', '.join(undetermined)}"
+            if undetermined else "")
+    return {"global_stage": bool(blocks), "at_best": at_best, "blocks": blocks,
+            "undetermined": coupons.undetermined,
+            "statement": f"{head} ({'; '.join(parts)}){tail}"}
+
+
+def _noise_notes(coupons) -> dict[str, Any]:
+    """Where each coupon test's noise came from and, if so, why its estimate is implausible."""
+    if coupons is None:
+        return {}
+    notes = {k: v["says"] for k, v in coupons.noise.items()}
+    implausible = sorted(k for k, v in coupons.noise.items() if v["source"] == "relative_floor")
+    return {"says": notes, "implausible": implausible}
+
+
+def _conclusion(missing, best, base: list[Comparison], pattern: str,
+                optimiser: dict[str, Any] | None = None, coupons=None) -> str:
     normalised = normalised_error(base)
+    noise = ""
+    floored = [k for k, v in (coupons.noise.items() if coupons is not None else ())
+               if v["source"] == "relative_floor"]
+    if floored:
+        noise = (f" Noise: the model-free estimates of {', '.join(floored)} are implausibly "
+                 "small for the curves (smoothed or digitised), so their errors are measured "
+                 "against 2 % of each test's peak force; declare the noise (force_sd_N or "
+                 "force_sd_rel in bundle.toml, [noise] in MODEL.toml) to judge against the "
+                 "real one.")
     if missing:
         return (f"Missing effect: {missing['effect']} ({missing['summary'].rstrip('.')}); adding "
                 f"it brings the normalised error from {normalised:.3g} to "
                 f"{missing['error_after']['normalised']:.3g}.")
     if normalised <= ADEQUATE:
         return (f"No effect is missing: the model is at {normalised:.3g} × the noise "
-                f"(adequate at ≤ {ADEQUATE}).")
+                f"(adequate at ≤ {ADEQUATE}).{noise}")
     if best and best["significant"]:
         return (f"No single candidate brings the error ({normalised:.3g} × the noise) to the "
                 f"noise floor: the best, {best['effect']}, is a real gain (evidence "
@@ -534,9 +587,16 @@ def _conclusion(missing, best, base: list[Comparison], pattern: str) -> str:
     closest = (f" The closest candidate, {best['effect']}, reaches "
                f"{best['error_after']['normalised']:.3g} × noise (evidence "
                f"{best['evidence']:.3g}).") if best else ""
+    if optimiser is not None and optimiser.get("at_best") is False:
+        return (f"None of the candidates explains the residual ({normalised:.3g} × the noise): "
+                f"{pattern}. But {optimiser['statement']}: the residual may be the optimiser's, "
+                f"not missing physics; give better starting values in MODEL.toml and diagnose "
+                f"again.{closest}{noise}")
+    how = (f" How the baseline is known to be at its best: {optimiser['statement']}."
+           if optimiser is not None and optimiser.get("at_best") else "")
     return (f"None of the candidates explains the residual ({normalised:.3g} × the noise): "
             f"{pattern}. The missing physics is not in the catalogue; write it as a user law "
-            f"(plugins in MODEL.toml) and diagnose again.{closest}")
+            f"(plugins in MODEL.toml) and diagnose again.{closest}{how}{noise}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -573,8 +633,12 @@ def summary(report: dict[str, Any]) -> str:
     base = report["baseline"]
     lines = [f"baseline ({', '.join(base['effects']) or 'no effects'}): normalised "
              f"{base['error']['normalised']:.3g}, held-out {base['heldout_normalised']:.3g} "
-             f"(noise floor 1; from {report['noise_floor']['source']})",
-             "where the error sits:"]
+             f"(noise floor 1; from {report['noise_floor']['source']})"]
+    if base.get("optimiser", {}).get("statement"):
+        lines.append(f"optimiser: {base['optimiser']['statement']}")
+    lines += [f"noise of {k}: {v}" for k, v in report["noise_floor"].get("says", {}).items()
+              if k in report["noise_floor"].get("implausible", ())]
+    lines.append("where the error sits:")
     lines += [f"  {100 * e['share_of_error']:5.1f} %  {e['test']}: {e['says']}"
               for e in report["where"][:5]]
     lines.append(f"{'candidate':<44} {'after':>7} {'held-out':>9} {'evidence':>9}  significant")
