@@ -131,9 +131,11 @@ def test_fixed_parameter_and_subset(small_bundle):
     assert result.model.parameters["E_p"] == 0.5
     assert "E_p" not in result.fitted
     assert set(result.errors) == {"bias-10", "bias-160"}
-    # without the tensile test nothing responds to the upper tow law: kept, and said so
+    # without the tensile test the tow law is undetermined: held, and said why
     assert "E_inf" not in result.fitted and "eps_bar" not in result.fitted
-    assert any("no test responds to" in note and "E_inf" in note for note in result.notes)
+    held = {u["parameter"]: u["reason"] for u in result.undetermined}
+    assert "no tensile test" in held["E_inf"]
+    assert result.model.parameters["E_inf"] == base.parameters["E_inf"]
 
 
 def test_write_fit_and_command_line(small_bundle, tmp_path):
