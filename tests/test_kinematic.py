@@ -137,3 +137,22 @@ def test_start_off_the_apex_is_on_the_part():
     assert s[2] == pytest.approx(20.0 + math.sqrt(60.0**2 - 30.0**2 - 20.0**2), abs=1e-9)
     assert_chords(off, 10.0)
     assert np.abs(TOOLS.formed_part().gap(off.x[off.present], 0.0).phi).max() < 1e-8
+
+
+def test_a_locking_angle_leaves_the_locked_cells_out(net):
+    """Cells sheared beyond 55° lock: their nodes and those behind them are absent and
+    counted; every remaining cell is within the limit; the rest of the net is unchanged."""
+    with pytest.warns(UserWarning, match="could not be placed"):
+        locked = kinematic_drape(TOOLS, 10.0, locking_angle_deg=55.0)
+    γ = np.abs(locked.shear_deg())
+    assert np.nanmax(γ) <= 55.0 and np.nanmax(np.abs(net.shear_deg())) > 55.0
+    assert locked.unplaced_count > 0
+    assert locked.unplaced_count + locked.present.sum() == net.present.sum()
+    ok = locked.present
+    np.testing.assert_array_equal(locked.x[ok], net.x[ok])
+    np.testing.assert_array_equal(ok, ok[::-1, :])  # the part's symmetries, unmirrored
+    np.testing.assert_array_equal(ok, ok.T)
+    # the locked nodes are those of the cells beyond 55° and the nodes that hang on them
+    assert (np.abs(net.shear_deg()) > 55.0).sum() <= locked.unplaced_count
+    assert_chords(locked, 10.0)
+    assert locked.summary()["unplaced_nodes"] == locked.unplaced_count

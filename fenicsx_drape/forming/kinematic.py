@@ -31,8 +31,9 @@ and a ply angle on any mould surface. It has no mechanics:
    independent 3 × 3 Newton solve, vectorised.
 
 A node that cannot be placed (Newton fails: the surface ends or the two chord spheres miss
-it; the cell locks: |A − B| ≥ 2Δ; the solution folds back onto C) is left absent with every
-node that depends on it, counted in :attr:`KinematicNet.unplaced` and warned about.
+it; the cell locks: |A − B| ≥ 2Δ, or its shear passes ``locking_angle_deg`` if given; the
+solution folds back onto C) is left absent with every node that depends on it, counted in
+:attr:`KinematicNet.unplaced` and warned about.
 """
 
 from __future__ import annotations
@@ -268,6 +269,7 @@ class KinematicNet(FormedGrid):
     direction_deg: float = 0.0
     ply_angle_deg: float = 0.0
     generator: str = "geodesic"
+    locking_angle_deg: float | None = None
     surface: str = ""
 
     @property
@@ -282,7 +284,8 @@ class KinematicNet(FormedGrid):
                 "cell_mm": self.cell_mm, "nodes": int(self.present.sum()),
                 "unplaced_nodes": self.unplaced_count, "start_mm": self.start_mm.tolist(),
                 "direction_deg": self.direction_deg, "ply_angle_deg": self.ply_angle_deg,
-                "generator": self.generator, "surface": self.surface}
+                "generator": self.generator, "locking_angle_deg": self.locking_angle_deg,
+                "surface": self.surface}
 
 
 def _solve(surface, t, Δ, A, second, cell, Q):
@@ -408,8 +411,8 @@ def _needed(inside: np.ndarray, c: tuple[int, int]) -> np.ndarray:
 
 def drape(surface: Surface, cell_mm: float, *, outline, start_mm=(0.0, 0.0),
           direction_deg: float | None = None, ply_angle_deg: float = 0.0,
-          generator: str = "geodesic", time_s: float = 0.0,
-          warn: bool = True) -> KinematicNet:
+          generator: str = "geodesic", locking_angle_deg: float | None = None,
+          time_s: float = 0.0, warn: bool = True) -> KinematicNet:
     """Drape a pin-jointed net of cell ``cell_mm`` on ``surface`` (see the module's notes).
 
     Args:
@@ -423,6 +426,8 @@ def drape(surface: Surface, cell_mm: float, *, outline, start_mm=(0.0, 0.0),
         ply_angle_deg: The warp at this angle to x on the flat sheet (the net turned about
             the start node inside the outline).
         generator: ``"geodesic"`` (default) or ``"normal_section"``.
+        locking_angle_deg: A cell sheared beyond this angle locks: its last node is left
+            absent (default: no limit; the net folds up to 90°).
         time_s: The time at which the surface is evaluated.
         warn: Warn when nodes of the blank could not be placed.
 
@@ -438,6 +443,9 @@ def drape(surface: Surface, cell_mm: float, *, outline, start_mm=(0.0, 0.0),
     if generator not in GENERATORS:
         raise ParameterError(f"kinematic drape: generator = {generator!r} is not one of "
                              f"{', '.join(GENERATORS)}")
+    if locking_angle_deg is not None and not 0.0 < locking_angle_deg <= 90.0:
+        raise ParameterError(f"kinematic drape: locking_angle_deg = {locking_angle_deg} must "
+                             "lie in (0, 90]")
     θ = float(ply_angle_deg)
     α = θ if direction_deg is None else float(direction_deg)
     if not (math.isfinite(θ) and math.isfinite(α)):
@@ -509,6 +517,13 @@ def drape(surface: Surface, cell_mm: float, *, outline, start_mm=(0.0, 0.0),
         M = 0.5 * (A + B)
         ok &= np.where(gen, np.einsum("ni,ni->n", Q - A, chord) > 0,
                        np.einsum("ni,ni->n", Q - M, C - M) < 0)
+        if locking_angle_deg is not None:  # the cell's shear (FormedGrid.shear_deg)
+            a, b = (B - C) + (Q - A), (A - C) + (Q - B)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cos = np.einsum("ni,ni->n", a, b) / (np.linalg.norm(a, axis=1)
+                                                     * np.linalg.norm(b, axis=1))
+            γ = np.degrees(np.arcsin(np.clip(np.abs(cos), 0.0, 1.0)))
+            ok &= gen | (γ <= locking_angle_deg)
         P[ii[ok], jj[ok]], N[ii[ok], jj[ok]] = Q[ok], nQ[ok]
 
     placed = np.isfinite(P[..., 0])
@@ -518,11 +533,12 @@ def drape(surface: Surface, cell_mm: float, *, outline, start_mm=(0.0, 0.0),
     if warn and unplaced.any():
         warnings.warn(f"kinematic drape on '{getattr(surface, 'name', 'surface')}': "
                       f"{int(unplaced.sum())} of {int(inside.sum())} nodes of the blank could "
-                      f"not be placed (the surface ends or the net locks); they are absent",
+                      "not be placed (the surface ends or the net locks); they are absent",
                       stacklevel=2)
     return KinematicNet(X=X, x=P, quarter=False, start_mm=S, start_index=c,
                         unplaced=unplaced, direction_deg=α, ply_angle_deg=θ,
-                        generator=generator, surface=str(getattr(surface, "name", "")))
+                        generator=generator, locking_angle_deg=locking_angle_deg,
+                        surface=str(getattr(surface, "name", "")))
 
 
 def kinematic_drape(surface, cell_mm: float = 10.0, **options) -> KinematicNet:
