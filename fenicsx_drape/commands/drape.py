@@ -9,7 +9,8 @@ Example::
 It writes into ``--out``: ``summary.json`` (max shear, nodes, unplaced nodes, the options),
 ``shear.png`` (the net coloured by shear angle), ``bundle/`` (the net on the drawn grid as a
 forming bundle, so it compares like a measured part) and ``provenance.json``. The same in
-Python: :func:`fenicsx_drape.forming.kinematic.kinematic_drape` and :func:`write_drape`.
+Python: :func:`~fenicsx_drape.forming.kinematic.kinematic_drape` and
+:func:`~fenicsx_drape.forming.kinematic.write_drape`.
 
 A forming case file (``drape drape CASE.toml``) comes with the case files of issue 13.
 """
@@ -18,10 +19,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 from pathlib import Path
-
-import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
 
@@ -53,56 +51,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-pictures", action="store_true", help="skip shear.png")
 
 
-def write_drape(out_dir: str | os.PathLike, net, *, grid_mm: float = 10.0,
-                setup: dict | None = None, pictures: bool = True,
-                case: dict | None = None) -> dict:
-    """Write a draped net: ``summary.json``, ``shear.png``, ``bundle/``, ``provenance.json``.
-
-    Args:
-        out_dir: The output folder (created).
-        net: The net (:class:`~fenicsx_drape.forming.kinematic.KinematicNet`).
-        grid_mm: Spacing of the bundle's drawn grid (mm).
-        setup: The forming test's keys of the bundle (geometry, sheet_mm, ...); no bundle
-            when None.
-        pictures: Write ``shear.png``.
-        case: What was draped, for ``summary.json`` and ``provenance.json``.
-
-    Returns:
-        The summary.
-    """
-    from fenicsx_drape.bundle import Bundle, Test, write_bundle
-    from fenicsx_drape.forming.plots import plot_shear
-    from fenicsx_drape.provenance import write_json, write_provenance
-
-    out = Path(out_dir)
-    summary = {**net.summary(), "case": case or {}}
-    write_json(out / "summary.json", summary)
-    if setup is not None:
-        table = net.drawn_grid(grid_mm)
-        columns = {k: np.asarray(v, dtype=float) for k, v in table.items()}
-        setup = {**setup, "grid_mm": grid_mm}
-        geometry = setup.pop("geometry", None)
-        test = Test(id=f"kinematic-{summary['cell_mm']:g}mm", kind="forming",
-                    file="kinematic_grid.csv", columns=columns, geometry=geometry,
-                    forming=setup, notes={"simulation": "kinematic drape (pin-jointed net)",
-                                          "generator": net.generator})
-        write_bundle(Bundle(name=f"kinematic-drape-{geometry or 'case'}", tests=(test,)),
-                     out / "bundle", comment=f"kinematic drape by fenicsx_drape: cell "
-                     f"{summary['cell_mm']:g} mm, {net.generator} generators, direction "
-                     f"{net.direction_deg:g}°, ply angle {net.ply_angle_deg:g}°")
-    if pictures:
-        plot_shear(net, out / "shear.png", f"kinematic drape on {net.surface}, shear angle "
-                   f"(max {summary['max_shear_deg']:.1f}°)")
-    write_provenance(out, case=case or {}, kinematic={
-        k: summary[k] for k in ("cell_mm", "start_mm", "direction_deg", "ply_angle_deg",
-                                "generator", "locking_angle_deg", "surface")})
-    return summary
-
-
 def run(args: argparse.Namespace) -> int:
     """Run ``drape drape``."""
     from fenicsx_drape.forming.hemisphere import HemisphereCase
-    from fenicsx_drape.forming.kinematic import kinematic_drape
+    from fenicsx_drape.forming.kinematic import kinematic_drape, write_drape
     from fenicsx_drape.forming.tools import HemisphereTools
 
     if not args.grid_mm > 0:

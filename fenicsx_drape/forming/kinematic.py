@@ -18,11 +18,15 @@ and a ply angle on any mould surface. It has no mechanics:
 4. Four *generator* tows, warp and weft both ways from the start, nodes a chord Δ apart.
    By default each is a discrete geodesic: node k + 1 lies in the plane through node k
    spanned by the incoming chord and the surface normal at node k (no turn within the
-   tangent plane: zero geodesic curvature). It is intrinsic (independent of the frame),
-   follows the meridians of a surface of revolution through its pole, straight lines of a
-   developable surface, great circles of a sphere. ``generator="normal_section"`` instead
-   keeps each generator in the one plane through the start spanned by its initial direction
-   and the start's normal (the surface's normal section).
+   tangent plane: zero geodesic curvature). It is intrinsic (independent of the frame):
+   exactly the meridians of a surface of revolution through its pole and the great circles
+   of a sphere, a geodesic to O(Δ²) on any surface (Clairaut's relation on a cone). This is
+   the classic fishnet choice: a tow laid without in-plane bending follows a geodesic.
+   ``generator="normal_section"`` instead keeps each generator in the one plane through the
+   start spanned by its initial direction and the start's normal (the surface's normal
+   section; the same as the geodesic on a sphere and through the pole of a surface of
+   revolution). KinDrape itself places its generator strips by minimising their cells'
+   shear, and measures its direction from y; here α is measured from x (the warp).
 5. Every other node closes a cell: it is the point of the surface at chord distance Δ from
    its two known neighbours A = P(i ∓ 1, j), B = P(i, j ∓ 1), on the side away from the
    cell's third node C, found by Newton from the parallelogram guess A + B − C. The four
@@ -40,6 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import warnings
 from collections.abc import Callable, Sequence
 from typing import Protocol
@@ -560,3 +565,51 @@ def kinematic_drape(surface, cell_mm: float = 10.0, **options) -> KinematicNet:
     elif "outline" not in options:
         raise ParameterError("kinematic drape: give the blank's outline (outline=...)")
     return drape(surface, cell_mm, **options)
+
+
+def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float = 10.0,
+                setup: dict | None = None, pictures: bool = True,
+                case: dict | None = None) -> dict:
+    """Write a draped net: ``summary.json``, ``shear.png``, ``bundle/``, ``provenance.json``.
+
+    Args:
+        out_dir: The output folder (created).
+        net: The net (:class:`~fenicsx_drape.forming.kinematic.KinematicNet`).
+        grid_mm: Spacing of the bundle's drawn grid (mm).
+        setup: The forming test's keys of the bundle (geometry, sheet_mm, ...); no bundle
+            when None.
+        pictures: Write ``shear.png``.
+        case: What was draped, for ``summary.json`` and ``provenance.json``.
+
+    Returns:
+        The summary.
+    """
+    from pathlib import Path
+
+    from fenicsx_drape.bundle import Bundle, Test, write_bundle
+    from fenicsx_drape.forming.plots import plot_shear
+    from fenicsx_drape.provenance import write_json, write_provenance
+
+    out = Path(out_dir)
+    summary = {**net.summary(), "case": case or {}}
+    write_json(out / "summary.json", summary)
+    if setup is not None:
+        table = net.drawn_grid(grid_mm)
+        columns = {k: np.asarray(v, dtype=float) for k, v in table.items()}
+        setup = {**setup, "grid_mm": grid_mm}
+        geometry = setup.pop("geometry", None)
+        test = Test(id=f"kinematic-{summary['cell_mm']:g}mm", kind="forming",
+                    file="kinematic_grid.csv", columns=columns, geometry=geometry,
+                    forming=setup, notes={"simulation": "kinematic drape (pin-jointed net)",
+                                          "generator": net.generator})
+        write_bundle(Bundle(name=f"kinematic-drape-{geometry or 'case'}", tests=(test,)),
+                     out / "bundle", comment=f"kinematic drape by fenicsx_drape: cell "
+                     f"{summary['cell_mm']:g} mm, {net.generator} generators, direction "
+                     f"{net.direction_deg:g}°, ply angle {net.ply_angle_deg:g}°")
+    if pictures:
+        plot_shear(net, out / "shear.png", f"kinematic drape on {net.surface}, shear angle "
+                   f"(max {summary['max_shear_deg']:.1f}°)")
+    write_provenance(out, case=case or {}, kinematic={
+        k: summary[k] for k in ("cell_mm", "start_mm", "direction_deg", "ply_angle_deg",
+                                "generator", "locking_angle_deg", "surface")})
+    return summary
