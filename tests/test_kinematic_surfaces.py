@@ -222,3 +222,38 @@ def test_no_warning_when_all_nodes_are_placed():
     assert net.unplaced_count == 0
     s = net.summary()
     assert s["nodes"] == 49 and s["max_shear_deg"] > 0 and s["generator"] == "geodesic"
+
+
+def bumps(turn_deg: float = 0.0) -> HeightField:
+    """A Gaussian dome with a sine ripple (no symmetry), turned by ``turn_deg`` about z."""
+    c, s = math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))
+
+    def height(x, y):
+        u, v = c * x + s * y, -s * x + c * y  # the point in the unturned frame
+        return 40 * np.exp(-(u * u + v * v) / 4000) + 6 * np.sin(u / 11) * np.cos(v / 14)
+
+    return HeightField(height, name="bumps")
+
+
+def test_the_net_turns_with_the_surface():
+    """No hidden frame: the surface, blank, start, ply angle and direction all turned by
+    50° about z give the same net turned by 50° (on a surface without any symmetry)."""
+    β = 50.0
+    c, s = math.cos(math.radians(β)), math.sin(math.radians(β))
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    blank = rectangle((160.0, 120.0), (5.0, -8.0))
+    start = np.array([12.0, -6.0])
+    a = kinematic_drape(bumps(), 5.0, outline=blank, start_mm=start, ply_angle_deg=10.0,
+                        direction_deg=25.0)
+    b = kinematic_drape(bumps(β), 5.0, outline=blank @ turn[:2, :2].T,
+                        start_mm=turn[:2, :2] @ start, ply_angle_deg=10.0 + β,
+                        direction_deg=25.0 + β)
+    assert a.present.sum() > 700 and a.unplaced_count == 0
+    np.testing.assert_array_equal(a.present, b.present)
+    # to the differences of the central-difference normals in the two frames (3e-9 mm)
+    np.testing.assert_allclose(b.x[b.present], a.x[a.present] @ turn.T, atol=1e-8)
+    np.testing.assert_allclose(b.shear_deg(), a.shear_deg(), atol=1e-7)
+    assert_chords(a, 5.0)
+    assert np.abs(bumps().gap(a.x[a.present]).phi).max() < 1e-9
+    warp, weft = a.tow_strains()
+    assert min(np.nanmin(warp), np.nanmin(weft)) > -1e-12  # chords: the net never shortens
