@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from fenicsx_drape.bundle import load_bundle
 from fenicsx_drape.cli import main
+from fenicsx_drape.measurements.bundle import load_bundle
 
 
 def test_drape_command_writes_summary_bundle_picture(tmp_path, capsys):

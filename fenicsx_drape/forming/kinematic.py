@@ -586,8 +586,8 @@ def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float
     """
     from pathlib import Path
 
-    from fenicsx_drape.bundle import Bundle, Test, write_bundle
     from fenicsx_drape.forming.plots import plot_shear
+    from fenicsx_drape.measurements.bundle import Bundle, Test, write_bundle
     from fenicsx_drape.provenance import write_json, write_provenance
 
     out = Path(out_dir)
