@@ -257,3 +257,47 @@ def test_the_net_turns_with_the_surface():
     assert np.abs(bumps().gap(a.x[a.present]).phi).max() < 1e-9
     warp, weft = a.tow_strains()
     assert min(np.nanmin(warp), np.nanmin(weft)) > -1e-12  # chords: the net never shortens
+
+
+def slot_tools():
+    """A flat-topped post (r ≤ 41) and a plate (r ≥ 42), both with 1 mm rounded edges (G1):
+    a 1 mm slot between them at depth, widening to 3 mm at the top."""
+    post = RevolvedTool("post", (Segment((0.0, 0.0), (40.0, 0.0)),
+                                 Arc((40.0, -1.0), 1.0, math.pi / 2, 0.0),
+                                 Segment((41.0, -1.0), (41.0, -1e4))))
+    plate = RevolvedTool("plate", (Segment((42.0, -1e4), (42.0, -1.0)),
+                                   Arc((43.0, -1.0), 1.0, math.pi, math.pi / 2),
+                                   Segment((43.0, 0.0), (1e4, 0.0))))
+    return post, plate
+
+
+def test_bridging_a_slot():
+    """The net's nodes fall into the slot of the plain union (4.7 mm deep, 77° of shear);
+    a smooth minimum of width 3 mm bridges it: the net stays within 0.1 mm of the plane."""
+    post, plate = slot_tools()
+    blank = rectangle((120.0, 120.0))
+    plain = kinematic_drape(UnionSurface((post, plate)), 5.0, outline=blank)
+    assert np.nanmin(plain.x[..., 2]) < -4.0 and np.nanmax(np.abs(plain.shear_deg())) > 70.0
+    bridged = kinematic_drape(UnionSurface((post, plate), bridge_mm=3.0), 5.0, outline=blank)
+    assert np.nanmax(np.abs(bridged.x[..., 2])) < 0.1
+    assert np.nanmax(np.abs(bridged.shear_deg())) < 0.2
+    assert bridged.unplaced_count == 0
+    assert_chords(bridged, 5.0)
+
+
+def test_smooth_minimum_derivatives():
+    """The bridged union's ∇φ and ∇∇φ against central differences, in the blend zone."""
+    post, plate = slot_tools()
+    union = UnionSurface((post, plate, Plane((0.0, 0.0, -0.5))), bridge_mm=3.0)
+    x = np.array([[40.2, 0.3, 0.1], [41.4, -0.6, -0.3], [30.0, 29.8, 0.4], [42.5, 1.0, 0.7]])
+    g = union.gap(x)
+    φ = np.sort(np.stack([p.gap(x, 0.0).phi for p in union.parts]), axis=0)
+    assert (φ[1] - φ[0] < 3.0).all()  # every point is in a blend zone
+    h = 1e-6
+    grad = np.stack([(union.gap(x + h * e).phi - union.gap(x - h * e).phi) / (2 * h)
+                     for e in np.eye(3)], axis=1)
+    np.testing.assert_allclose(g.normal, grad, atol=1e-7)
+    h = 1e-5
+    hess = np.stack([(union.gap(x + h * e).normal - union.gap(x - h * e).normal) / (2 * h)
+                     for e in np.eye(3)], axis=2)
+    np.testing.assert_allclose(g.hessian, hess, atol=1e-5)

@@ -169,22 +169,40 @@ class UnionSurface:
     as near (at a crease where two meet: the mean of their normals, turning smoothly to
     either within ``blend_mm``), so Newton's Jacobian does not jump at the crease. The
     Hessian is the active surface's.
+
+    ``bridge_mm`` > 0 replaces the minimum by a smooth one of that width k (the quadratic
+    smooth minimum, min − k s²/4 with s = max(k − |φ_a − φ_b|, 0)/k, folded over the parts;
+    C¹, its gradient and Hessian exact): it fills concave creases with a round of about k and
+    bridges gaps narrower than about k, such as the slot between a punch and a holder's
+    opening that the nodes of a net would fall into. It lifts the surface by k/4 where two
+    parts coincide (a punch's shoulder on the holder plane), so it is off by default.
     """
 
     parts: tuple
     name: str = "formed surface"
     blend_mm: float = 0.5
+    bridge_mm: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.parts:
             raise ParameterError("UnionSurface: no surface to unite")
-        if not (math.isfinite(self.blend_mm) and self.blend_mm >= 0.0):
-            raise ParameterError(f"UnionSurface: blend_mm = {self.blend_mm} must be >= 0")
+        for key in ("blend_mm", "bridge_mm"):
+            value = getattr(self, key)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ParameterError(f"UnionSurface: {key} = {value} must be >= 0")
 
     def gap(self, x: np.ndarray, t: float = 0.0) -> Gap:
-        """φ = min φ_k, the blended normal and the active surface's Hessian."""
+        """φ = min φ_k, the blended normal and the active surface's Hessian.
+
+        With ``bridge_mm``: the smooth minimum, its gradient and Hessian.
+        """
         x = np.asarray(x, float).reshape(-1, 3)
         gaps = [p.gap(x, t) for p in self.parts]
+        if self.bridge_mm > 0.0:
+            out = gaps[0]
+            for g in gaps[1:]:
+                out = _smooth_min(out, g, self.bridge_mm, len(x))
+            return out
         Φ = np.stack([g.phi for g in gaps])
         k = np.argmin(np.where(np.isnan(Φ), np.inf, Φ), axis=0)
         i = np.arange(len(x))
@@ -204,15 +222,30 @@ class UnionSurface:
         return Gap(phi, normal, hessian)
 
 
+def _smooth_min(a: Gap, b: Gap, k: float, n: int) -> Gap:
+    """The quadratic smooth minimum of two gaps (see :class:`UnionSurface`)."""
+    na, nb = np.broadcast_to(a.normal, (n, 3)), np.broadcast_to(b.normal, (n, 3))
+    Ha, Hb = np.broadcast_to(a.hessian, (n, 3, 3)), np.broadcast_to(b.hessian, (n, 3, 3))
+    s = np.maximum(k - np.abs(a.phi - b.phi), 0.0) / k
+    lower = a.phi <= b.phi
+    wa = np.where(lower, 1.0 - 0.5 * s, 0.5 * s)  # ∂/∂φ_a; 1 − wa for φ_b
+    d = na - nb
+    hessian = (wa[:, None, None] * Ha + (1.0 - wa)[:, None, None] * Hb
+               - np.where(s > 0.0, 0.5 / k, 0.0)[:, None, None] * np.einsum("ni,nj->nij", d, d))
+    return Gap(np.minimum(a.phi, b.phi) - 0.25 * k * s * s,
+               wa[:, None] * na + (1.0 - wa)[:, None] * nb, hessian)
+
+
 def formed_surface(tools: Sequence[Surface], time_s: float, *, blend_mm: float = 0.5,
-                   name: str = "formed surface") -> UnionSurface:
+                   bridge_mm: float = 0.0, name: str = "formed surface") -> UnionSurface:
     """The surface the sheet lies on at ``time_s``: the tools there, their materials united.
 
     Give the tools on the sheet's one side (e.g. the punch and the holder plane, not the die
-    above the sheet): their union's outer surface is the formed part.
+    above the sheet): their union's outer surface is the formed part. ``blend_mm`` and
+    ``bridge_mm``: see :class:`UnionSurface`.
     """
     return UnionSurface(tuple(AtTime(tool, time_s) for tool in tools), name=name,
-                        blend_mm=blend_mm)
+                        blend_mm=blend_mm, bridge_mm=bridge_mm)
 
 
 # --- blank outline ---------------------------------------------------------------------------
