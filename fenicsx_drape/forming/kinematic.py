@@ -600,9 +600,67 @@ def kinematic_drape(surface, cell_mm: float = 10.0, **options) -> KinematicNet:
     return drape(surface, cell_mm, **options)
 
 
+def case_surface(case, tools: dict | None = None, *, time_s: float | None = None,
+                 blend_mm: float = 0.5) -> UnionSurface:
+    """The formed surface of a forming case: the tools the sheet lies on, at the end, united.
+
+    The tools whose sheet side is +z (by default punches, holders and plain surfaces: the
+    sheet lies on them), or, when there are none, those whose sheet side is −z; dies on the
+    other side are left out. For the hemisphere: the punch at full travel and the holder
+    plane, i.e. :meth:`HemisphereTools.formed_part`.
+
+    Args:
+        case: The forming case (:func:`~fenicsx_drape.forming.case.load_case`).
+        tools: Built tools by name (default :func:`~fenicsx_drape.forming.case.build_tools`).
+        time_s: When (default: the end of the motion, ``case.duration_s``).
+        blend_mm: See :class:`UnionSurface`.
+    """
+    from fenicsx_drape.forming.case import build_tools
+
+    for side in ("+z", "-z"):
+        names = [t.name for t in case.tools if t.side == side]
+        if names:
+            break
+    else:
+        raise ParameterError(f"kinematic drape: case {case.name!r} has no tool with its sheet "
+                             "side +z or -z to drape on")
+    if tools is None:
+        tools = build_tools(case, skip=tuple(t.name for t in case.tools if t.name not in names))
+    t = case.duration_s if time_s is None else float(time_s)
+    return formed_surface([tools[n] for n in names], t, blend_mm=blend_mm,
+                          name=f"{case.name} formed surface ({', '.join(names)})")
+
+
+def drape_case(case, *, tools: dict | None = None, cell_mm: float | None = None,
+               start_mm=None, direction_deg: float | None = None,
+               ply_angle_deg: float | None = None, **options) -> KinematicNet:
+    """The kinematic drape of a forming case's blank on its formed surface.
+
+    The case gives the defaults: the whole blank's outline (symmetry planes are not used:
+    the four quadrants are built), its Δ, its ply angle, and its net's origin
+    (``origin_mm``) as the start; the surface is :func:`case_surface`.
+
+    Args:
+        case: The forming case.
+        tools: Built tools by name (default: the case's).
+        cell_mm: Δ (mm), default the case's.
+        start_mm: The start (default: the blank's ``origin_mm``).
+        direction_deg: The warp's initial direction (default: the ply angle).
+        ply_angle_deg: Default the case's.
+        **options: Other options of :func:`drape` (``generator``, ``locking_angle_deg``).
+    """
+    blank = case.blank
+    return drape(case_surface(case, tools), blank.cell_mm if cell_mm is None else cell_mm,
+                 outline=blank.polygon(),
+                 start_mm=blank.origin_mm if start_mm is None else start_mm,
+                 direction_deg=direction_deg,
+                 ply_angle_deg=blank.ply_angle_deg if ply_angle_deg is None else ply_angle_deg,
+                 **options)
+
+
 def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float = 10.0,
                 setup: dict | None = None, pictures: bool = True,
-                case: dict | None = None) -> dict:
+                case: dict | None = None, forming_case=None) -> dict:
     """Write a draped net: ``summary.json``, ``shear.png``, ``bundle/``, ``provenance.json``.
 
     Args:
@@ -610,9 +668,12 @@ def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float
         net: The net (:class:`~fenicsx_drape.forming.kinematic.KinematicNet`).
         grid_mm: Spacing of the bundle's drawn grid (mm).
         setup: The forming test's keys of the bundle (geometry, sheet_mm, ...); no bundle
-            when None.
+            when None (nor ``forming_case``).
         pictures: Write ``shear.png``.
         case: What was draped, for ``summary.json`` and ``provenance.json``.
+        forming_case: A forming case (:class:`~fenicsx_drape.forming.case.FormingCase`):
+            the bundle's test names a copy of it (``case = "case/case.toml"``), as
+            :func:`~fenicsx_drape.forming.outputs.form_case` writes it.
 
     Returns:
         The summary.
@@ -626,6 +687,16 @@ def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float
     out = Path(out_dir)
     summary = {**net.summary(), "case": case or {}}
     write_json(out / "summary.json", summary)
+    notes = {"simulation": "kinematic drape (pin-jointed net)", "generator": net.generator}
+    if forming_case is not None:
+        from fenicsx_drape.forming.case import write_case
+
+        write_case(forming_case, out / "bundle" / "case")
+        notes["case"] = "case/case.toml"
+        setup = {"travel_mm": forming_case.total_travel_mm,
+                 "duration_s": forming_case.duration_s, **(setup or {})}
+        if forming_case.holder is not None:
+            setup.setdefault("holder_force_N", forming_case.holder.force_N)
     if setup is not None:
         table = net.drawn_grid(grid_mm)
         columns = {k: np.asarray(v, dtype=float) for k, v in table.items()}
@@ -633,9 +704,9 @@ def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float
         geometry = setup.pop("geometry", None)
         test = Test(id=f"kinematic-{summary['cell_mm']:g}mm", kind="forming",
                     file="kinematic_grid.csv", columns=columns, geometry=geometry,
-                    forming=setup, notes={"simulation": "kinematic drape (pin-jointed net)",
-                                          "generator": net.generator})
-        write_bundle(Bundle(name=f"kinematic-drape-{geometry or 'case'}", tests=(test,)),
+                    forming=setup, notes=notes)
+        label = geometry or (forming_case.name if forming_case is not None else "case")
+        write_bundle(Bundle(name=f"kinematic-drape-{label}", tests=(test,)),
                      out / "bundle", comment=f"kinematic drape by fenicsx_drape: cell "
                      f"{summary['cell_mm']:g} mm, {net.generator} generators, direction "
                      f"{net.direction_deg:g}°, ply angle {net.ply_angle_deg:g}°")
