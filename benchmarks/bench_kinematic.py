@@ -1,0 +1,81 @@
+"""Wall time of the kinematic drape (issue 13: any case under 1 s at Δ = 5 mm on one core).
+
+    ./drape exec python3 benchmarks/bench_kinematic.py
+    ./drape exec python3 benchmarks/bench_kinematic.py --cells 10 5 2.5 --repeat 5
+
+Cases: the paper's hemisphere on its closed-form formed part and on the punch at its final
+position united with the holder plane (240 mm square blank, start at the apex), and a bumpy
+analytic height field (a Gaussian dome with a superposed sine ripple, the same blank). Each
+time is the best of ``--repeat`` runs; the Newton work is the number of surface evaluations.
+"""
+
+import argparse
+import time
+
+import numpy as np
+
+from fenicsx_drape.forming.kinematic import (
+    HeightField,
+    Plane,
+    formed_surface,
+    kinematic_drape,
+    rectangle,
+)
+from fenicsx_drape.forming.tools import HemisphereTools
+
+parser = argparse.ArgumentParser()
+parser.add_argument("--cells", type=float, nargs="*", default=[10.0, 5.0, 2.5],
+                    help="cell sizes Δ (mm)")
+parser.add_argument("--repeat", type=int, default=3, help="runs per case (the best is shown)")
+args = parser.parse_args()
+
+A_MM, W_MM, RIPPLE_MM, LX_MM, LY_MM = 40.0, 45.0, 6.0, 70.0, 90.0
+kx, ky = 2 * np.pi / LX_MM, 2 * np.pi / LY_MM
+
+
+def bump(x, y):
+    """A Gaussian dome 40 mm high with a 6 mm sine ripple."""
+    return (A_MM * np.exp(-(x * x + y * y) / (2 * W_MM**2))
+            + RIPPLE_MM * np.sin(kx * x) * np.cos(ky * y))
+
+
+def bump_gradient(x, y):
+    """(∂F/∂x, ∂F/∂y) of :func:`bump`."""
+    g = -A_MM * np.exp(-(x * x + y * y) / (2 * W_MM**2)) / W_MM**2
+    return (g * x + RIPPLE_MM * kx * np.cos(kx * x) * np.cos(ky * y),
+            g * y - RIPPLE_MM * ky * np.sin(kx * x) * np.sin(ky * y))
+
+
+class Counted:
+    """A surface that counts its evaluations."""
+
+    def __init__(self, surface):
+        self.surface, self.calls, self.points = surface, 0, 0
+        self.name = getattr(surface, "name", "surface")
+
+    def gap(self, x, t=0.0):
+        self.calls += 1
+        self.points += len(x)
+        return self.surface.gap(x, t)
+
+
+tools = HemisphereTools()
+square = rectangle((tools.sheet_mm, tools.sheet_mm))
+cases = {
+    "hemisphere, closed-form part": tools.formed_part(),
+    "hemisphere, punch + holder plane": formed_surface([tools.punch(40.0), Plane()], 40.0),
+    "bumpy height field": HeightField(bump, bump_gradient, name="bumps"),
+}
+for cell in args.cells:
+    for name, surface in cases.items():
+        counted = Counted(surface)
+        net = kinematic_drape(counted, cell, outline=square)
+        best = np.inf
+        for _ in range(args.repeat):
+            start = time.perf_counter()
+            kinematic_drape(surface, cell, outline=square)
+            best = min(best, time.perf_counter() - start)
+        γ = np.nanmax(np.abs(net.shear_deg()))
+        print(f"Δ = {cell:5.2f} mm  {name:34s} {net.present.sum():6d} nodes "
+              f"({net.unplaced_count} unplaced), max shear {γ:6.2f}°, {counted.calls:4d} "
+              f"surface calls ({counted.points} points): {best:6.3f} s")
