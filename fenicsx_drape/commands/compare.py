@@ -17,8 +17,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         "the ledger of versions)")
     parser.add_argument("--no-fit", action="store_true",
                         help="compare the model as given, without fitting its parameters")
-    parser.add_argument("--forming-cell-mm", type=float, default=10.0, metavar="MM",
-                        help="unit cell of the forming simulations (default 10 mm, the paper's)")
+    parser.add_argument("--forming-cell-mm", type=float, default=None, metavar="MM",
+                        help="unit cell of the forming simulations (default: a case's own "
+                        "cell_mm; the hemisphere 10 mm, the paper's)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
 
     bundle = load_bundle(args.bundle)
     model = load_model(args.model) if args.model else default_model()
-    if not args.forming_cell_mm > 0:
+    if args.forming_cell_mm is not None and not args.forming_cell_mm > 0:
         raise DrapeInputError(f"--forming-cell-mm {args.forming_cell_mm} must be > 0 (mm)")
     with resolution(args.forming_cell_mm):
         result = compare(bundle, model, fit=not args.no_fit,

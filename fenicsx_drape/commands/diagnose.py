@@ -19,9 +19,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", required=True, metavar="REPORT.json",
                         help="where to write the report")
     parser.add_argument("--out", help="folder for the plots of the candidates' gains")
-    parser.add_argument("--forming-cell-mm", type=float, default=10.0, metavar="MM",
-                        help="unit cell of the forming runs (default 10 mm, the paper's; a "
-                        "coarser mesh is only sound where its error is below the noise)")
+    parser.add_argument("--forming-cell-mm", type=float, default=None, metavar="MM",
+                        help="unit cell of the forming runs (default: a case's own cell_mm; "
+                        "the hemisphere 10 mm, the paper's; a coarser mesh is only sound "
+                        "where its error is below the noise)")
     parser.add_argument("--confirm-cell-mm", type=float, default=0.0, metavar="MM",
                         help="also refit the baseline and the winner on this mesh and compare "
                         "them with the forming tests there (e.g. 5; default: no)")
@@ -37,7 +38,8 @@ def run(args: argparse.Namespace) -> int:
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
 
-    if not args.forming_cell_mm > 0 or not args.confirm_cell_mm >= 0:
+    if ((args.forming_cell_mm is not None and not args.forming_cell_mm > 0)
+            or not args.confirm_cell_mm >= 0):
         raise DrapeInputError(f"--forming-cell-mm {args.forming_cell_mm} must be > 0 and "
                               f"--confirm-cell-mm {args.confirm_cell_mm} >= 0 (mm)")
     bundle = load_bundle(args.bundle)

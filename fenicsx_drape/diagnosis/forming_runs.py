@@ -1,13 +1,18 @@
 """The forming runs of compare and diagnose: cached, and in worker processes.
 
-A forming test is simulated by forming its part (:func:`~fenicsx_drape.forming.hemisphere.
-run_hemisphere`) for a model; a diagnosis asks for a few dozen such runs, many of them the
-same. :func:`form_many` forms ``(case, model)`` jobs: every run is cached by its case and
-model (the :data:`_CACHE_SIZE` latest), and the new runs of one call go to :data:`WORKERS`
-persistent worker processes at once (under ``mpirun`` they run one after the other on all
-ranks). The cells of the runs are :data:`FULL_CELL_MM` (the paper's Δ) unless set with
-:func:`resolution`. A run that stops short of full travel is kept as far as it got, and
-:func:`stopped_at` tells the travel it reached.
+A forming test is simulated by forming its part for a model: the paper's hemisphere
+(:func:`~fenicsx_drape.forming.hemisphere.run_hemisphere` of a
+:class:`~fenicsx_drape.forming.hemisphere.HemisphereCase`) or any forming case
+(:func:`~fenicsx_drape.forming.run.run_case` of a
+:class:`~fenicsx_drape.forming.case.FormingCase`). A diagnosis asks for a few dozen such
+runs, many of them the same. :func:`form_many` forms ``(case, model)`` jobs: every run is
+cached by the case's content (its tables and the bytes of its geometry files, not the path
+it was read from) and the model (the :data:`_CACHE_SIZE` latest), and the new runs of one call
+go to :data:`WORKERS` persistent worker processes at once (under ``mpirun`` they run one
+after the other on all ranks). The cells of the runs are set with :func:`resolution`: by
+default the hemisphere runs on :data:`FULL_CELL_MM` (the paper's Δ) and a case on its own
+blank's ``cell_mm``; a resolution replaces both. A run that stops short of full travel is
+kept as far as it got, and :func:`stopped_at` tells the travel it reached.
 
 This module knows forming cases and models, not tests: the forming kind
 (:mod:`~fenicsx_drape.diagnosis.forming_kind`) turns a test into a case.
@@ -17,11 +22,15 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import hashlib
+import json
 import os
 from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.forming.case import FormingCase, case_dict
 
 if TYPE_CHECKING:
     from fenicsx_drape.forming.post import FormedGrid
@@ -31,17 +40,23 @@ FULL_CELL_MM = 10.0  # unit cell of the forming runs (mm), the paper's Δ
 SCREEN_CELL_MM = 20.0  # a coarse screening mesh (mm), for data formed on it (tests)
 WORKERS = max(1, min(2, os.cpu_count() or 1))  # processes running forming solves at once
 
-_settings = {"cell_mm": FULL_CELL_MM}
+_settings: dict[str, float | None] = {"cell_mm": None}  # None: each case's own cell
 _cache: dict[tuple, FormedGrid] = {}
 _stopped: dict[tuple, float] = {}  # travel (mm) reached by the runs that stopped short
 _CACHE_SIZE = 256
+_digests: dict[tuple, str] = {}  # file digests by (path, size, mtime)
 
 
 @contextlib.contextmanager
-def resolution(cell_mm: float) -> Iterator[None]:
-    """Run the forming simulations of compare/diagnose on cells of ``cell_mm`` (mm) inside."""
+def resolution(cell_mm: float | None) -> Iterator[None]:
+    """Run the forming simulations of compare/diagnose on cells of ``cell_mm`` (mm) inside.
+
+    None: the hemisphere on :data:`FULL_CELL_MM`, a case on its own blank's ``cell_mm``.
+    """
+    if cell_mm is not None and not cell_mm > 0:
+        raise DrapeInputError(f"forming cell size {cell_mm} mm must be > 0")
     old = _settings["cell_mm"]
-    _settings["cell_mm"] = float(cell_mm)
+    _settings["cell_mm"] = None if cell_mm is None else float(cell_mm)
     try:
         yield
     finally:
@@ -49,29 +64,67 @@ def resolution(cell_mm: float) -> Iterator[None]:
 
 
 def current_cell_mm() -> float:
-    """The unit cell (mm) of the forming runs now (:data:`FULL_CELL_MM` or :func:`resolution`)."""
+    """The unit cell (mm) of the hemisphere runs now (:data:`FULL_CELL_MM` or the resolution)."""
+    return _settings["cell_mm"] or FULL_CELL_MM
+
+
+def cell_override() -> float | None:
+    """The unit cell (mm) a :func:`resolution` sets for every run, None for the cases' own."""
     return _settings["cell_mm"]
+
+
+def _digest(path: Path) -> str:
+    """SHA-256 of a file's bytes (memoised by path, size and modification time)."""
+    stat = path.stat()
+    key = (str(path), stat.st_size, stat.st_mtime_ns)
+    if key not in _digests:
+        _digests[key] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return _digests[key]
+
+
+def case_key(case) -> str:
+    """What a forming run of ``case`` depends on, as text.
+
+    A :class:`~fenicsx_drape.forming.case.FormingCase` by content: its tables (paths relative
+    to its folder, the model file left out: the run's model is given) and the digests of the
+    geometry files it reads, so that the same case read from two copies (a bundle's and the
+    mesh folder's) shares its runs. Other cases (the hemisphere's) by their ``repr``.
+    """
+    if not isinstance(case, FormingCase):
+        return repr(case)
+    tables = case_dict(case, case.folder)
+    tables["case"].pop("model", None)
+    files = [t.path for t in case.tools if t.path is not None]
+    if case.blank.path is not None:
+        files.append(case.blank.path)
+    digests = [_digest(Path(p)) if Path(p).is_file() else f"missing {p}" for p in files]
+    return json.dumps([tables, digests], sort_keys=True, default=str)
 
 
 def _key(case, model: Model) -> tuple:
     params = tuple(sorted((k, float(v)) for k, v in model.parameters.items()))
-    return (repr(case), tuple(sorted(model.effects)), params,
+    return (case_key(case), tuple(sorted(model.effects)), params,
             tuple(str(p) for p in model.plugins))
 
 
-def _form(case, model: Model, comm=None) -> tuple[np.ndarray, np.ndarray, float | None]:
-    """One forming run (on this process alone by default): flat and formed quarter grids.
+def _form(case, model: Model, comm=None) -> tuple[FormedGrid, float | None]:
+    """One forming run (on this process alone by default): the formed sheet (modelled part).
 
     A model that cannot form the part to full travel (its solve fails at the smallest step)
-    is compared as far as it got: the third value is then the travel reached (mm), which
+    is compared as far as it got: the second value is then the travel reached (mm), which
     :func:`stopped_at` gives back, else None.
     """
     from mpi4py import MPI
 
-    from fenicsx_drape.forming.hemisphere import run_hemisphere
+    from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+    from fenicsx_drape.forming.run import run_case
 
-    run = run_hemisphere(case, model, comm=comm or MPI.COMM_SELF, allow_incomplete=True)
-    return run.grid.X, run.grid.x, (run.travel_mm if run.stopped else None)
+    comm = comm or MPI.COMM_SELF
+    if isinstance(case, HemisphereCase):
+        run = run_hemisphere(case, model, comm=comm, allow_incomplete=True)
+    else:
+        run = run_case(case, model, comm=comm, allow_incomplete=True)
+    return run.grid, (run.travel_mm if run.stopped else None)
 
 
 def _in_workers(jobs: list[tuple[Any, Model]]) -> list[tuple]:
@@ -144,6 +197,8 @@ def _worker() -> None:
             return
         try:
             reply = ("ok", _form(case, model))
+        except DrapeInputError as error:  # its subclasses may not unpickle: send the message
+            reply = ("error", DrapeInputError(str(error)))
         except Exception as error:  # sent back and raised in the parent
             reply = ("error", error)
         try:
@@ -155,14 +210,12 @@ def _worker() -> None:
 
 
 def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
-    """Formed quarter sheets of ``(case, model)`` jobs: cached, the new ones in parallel.
+    """Formed sheets (modelled parts) of ``(case, model)`` jobs: cached, new ones in parallel.
 
     With one MPI process the new runs go to :data:`WORKERS` worker processes; under
     ``mpirun`` they run one after the other on all ranks.
     """
     from mpi4py import MPI
-
-    from fenicsx_drape.forming.post import FormedGrid
 
     keys = [_key(case, model) for case, model in jobs]
     todo = {k: job for k, job in zip(keys, jobs) if k not in _cache}
@@ -172,12 +225,12 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
             results = [_form(c, m, comm) for c, m in todo.values()]
         else:
             results = _in_workers(list(todo.values()))
-        for k, (X, x, stopped_mm) in zip(todo, results):
+        for k, (grid, stopped_mm) in zip(todo, results):
             if len(_cache) >= _CACHE_SIZE:
                 oldest = next(iter(_cache))
                 del _cache[oldest]
                 _stopped.pop(oldest, None)
-            _cache[k] = FormedGrid(X, x, True)
+            _cache[k] = grid
             if stopped_mm is not None:
                 _stopped[k] = stopped_mm
     return [_cache[k] for k in keys]

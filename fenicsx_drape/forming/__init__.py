@@ -4,10 +4,17 @@ A case is a file (``case.toml``, :func:`load_case`); :func:`run_case` forms it a
 :func:`form_case` writes its outputs. The tools, contact and holder terms, the case, the
 kinematic drape and the post-processing are plain NumPy; the forming runs
 (:func:`run_case`, :func:`run_hemisphere`, :func:`form_case`, :func:`form_hemisphere`) import
-DOLFINx when called.
+DOLFINx when called. Importing the package lets the bundle loader read the case files
+that measured forming tests name (:func:`case_for_test`).
 """
 
-from fenicsx_drape.forming.case import FormingCase, load_case, with_overrides, write_case
+from fenicsx_drape.forming.case import (
+    FormingCase,
+    case_for_test,
+    load_case,
+    with_overrides,
+    write_case,
+)
 from fenicsx_drape.forming.contact import PenaltyContact
 from fenicsx_drape.forming.hemisphere import HemisphereCase, HemisphereRun, run_hemisphere
 from fenicsx_drape.forming.holder import BlankHolder, FlatHolder
@@ -17,6 +24,10 @@ from fenicsx_drape.forming.post import FormedGrid, mean_distance
 from fenicsx_drape.forming.run import FormingRun, run_case
 from fenicsx_drape.forming.stabilisation import ExtrapolationSpring
 from fenicsx_drape.forming.tools import HemisphereTools, RevolvedTool
+from fenicsx_drape.measurements.bundle import register_case_reader
+
+# A bundle's forming test may name its case file: the bundle loader reads and checks it here.
+register_case_reader(case_for_test)
 
 __all__ = [
     "BlankHolder",
@@ -30,6 +41,7 @@ __all__ = [
     "HemisphereTools",
     "PenaltyContact",
     "RevolvedTool",
+    "case_for_test",
     "form_case",
     "form_hemisphere",
     "kinematic_drape",

@@ -888,6 +888,83 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     return new_case
 
 
+# The forming keys of the measurement spec's hemisphere tests: in a test that names a case,
+# they must name a value of the case (else they would be silently ignored).
+SPEC_FORMING_KEYS = ("punch_radius_mm", "fillet_radius_mm", "holder_opening_mm", "sheet_mm",
+                     "travel_mm", "duration_s", "holder_force_N")
+
+
+def override_names(case: FormingCase) -> set[str]:
+    """The names :func:`with_overrides` accepts for ``case``: :data:`OVERRIDES` and parameters."""
+    names = set(OVERRIDES) | {k for t in case.tools for k, _ in t.parameters}
+    if any(t.builtin for t in case.tools):
+        from fenicsx_drape.forming.tools import HemisphereTools
+
+        names |= {f.name for f in dataclasses.fields(HemisphereTools)}
+    return names
+
+
+def case_value(case: FormingCase, key: str) -> Any:
+    """The case's own value of an override name (None when it has none to compare)."""
+    if key in ("duration_s", "step_mm", "penalty_factor", "stabilisation_N_per_mm"):
+        return getattr(case, key)
+    if key == "travel_mm":
+        return case.total_travel_mm
+    if key in ("cell_mm", "ply_angle_deg"):
+        return getattr(case.blank, key)
+    if key == "sheet_mm" and case.blank.outline == "rectangle":
+        a, b = case.blank.size_mm
+        return a if a == b else None
+    if key.startswith("holder_") and key in OVERRIDES:
+        if case.holder is None:
+            return None
+        return getattr(case.holder, {"holder_force_N": "force_N", "holder_mu": "mu",
+                                     "holder_force_share": "force_share"}[key])
+    values = {dict(t.parameters).get(key) for t in case.tools if key in dict(t.parameters)}
+    return values.pop() if len(values) == 1 else None
+
+
+def case_for_test(path: str | os.PathLike, keys: Mapping[str, Any]
+                  ) -> tuple[FormingCase, dict[str, Any]]:
+    """The case a measured forming test names, its keys applied as overrides.
+
+    The reader the bundle loader calls (``measurements.bundle.register_case_reader``; the
+    spec's "forming tests on any part"): a key that names a value of the case
+    (:func:`override_names`) overrides it, unless it equals the case's own value (then it
+    only repeats it: e.g. ``travel_mm`` of a bundle written by ``form_case``); the other keys
+    are the test's conditions. A hemisphere key of the spec (:data:`SPEC_FORMING_KEYS`) the
+    case has no value for is an error, not a silently ignored condition.
+
+    Returns:
+        The case with the overrides, and the keys it used (overrides and repeats).
+
+    Raises:
+        CaseError: a malformed case file (every problem with the file and key), or a key the
+            case cannot take.
+    """
+    case = load_case(path)
+    names = override_names(case)
+    used: dict[str, Any] = {}
+    changes: dict[str, Any] = {}
+    problems = []
+    for key, value in keys.items():
+        if key not in names:
+            if key in SPEC_FORMING_KEYS:
+                problems.append(f"{path}: test key {key} = {value!r}: the case has no such "
+                                "value (a tool parameter of that name, or an override: "
+                                f"{', '.join(OVERRIDES)})")
+            continue
+        used[key] = value
+        own = case_value(case, key)
+        same = (own == value if isinstance(value, str) or isinstance(own, str) or own is None
+                else math.isclose(float(own), float(value), rel_tol=1e-9, abs_tol=1e-12))
+        if not same:
+            changes[key] = value
+    if problems:
+        raise CaseError(problems)
+    return (with_overrides(case, **changes) if changes else case), used
+
+
 # --------------------------------------------------------------------------------------------
 # Tools
 

@@ -246,7 +246,7 @@ def case_bundle(run: FormingRun, friction: float, grid_mm: float = 10.0,
     test_id = f"{case.name}{force}-{case.duration_s:g}s"
     test = Test(id=test_id, kind="forming", file=f"{case.name}_grid.csv", columns=columns,
                 forming=setup, conditions={"friction_coefficient": friction},
-                notes={"case": case_file})
+                case=case_file)
     return Bundle(name=name or f"simulated-{test_id}", tests=(test,),
                   material="simulated by fenicsx_drape")
 

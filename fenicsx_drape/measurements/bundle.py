@@ -6,6 +6,14 @@ as ``file:line: problem``; all problems of a bundle are collected and raised tog
 not know are kept (as test conditions, or as notes when not numeric) and listed in
 :attr:`Bundle.unknown_keys`.
 
+A forming test names either the paper's tool set (``geometry = "hemisphere"`` and its keys)
+or the forming case it was made with (``case = "part.toml"``, relative to the bundle folder;
+spec version 2, "forming tests on any part"). This layer does not know forming cases: the
+forming layer registers a reader (:func:`register_case_reader`; importing
+``fenicsx_drape.forming`` does it), which reads and checks the case file with the test's keys
+as overrides, so that a malformed case is reported here as a problem of the bundle, with the
+case file and its key.
+
 :func:`write_bundle` writes a bundle back (each file atomically, ``bundle.toml`` last).
 """
 
@@ -15,7 +23,7 @@ import dataclasses
 import math
 import re
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +64,27 @@ REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
     "bias_extension": ("length_mm", "width_mm"),
     "forming": ("geometry", "sheet_mm", "travel_mm", "duration_s", "holder_force_N"),
 }
+# A forming test that names its case file needs nothing else: the case says the rest, and the
+# test's own keys override it. ``grid_mm`` describes the drawn grid (not a case value).
+CASE_DESCRIPTIVE_KEYS = ("grid_mm",)
+
+# The reader of forming cases, registered by the forming layer (:func:`register_case_reader`):
+# ``reader(case_path, keys) -> (case, used)`` reads and checks the case file, applies those
+# of the test's ``keys`` that name a value of the case as overrides and returns the case with
+# the keys it used; it raises a DrapeInputError (with ``problems``, each naming the case file
+# and key) for a malformed case or a key the case cannot take.
+CaseReader = Callable[[Path, Mapping[str, Any]], tuple[Any, Mapping[str, Any]]]
+_case_reader: list[CaseReader] = []
+
+
+def register_case_reader(reader: CaseReader) -> None:
+    """Let :func:`load_bundle` read and check the case files forming tests name."""
+    _case_reader[:] = [reader]
+
+
+def case_reader() -> CaseReader | None:
+    """The registered reader of forming cases, or None (``fenicsx_drape.forming`` not loaded)."""
+    return _case_reader[0] if _case_reader else None
 
 # The unit each physical quantity must carry in a key or column name. A name made of one of
 # these quantities and another unit (``force_kN``, ``length_m``, ``temperature_K``) is an
@@ -121,6 +150,13 @@ class Test:
     noise_declared_by: str | None = None  # where the declaration came from (for the report)
     geometry: str | None = None  # forming: tool set ("hemisphere")
     forming: Mapping[str, float] = dataclasses.field(default_factory=dict)  # forming keys
+    case: str | None = None  # forming: the case file as written (relative to the bundle)
+    case_path: Path | None = None  # forming: the case file (absolute)
+    # forming: the test's keys offered to its case as overrides (all its scalar keys but the
+    # descriptive ones), and the case with those it names applied (read by the forming
+    # layer's reader when the bundle is loaded; None when no reader was registered then)
+    case_keys: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    forming_case: Any = None
     conditions: Mapping[str, float] = dataclasses.field(default_factory=dict)  # e.g. temperature_C
     notes: Mapping[str, str] = dataclasses.field(default_factory=dict)  # non-numeric extra keys
 
@@ -389,8 +425,18 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
     if not isinstance(file, str) or not file:
         problems.add(fname, where("test", index, "file"),
                      f"{label}: needs file = \"table.csv\" (relative to the bundle folder)")
-    for key in _missing(REQUIRED_KEYS[kind], raw):
-        problems.add(fname, line, f"{label}: a {kind} test needs {key}")
+    names_case = kind == "forming" and "case" in raw
+    if names_case and "geometry" in raw:
+        problems.add(fname, where("test", index, "case"),
+                     f"{label}: give either geometry = \"hemisphere\" (with its keys) or "
+                     "case = \"case.toml\", not both")
+    elif kind == "forming" and not names_case and "geometry" not in raw:
+        problems.add(fname, line, f"{label}: a forming test needs geometry = \"hemisphere\" "
+                                  "(with its keys) or case = \"case.toml\" (the forming case "
+                                  "it was made with, relative to the bundle folder)")
+    elif not names_case:
+        for key in _missing(REQUIRED_KEYS[kind], raw):
+            problems.add(fname, line, f"{label}: a {kind} test needs {key}")
 
     setup: dict[str, float] = {}
     conditions: dict[str, float] = {}
@@ -399,14 +445,24 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
     if kind == "forming" and "geometry" in raw and not isinstance(geometry, str):
         problems.add(fname, where("test", index, "geometry"),
                      f"{label}: geometry must be a string (e.g. \"hemisphere\")")
-    known = {"id", "kind", "file", "conditions"} | ({"geometry"} if kind == "forming" else set())
+    known = {"id", "kind", "file", "conditions"} | ({"geometry", "case"} if kind == "forming"
+                                                    else set())
+    case_file, case_path, used, forming_case = None, None, {}, None
+    if names_case:
+        case_file, case_path, used, forming_case = _read_case(
+            folder, fname, raw, index, where, label, known, problems)
     for key, value in raw.items():
         if key in known:
             continue
         at = where("test", index, key)
         if msg := _unit_problem(key):
             problems.add(fname, at, f"{label}: {msg}")
-        elif key in SETUP_KEYS[kind]:
+        elif key in used:  # a value of the case, checked by its reader
+            if isinstance(value, str):
+                text_notes[key] = value  # e.g. holder_force_share
+            else:
+                setup[key] = float(value)
+        elif key in SETUP_KEYS[kind] and (not names_case or key in CASE_DESCRIPTIVE_KEYS):
             if not (_is_number(value) and 0 < value < math.inf):
                 problems.add(fname, at, f"{label}: {key} = {value!r} must be a positive number")
             else:
@@ -473,12 +529,15 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
         problems.add(fname, where("test", index, "force_sd_rel"),
                      f"{label}: give force_sd_N or force_sd_rel, not both")
         return None
+    case_keys = ({k: v for k, v in raw.items() if _offered(k, v, known)} if names_case
+                 else {})
     test = Test(
         id=test_id, kind=kind, file=file, columns=columns, line=line,
         gauge_length_mm=setup.get("gauge_length_mm"), length_mm=setup.get("length_mm"),
         width_mm=setup.get("width_mm"), tows=tows, tows_derived=tows_derived,
         speed_mm_per_min=speed, geometry=geometry if kind == "forming" else None,
-        forming=forming, conditions=conditions, notes=text_notes,
+        forming=forming, conditions=conditions, notes=text_notes, case=case_file,
+        case_path=case_path, case_keys=case_keys, forming_case=forming_case,
     )
     own = {k: setup[k] for k in NOISE_KEYS if k in setup}
     return declared_noise(test, own, f"{fname} [[test]] {test_id!r}") if own else test
@@ -494,6 +553,44 @@ def declared_noise(test: Test, noise: Mapping[str, float], by: str) -> Test:
         return test
     return dataclasses.replace(test, noise_sd_N=noise.get("force_sd_N"),
                                noise_rel=noise.get("force_sd_rel"), noise_declared_by=by)
+
+
+def _offered(key: str, value: Any, known) -> bool:
+    """Whether a [[test]] key is offered to the test's case as an override."""
+    scalar = isinstance(value, (str, int, float)) and not isinstance(value, bool)
+    return (key not in known and key not in CASE_DESCRIPTIVE_KEYS and scalar
+            and _unit_problem(key) is None)
+
+
+def _read_case(folder, fname, raw, index, where, label, known, problems):
+    """The case file a forming test names, read with the test's keys as overrides.
+
+    Returns ``(case as written, absolute path, the keys the case used, the case)``; the last
+    two are empty/None when no reader is registered or the case has problems (added to
+    ``problems``, each with the line of the test's ``case`` key, the case file and its key).
+    """
+    at = where("test", index, "case")
+    written = raw["case"]
+    if not isinstance(written, str) or not written.strip():
+        problems.add(fname, at, f"{label}: case must be the path of a case file (a string, "
+                                "relative to the bundle folder)")
+        return None, None, {}, None
+    path = (folder / written).resolve()
+    if not path.is_file():
+        problems.add(fname, at, f"{label}: case = {written!r}: no such file {str(path)!r} "
+                                "(the path is relative to the bundle folder)")
+        return written, path, {}, None
+    keys = {k: v for k, v in raw.items() if _offered(k, v, known)}
+    reader = case_reader()
+    if reader is None:  # read when the test is simulated: every key is offered to the case
+        return written, path, keys, None
+    try:
+        case, used = reader(path, keys)
+    except DrapeInputError as err:
+        for problem in getattr(err, "problems", None) or [str(err)]:
+            problems.add(fname, at, f"{label}: case {written!r}: {problem}")
+        return written, path, {}, None
+    return written, path, dict(used), case
 
 
 def _read_table(path: Path, kind: str, label: str, problems: _Problems):
@@ -653,6 +750,8 @@ def write_bundle(bundle: Bundle, path: str | Path, *, comment: str = "") -> Path
                 f"kind = {_toml_value(test.kind)}", f"file = {_toml_value(test.file)}"]
         if test.geometry is not None:
             out.append(f"geometry = {_toml_value(test.geometry)}")
+        if test.case is not None:
+            out.append(f"case = {_toml_value(test.case)}")
         keys = ("gauge_length_mm", "length_mm", "width_mm", "speed_mm_per_min")
         for key in keys:
             if (value := getattr(test, key)) is not None:
