@@ -289,3 +289,25 @@ def test_tilted_meshed_plane_normals_and_friction_oppose_the_slip(tool_moves):
     s = 1.0  # mm of slip per step, ≫ the regularising 0.01 mm
     np.testing.assert_allclose(f_t, np.tile(-μ * F * s / math.hypot(s, 0.01) * slip_dir,
                                             (len(x), 1)), atol=1e-6)
+
+
+@pytest.mark.parallel
+def test_a_meshed_tool_gives_the_same_gap_on_every_rank_as_on_one(tmp_path_factory):
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    folder = comm.bcast(str(tmp_path_factory.mktemp("tool")) if comm.rank == 0 else None)
+    if comm.rank == 0:
+        with open(f"{folder}/ball.geo", "w") as f:
+            f.write('SetFactory("OpenCASCADE");\nSphere(1) = {0, 0, 0, 12};\n')
+    comm.Barrier()
+    motion = RigidMotion(time_s=[0.0, 1.0], z_mm=[0.0, 5.0])
+    shared = MeshedTool("ball", load_surface(f"{folder}/ball.geo", mesh_size_mm=3.0),
+                        motion, cache=False)  # read and built on rank 0, broadcast
+    alone = MeshedTool("ball", load_surface(f"{folder}/ball.geo", mesh_size_mm=3.0,
+                                            comm=None), motion, cache=False, comm=None)
+    x = np.random.default_rng(3).uniform(-15, 15, (500, 3))
+    a, b = shared.gap(x, 0.4), alone.gap(x, 0.4)
+    np.testing.assert_array_equal(a.phi, b.phi)
+    np.testing.assert_array_equal(a.hessian, b.hessian)
+    assert len(set(comm.allgather(a.phi.tobytes()))) == 1

@@ -3,15 +3,17 @@
 // (base plane at z = travel_mm - (R + Rf), i.e. z = 0 for the paper's 80 mm), its material
 // above. The offset cap (radius R + t), the offset fillet (radius Rf - t: the die's convex
 // lip, the entry radius the sheet is drawn over) and the flat face z = t out to
-// outer_radius_mm (default 0.75 sheet_mm: beyond the sheet's corners; the closed form's face
-// is endless). An open surface: the loader turns its normals towards the sheet (-z).
+// outer_radius_mm (the closed form's face is endless; beyond the holder's opening the sheet
+// is clamped at z = 0, below the face, so 15 mm past the opening is enough and keeps the
+// distance field's grid small). An open surface: the loader turns its normals towards the
+// sheet (-z).
 DefineConstant[
   punch_radius_mm = 60.0,
   fillet_radius_mm = 20.0,
   ply_thickness_mm = 0.3,      // t: the gap between punch and die when closed
   travel_mm = 80.0,            // punch travel: the die sits at the punch's final position
-  sheet_mm = 240.0,            // side of the square sheet
-  outer_radius_mm = 0.75 * sheet_mm,
+  holder_opening_mm = 170.0,   // diameter of the blank holder's opening
+  outer_radius_mm = 0.5 * holder_opening_mm + 15.0,
   mesh_mm = 2.0
 ];
 SetFactory("OpenCASCADE");
