@@ -116,10 +116,19 @@ def test_gmsh_session_of_the_caller_is_left_alone(sources):
         gmsh.model.add("mine")
         gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
         gmsh.model.occ.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 123.0)
+        models = sorted(gmsh.model.list())
         load_surface(sources["geo"], mesh_size_mm=3.0, comm=None)
+        # A build() that makes a model of its own: read from it, removed afterwards.
+        own = sources["py"].with_name("own_model.py")
+        own.write_text("def build(gmsh):\n    gmsh.model.add('extra')\n"
+                       "    gmsh.model.occ.addSphere(0, 0, 0, 4.0)\n"
+                       "    gmsh.model.occ.synchronize()\n")
+        s = load_surface(own, mesh_size_mm=2.0, comm=None)
+        assert s.bounds[1][2] == pytest.approx(4.0)
         assert gmsh.isInitialized()
-        assert "mine" in gmsh.model.list()
-        assert len(gmsh.model.list()) == 2  # Gmsh's default model and ours: none added
+        assert sorted(gmsh.model.list()) == models  # none added, none lost
+        assert gmsh.option.getNumber("Mesh.MeshSizeMax") == 123.0  # options put back
     finally:
         gmsh.finalize()
 

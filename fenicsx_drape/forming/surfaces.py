@@ -38,11 +38,12 @@ surface (an edge with one triangle) are counted outside: the distance is positiv
 the edge of a holder's plate or a punch's rim, whatever the side. ``on_boundary`` tells
 them, which is how a clamping surface knows the nodes it *covers*.
 
-**MPI.** Gmsh runs on rank 0 only; the surface is broadcast to every rank. Gmsh is
-initialised (if nobody did), every model this module adds is removed and Gmsh finalised
-again when it was not running before, also after an error; the parser's variables and the
-ONELAB parameters are cleared before a script runs so that no value leaks from one file to
-the next.
+**Gmsh in-process, MPI.** Gmsh runs on rank 0 only; the surface is broadcast to every rank.
+Gmsh is initialised if nobody did, and finalised again afterwards; in a session the caller
+started, every model added (ours, and any a ``build()`` adds) is removed and the mesh options
+touched are put back, also after an error. The parser's variables and the ONELAB parameters
+are cleared before a script runs so that no value leaks from one file to the next (in a
+caller's session too).
 """
 
 from __future__ import annotations
@@ -681,17 +682,17 @@ def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
     initialised = gmsh.isInitialized()
     if not initialised:
         gmsh.initialize(interruptible=False)
+    models = set(gmsh.model.list())
+    saved = _save_options(gmsh)
     model = f"fenicsx_drape_surface_{os.getpid()}_{id(path)}"
-    added = False
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.parser.clear()
         gmsh.onelab.clear()
         gmsh.model.add(model)
-        added = True
         try:
             if suffix == ".py":
-                _run_build(gmsh, path, parameters)
+                _run_build(gmsh, path, parameters)  # may add its own model and make it current
             else:
                 if suffix == ".geo":
                     for k, v in parameters.items():
@@ -702,7 +703,6 @@ def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
                 if suffix in CAD_SUFFIXES:
                     gmsh.option.setString("Geometry.OCCTargetUnit", "MM")
                 gmsh.merge(str(path))
-            gmsh.model.setCurrent(model)
             meshed = _has_triangles(gmsh)
             if not meshed:
                 if not gmsh.model.getEntities(2):
@@ -722,14 +722,41 @@ def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
         except Exception as error:  # Gmsh reports its errors as plain exceptions
             raise DrapeInputError(f"{where}: Gmsh: {error}") from None
     finally:
-        if added:
-            gmsh.model.setCurrent(model)
+        # Leave no model behind (ours and any a build() added), nor our options or parameters.
+        for name in set(gmsh.model.list()) - models:
+            gmsh.model.setCurrent(name)
             gmsh.model.remove()
         gmsh.parser.clear()
         gmsh.onelab.clear()
-        if not initialised:
+        if initialised:
+            _restore_options(gmsh, saved)
+        else:
             gmsh.finalize()
     return TriangleSurface(points, triangles, sheet_side=sheet_side, source=where)
+
+
+# Options this module or the project's scripts set: put back for a caller's Gmsh session.
+_OPTIONS = ("General.Terminal", "Mesh.MeshSizeMax", "Mesh.MeshSizeMin",
+            "Mesh.MeshSizeFromCurvature", "Mesh.MeshSizeExtendFromBoundary", "Mesh.ElementOrder",
+            "Mesh.SecondOrderLinear", "Geometry.OCCTargetUnit")
+
+
+def _save_options(gmsh) -> dict:
+    saved = {}
+    for name in _OPTIONS:
+        try:
+            saved[name] = ("n", gmsh.option.getNumber(name))
+        except Exception:  # a string option
+            saved[name] = ("s", gmsh.option.getString(name))
+    return saved
+
+
+def _restore_options(gmsh, saved: dict) -> None:
+    for name, (kind, value) in saved.items():
+        if kind == "n":
+            gmsh.option.setNumber(name, value)
+        else:
+            gmsh.option.setString(name, value)
 
 
 def _run_build(gmsh, path: Path, parameters: dict) -> None:
