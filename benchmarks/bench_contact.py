@@ -1,7 +1,7 @@
 """Meshed tools: build time, memory and evaluation cost of the distance field, and its accuracy
 against the closed-form hemisphere tools (the geometric half of the tool-mesh convergence study).
 
-    ./drape exec python3 benchmarks/bench_contact.py                  # timing, default tools
+    ./drape exec python3 benchmarks/bench_contact.py                  # timing: punch and die
     ./drape exec python3 benchmarks/bench_contact.py --accuracy       # mesh sizes × orders
     ./drape exec python3 benchmarks/bench_contact.py --accuracy --mesh-mm 4 2 --order 1 2
 
@@ -109,37 +109,65 @@ def accuracy(name: str, mesh_mm: float, order: int, spacing_mm: float | None, rn
     return surface, h, field, load_s, build_s, peak, rows
 
 
+def sheet_nodes(n_side: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """The 240 mm sheet's nodes: flat (t = 0) and on the formed part (t = 40 s, 0-0.3 mm off)."""
+    c = np.linspace(-120.0, 120.0, n_side)
+    X, Y = np.meshgrid(c, c)
+    flat = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
+    g = TOOLS.formed_part().gap(flat, 0.0)
+    formed = flat - (g.phi - rng.uniform(-0.02, 0.3, len(flat)))[:, None] * g.normal
+    return flat, formed
+
+
 def timing(args) -> None:
     rng = np.random.default_rng(1)
-    punch = MeshedTool("punch", load_surface(FOLDER / "punch.geo", mesh_size_mm=args.tool_mm,
-                                             order=args.tool_order, comm=None),
-                       RigidMotion(time_s=[0.0, 40.0], z_mm=[0.0, 80.0]),
-                       spacing_mm=args.spacing_mm, cache=args.cache, comm=None)
-    exact = TOOLS.punch(40.0)
-    f = punch.field
-    print(f"punch: {len(punch.surface.triangles)} triangles, h = {f.h:g} mm, band = "
-          f"{f.band_mm:g} mm, grid {tuple(f.coefficients.shape)}, {f.nbytes / 1e6:.1f} MB")
-    # Nodes of the formed sheet (on the part at the end, within 0.5 mm) and of the flat one.
-    for n in (1000, 3000, 10000):
-        xy = rng.uniform(-120, 120, (n, 2))
-        flat = np.column_stack([xy, np.zeros(n)])
-        g = TOOLS.formed_part().gap(flat, 0.0)
-        formed = flat - (g.phi - rng.uniform(-0.05, 0.5, n))[:, None] * g.normal
-        for label, x, t in (("flat sheet, t = 0", flat, 0.0), ("formed, t = 40 s", formed, 40.0)):
-            best_m = best_e = np.inf
-            for _ in range(args.repeat):
-                s = time.perf_counter()
-                punch.gap(x, t)
-                best_m = min(best_m, time.perf_counter() - s)
-                s = time.perf_counter()
-                exact.gap(x, t)
-                best_e = min(best_e, time.perf_counter() - s)
-            print(f"  n = {n:6d} {label:18s} meshed {best_m * 1e3:7.2f} ms "
-                  f"({best_m / n * 1e6:.2f} µs/node)  closed form {best_e * 1e3:7.2f} ms")
-    start = time.perf_counter()
-    punch.covers(formed, 40.0)
-    print(f"  covers (exact closest points) of {len(formed)} formed nodes: "
-          f"{(time.perf_counter() - start) * 1e3:.0f} ms")
+    tools = {}
+    for name, side, motion in (("punch", "+z", RigidMotion(time_s=[0.0, 40.0],
+                                                              z_mm=[0.0, 80.0])),
+                               ("die", "-z", None)):
+        surface = load_surface(FOLDER / f"{name}.geo", mesh_size_mm=args.tool_mm,
+                               order=args.tool_order, sheet_side=side, comm=None)
+        tracemalloc.start()
+        start = time.perf_counter()
+        tool = MeshedTool(name, surface, motion, spacing_mm=args.spacing_mm, cache=args.cache,
+                          comm=None)
+        took = time.perf_counter() - start
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        f = tool.field
+        print(f"{name}: {len(surface.triangles)} triangles ({args.tool_mm:g} mm, order "
+              f"{args.tool_order}), h = {f.h:g} mm, band {f.band_mm:g} mm, grid "
+              f"{tuple(f.coefficients.shape)} = {f.nbytes / 1e6:.1f} MB; "
+              f"{'read or built' if args.cache else 'built'} in {took:.1f} s, peak "
+              f"{peak / 1e6:.0f} MB")
+        tools[name] = tool
+    exact = {"punch": TOOLS.punch(40.0), "die": TOOLS.die()}
+    print("gap of punch + die (best of", args.repeat, "calls):")
+    for n_side in (33, 65, 97):  # 1089, 4225, 9409 nodes (Δ = 7.5, 3.75, 2.5 mm)
+        flat, formed = sheet_nodes(n_side, rng)
+        for label, x, t in (("flat, t = 0", flat, 0.0), ("formed, t = 40 s", formed, 40.0)):
+            best = {}
+            for kind, set_ in (("meshed", tools), ("closed form", exact)):
+                b = np.inf
+                for _ in range(args.repeat):
+                    s = time.perf_counter()
+                    for tool in set_.values():
+                        tool.gap(x, t)
+                    b = min(b, time.perf_counter() - s)
+                best[kind] = b
+            n = len(x)
+            print(f"  {n:5d} nodes, {label:17s} meshed {best['meshed'] * 1e3:6.1f} ms "
+                  f"({best['meshed'] / n * 1e6:.2f} µs/node), closed form "
+                  f"{best['closed form'] * 1e3:6.1f} ms; meshed = "
+                  f"{best['meshed'] / 0.15 * 100:.1f} % of a 0.15 s Newton iteration")
+    holder = MeshedTool("holder", load_surface(FOLDER / "holder.geo", mesh_size_mm=args.tool_mm,
+                                               order=args.tool_order, comm=None),
+                        spacing_mm=args.spacing_mm, cache=args.cache, comm=None)
+    for label, x in (("flat", flat), ("formed", formed)):
+        start = time.perf_counter()
+        under = holder.covers(x, 40.0)
+        print(f"holder.covers (exact closest points) of {len(x)} {label} nodes "
+              f"({under.sum()} under it): {(time.perf_counter() - start) * 1e3:.0f} ms")
 
 
 def main() -> None:
@@ -149,8 +177,8 @@ def main() -> None:
     ap.add_argument("--order", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--tools", nargs="+", default=["punch", "die", "holder"])
     ap.add_argument("--spacing-mm", type=float, default=None, help="grid h (default: mesh)")
-    ap.add_argument("--tool-mm", type=float, default=2.0, help="timing: punch mesh size")
-    ap.add_argument("--tool-order", type=int, default=2, help="timing: punch mesh order")
+    ap.add_argument("--tool-mm", type=float, default=2.0, help="timing: tool mesh size")
+    ap.add_argument("--tool-order", type=int, default=2, help="timing: tool mesh order")
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--cache", action="store_true", help="use the on-disk cache (timing)")
     args = ap.parse_args()

@@ -163,6 +163,9 @@ def test_covers_tells_the_nodes_under_a_clamping_surface(tmp_path):
     covered = holder.covers(x, 0.0)
     clear = (np.abs(r - 30) > 0.2) & (np.abs(r - 60) > 0.2)  # the rims are polygons
     np.testing.assert_array_equal(covered[clear], ((r > 30) & (r < 60))[clear])
+    # Far above the plate a node is not under it (unless asked to look that far).
+    far = np.array([[45.0, 0.0, 20.0]])
+    assert not holder.covers(far, 0.0)[0] and holder.covers(far, 0.0, reach_mm=30.0)[0]
     # Its gap under the plate (away from the rims) is the height, its normal +z.
     inner = (r > 30 + holder.field.band_mm + 4) & (r < 60 - holder.field.band_mm - 4)
     g = holder.gap(x[inner], 0.0)

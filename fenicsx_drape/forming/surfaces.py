@@ -736,27 +736,23 @@ def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
 
 
 # Options this module or the project's scripts set: put back for a caller's Gmsh session.
-_OPTIONS = ("General.Terminal", "Mesh.MeshSizeMax", "Mesh.MeshSizeMin",
-            "Mesh.MeshSizeFromCurvature", "Mesh.MeshSizeExtendFromBoundary", "Mesh.ElementOrder",
-            "Mesh.SecondOrderLinear", "Geometry.OCCTargetUnit")
+_NUMBER_OPTIONS = ("General.Terminal", "Mesh.MeshSizeMax", "Mesh.MeshSizeMin",
+                   "Mesh.MeshSizeFromCurvature", "Mesh.MeshSizeExtendFromBoundary",
+                   "Mesh.ElementOrder", "Mesh.SecondOrderLinear")
+_STRING_OPTIONS = ("Geometry.OCCTargetUnit",)
 
 
 def _save_options(gmsh) -> dict:
-    saved = {}
-    for name in _OPTIONS:
-        try:
-            saved[name] = ("n", gmsh.option.getNumber(name))
-        except Exception:  # a string option
-            saved[name] = ("s", gmsh.option.getString(name))
-    return saved
+    return ({k: gmsh.option.getNumber(k) for k in _NUMBER_OPTIONS},
+            {k: gmsh.option.getString(k) for k in _STRING_OPTIONS})
 
 
-def _restore_options(gmsh, saved: dict) -> None:
-    for name, (kind, value) in saved.items():
-        if kind == "n":
-            gmsh.option.setNumber(name, value)
-        else:
-            gmsh.option.setString(name, value)
+def _restore_options(gmsh, saved) -> None:
+    numbers, strings = saved
+    for name, value in numbers.items():
+        gmsh.option.setNumber(name, value)
+    for name, value in strings.items():
+        gmsh.option.setString(name, value)
 
 
 def _run_build(gmsh, path: Path, parameters: dict) -> None:

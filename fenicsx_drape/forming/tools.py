@@ -355,13 +355,24 @@ class MeshedTool:
         q, d, on_boundary = self.surface.closest(self.motion.inverse(x, t))
         return self.motion.apply(q, t), d, on_boundary
 
-    def covers(self, x: np.ndarray, t: float) -> np.ndarray:
-        """The nodes whose closest surface point is not on the surface's boundary.
+    def covers(self, x: np.ndarray, t: float, reach_mm: float | None = None) -> np.ndarray:
+        """The nodes *under* the surface: near it, and their closest point not on its edge.
 
-        For a clamping surface these lie *under* it, not beyond its edge or in its opening.
-        Exact (closest-point search): meant for once per converged step, not every iterate.
+        For a clamping surface these are the nodes between its plates, not beyond its edge
+        or in its opening, nor far from it (farther than ``reach_mm``, default the field's
+        band, ≥ 3 mm). Exact (closest-point search, for the nodes within reach): meant for
+        once per converged step, not every iterate.
         """
-        return ~self.closest(x, t)[2]
+        X = self.motion.inverse(x, t)
+        reach = self.field.band_mm if reach_mm is None else float(reach_mm)
+        near = np.abs(self.field.evaluate(X, order=0)[0]) < min(reach, self.field.band_mm)
+        if reach > self.field.band_mm:  # beyond the band the field cannot tell: measure
+            near = np.ones(len(X), dtype=bool)
+        out = np.zeros(len(X), dtype=bool)
+        if near.any():
+            _, d, on_boundary = self.surface.closest(X[near])
+            out[near] = ~on_boundary & (d < reach)
+        return out
 
     def signed_distance(self, x: np.ndarray, t: float) -> np.ndarray:
         """The exact signed distance (n,) in mm (no smoothing; see ``gap`` for contact)."""
