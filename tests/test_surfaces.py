@@ -93,6 +93,15 @@ def test_parameters_reach_the_script_and_do_not_leak(sources):
 
 
 @pytest.mark.skip_in_parallel
+def test_onelab_parameters_by_their_name(tmp_path):
+    path = tmp_path / "onelab.geo"
+    path.write_text('DefineConstant[ r = {10, Name "Parameters/radius"} ];\n'
+                    'SetFactory("OpenCASCADE");\nSphere(1) = {0, 0, 0, r};\n')
+    s = load_surface(path, {"Parameters/radius": 6.0}, mesh_size_mm=2.0, comm=None)
+    assert s.bounds[1][2] == pytest.approx(6.0)
+
+
+@pytest.mark.skip_in_parallel
 def test_second_order_triangles_are_split_through_their_mid_side_nodes(sources):
     one = load_surface(sources["geo"], mesh_size_mm=3.0, order=1, comm=None)
     two = load_surface(sources["geo"], mesh_size_mm=3.0, order=2, comm=None)
