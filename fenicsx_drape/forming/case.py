@@ -999,19 +999,20 @@ def build_tools(case: FormingCase, skip: tuple[str, ...] = ()) -> dict[str, obje
 
 
 def _meshed_tool(case: FormingCase, spec: ToolSpec):
-    """A tool from a geometry file: issue 13's meshed surfaces (not in this build yet).
+    """A tool from a geometry file: its surface meshed once by Gmsh, moved rigidly."""
+    from fenicsx_drape.forming.motion import RigidMotion
+    from fenicsx_drape.forming.surfaces import load_surface
+    from fenicsx_drape.forming.tools import MeshedTool
 
-    The wiring, once ``forming/surfaces.py`` and ``forming/motion.py`` are in: the surface
-    ``load_surface(spec.path, parameters=spec.params, mesh_size_mm=spec.mesh_mm,
-    order=spec.order or 1, sheet_side=spec.side)`` moved by
-    ``RigidMotion(**table of spec.motion)`` (fixed when None) as a ``MeshedTool``. Until then
-    a file tool can be given in Python (``run_case(case, tools={name: tool})``).
-    """
     k = case.tools.index(spec) + 1
-    raise CaseError([f"{case.path or case.name}: [[tool]] {k} 'geometry': {spec.geometry!r}: "
-                     "meshed tool geometry (Gmsh/CAD/STL surfaces) is not in this build yet; "
-                     "use geometry = \"builtin:hemisphere\" or give the tool in Python "
-                     "(run_case(case, tools={...}))"])
+    where = f"{case.path or case.name}: [[tool]] {k} ({spec.name!r})"
+    surface = load_surface(spec.path, spec.params or None, spec.mesh_mm, spec.order or 1,
+                           sheet_side=spec.side)
+    m = spec.motion
+    motion = None if m is None else RigidMotion(
+        time_s=m.time_s, x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm, rotation_deg=m.rotation_deg,
+        axis=m.axis, centre_mm=m.centre_mm, where=f"{where} [tool.motion]")
+    return MeshedTool(spec.name, surface, motion)
 
 
 # --------------------------------------------------------------------------------------------

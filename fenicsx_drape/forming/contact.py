@@ -31,7 +31,16 @@ is smooth at zero slip,
     s = P (x − x_n − Δx_tool),  P = I − n⊗n,   f_T = −μ_t f_N s / √(|s|² + s_ε²),
 
 with f_N = p(φ) the normal force and ``s_ε`` (mm) the regularising slip: below it the
-friction force grows linearly with the slip (a stick stiffness μ_t f_N / s_ε).
+friction force grows linearly with the slip (a stick stiffness μ_t f_N / s_ε). Δx_tool =
+``tool.displacement(x, t_n, t)`` is how far the tool's material point under the node moved
+over the step (a translation for the hemisphere's tools, any rigid motion for a meshed
+tool); being rigid, it is affine in x, and its constant gradient (I − Q) enters the
+Jacobian through ∂s/∂x = P Q − (n·d) ∇∇φ − n ⊗ (∇∇φ d), d = x − x_n − Δx_tool.
+
+**Any tool** (``forming.tools``: closed form or meshed) answers ``gap(x, t)`` (φ, ∇φ, ∇∇φ)
+and ``displacement(x, t0, t1)``. For a meshed tool φ is a C² spline
+(:mod:`~fenicsx_drape.forming.distance`), so force and Jacobian stay consistent and, without
+friction, symmetric, as for the exact surfaces.
 """
 
 from __future__ import annotations
@@ -39,7 +48,6 @@ from __future__ import annotations
 import numpy as np
 
 from fenicsx_drape.errors import ParameterError
-from fenicsx_drape.forming.tools import RevolvedTool
 
 
 def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -50,7 +58,9 @@ class PenaltyContact:
     """Penalty contact of the sheet's nodes with one rigid tool (a :class:`NodalTerm`).
 
     Args:
-        tool: the rigid tool (signed gap, normal, curvature, prescribed motion).
+        tool: the rigid tool: ``gap(x, t)`` (signed gap, normal, curvature) and
+            ``displacement(x, t0, t1)`` (its prescribed motion), e.g. a
+            :class:`~fenicsx_drape.forming.tools.RevolvedTool` or ``MeshedTool``.
         stiffness_N_per_mm: penalty stiffness ``k`` per node (see the module docstring).
         friction: Coulomb coefficient μ_t of ``tool_friction`` (0 switches it off).
         slip_regularisation_mm: ``s_ε``, the slip below which friction is not yet at
@@ -58,7 +68,7 @@ class PenaltyContact:
         smoothing_force_N: ``f_s``, the force below which the penalty law is quadratic.
     """
 
-    def __init__(self, tool: RevolvedTool, stiffness_N_per_mm: float, *, friction: float = 0.0,
+    def __init__(self, tool, stiffness_N_per_mm: float, *, friction: float = 0.0,
                  slip_regularisation_mm: float = 0.01, smoothing_force_N: float = 100.0) -> None:
         if not stiffness_N_per_mm > 0.0:
             raise ParameterError(f"contact with {tool.name}: penalty stiffness "
@@ -110,20 +120,31 @@ class PenaltyContact:
 
     def _friction(self, x, t, g, f_N, dp, active):
         n, H = g.normal, g.hessian
-        d = x - self._x_n
-        d[:, 2] -= self.tool.z_offset(t) - self.tool.z_offset(self._t_n)
+        d = x - self._x_n - self.tool.displacement(x, self._t_n, t)
         dn = np.einsum("ni,ni->n", d, n)
         s = d - dn[:, None] * n
         w = np.sqrt(np.einsum("ni,ni->n", s, s) + self.s_ε**2)
         m = s / w[:, None]
         f = -self.μ * f_N[:, None] * m
-        # ∂s/∂x = P − (n·d) ∇∇φ − n ⊗ (∇∇φ d);  ∂m/∂s = (I − m⊗m) / w;  ∂f_N/∂x = p' n.
+        # ∂s/∂x = P Q − (n·d) ∇∇φ − n ⊗ (∇∇φ d);  ∂m/∂s = (I − m⊗m) / w;  ∂f_N/∂x = p' n.
         P = np.eye(3) - _outer(n, n)
-        ds = P - dn[:, None, None] * H - _outer(n, np.einsum("nij,nj->ni", H, d))
+        Q = self._slip_gradient(t)
+        ds = (P if Q is None else P @ Q) - dn[:, None, None] * H \
+            - _outer(n, np.einsum("nij,nj->ni", H, d))
         dm = (np.eye(3) - _outer(m, m)) / w[:, None, None]
         K = self.μ * (f_N[:, None, None] * dm @ ds + dp[:, None, None] * _outer(m, n))
         on = active[:, None]
         return np.where(on, f, 0.0), np.where(on[:, :, None], K, 0.0)
+
+    def _slip_gradient(self, t: float) -> np.ndarray | None:
+        """Q = ∂(x − Δx_tool)/∂x (3, 3) over the step; None when it is the identity.
+
+        A rigid motion makes Δx_tool affine in x, so Q follows from four evaluations.
+        """
+        probe = np.vstack([np.zeros(3), np.eye(3)])
+        D = self.tool.displacement(probe, self._t_n, t)
+        Q = np.eye(3) - (D[1:] - D[0]).T
+        return None if np.array_equal(Q, np.eye(3)) else Q
 
     def project(self, x: np.ndarray, t: float) -> np.ndarray:
         """Move penetrating nodes back onto the tool surface along its normal (predictor)."""

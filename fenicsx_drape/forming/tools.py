@@ -138,6 +138,13 @@ class RevolvedTool:
         """Height (mm) of the tool's reference plane at time ``t`` (s)."""
         return self.z0_mm + self.speed_mm_per_s * t
 
+    def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
+        """How far (n, 3) the tool's material point at ``x`` at ``t1`` moved since ``t0`` (mm)."""
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        d = np.zeros_like(x)
+        d[:, 2] = self.z_offset(t1) - self.z_offset(t0)
+        return d
+
     def gap(self, x: np.ndarray, t: float) -> Gap:
         """Signed gap, normal and curvature at the positions ``x`` (n, 3) in mm at time ``t``."""
         x = np.asarray(x, dtype=float).reshape(-1, 3)
@@ -285,3 +292,88 @@ class HemisphereTools:
         The punch at its final position, continued by the holder plane z = 0.
         """
         return RevolvedTool("part", self.part_profile(), z0_mm=self.travel_mm - self.height_mm)
+
+
+class MeshedTool:
+    """A rigid tool given by a triangle surface (issue 13), moving with a rigid motion.
+
+    The gap is the smooth signed distance field of the surface in the tool's own frame
+    (:mod:`~fenicsx_drape.forming.distance`: a cubic B-spline of exact distances, C², so the
+    penalty Jacobian stays consistent and symmetric), carried along by the motion
+    (:mod:`~fenicsx_drape.forming.motion`): with X = R(t)ᵀ (x − c − T(t)) + c,
+
+        φ(x, t) = φ₀(X),   ∇φ = R ∇φ₀,   ∇∇φ = R ∇∇φ₀ Rᵀ.
+
+    Args:
+        name: The tool's name.
+        surface: Its :class:`~fenicsx_drape.forming.surfaces.TriangleSurface` (normals out of
+            the tool, towards the sheet).
+        motion: Its :class:`~fenicsx_drape.forming.motion.RigidMotion` (default: fixed).
+        spacing_mm: Grid spacing h of the distance field (default: the tool mesh size).
+        band_mm: Band of exact distances (default 3 mm + 2h).
+        cache: Keep the built field on disk.
+        comm: MPI communicator for building the field once (default: the world).
+    """
+
+    def __init__(self, name: str, surface, motion=None, *, spacing_mm: float | None = None,
+                 band_mm: float | None = None, cache: bool = True, comm=None) -> None:
+        from fenicsx_drape.forming.distance import distance_field
+        from fenicsx_drape.forming.motion import RigidMotion
+
+        if comm is None:
+            try:
+                from mpi4py import MPI
+
+                comm = MPI.COMM_WORLD
+            except ImportError:
+                comm = None
+        self.name = str(name)
+        self.surface = surface
+        self.motion = motion if motion is not None else RigidMotion.fixed()
+        self.field = distance_field(surface, spacing_mm, band_mm, cache=cache, comm=comm)
+
+    def __repr__(self) -> str:
+        return (f"MeshedTool({self.name!r}, {self.surface!r}, h = {self.field.h:g} mm, "
+                f"band = {self.field.band_mm:g} mm)")
+
+    def gap(self, x: np.ndarray, t: float) -> Gap:
+        """Signed gap, normal and curvature at the positions ``x`` (n, 3) in mm at time ``t``."""
+        X = self.motion.inverse(x, t)
+        phi, grad, hess = self.field.evaluate(X)
+        if self.motion.rotation_deg is not None:
+            R, _ = self.motion.at(t)
+            grad = grad @ R.T
+            hess = np.einsum("ij,njk,lk->nil", R, hess, R)
+        return Gap(phi, grad, hess)
+
+    def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
+        """How far (n, 3) the tool's material point at ``x`` at ``t1`` moved since ``t0`` (mm)."""
+        return self.motion.displacement(x, t0, t1)
+
+    def closest(self, x: np.ndarray, t: float):
+        """Exact closest points (n, 3) at time ``t``, distances (n,) and ``on_boundary`` (n,)."""
+        q, d, on_boundary = self.surface.closest(self.motion.inverse(x, t))
+        return self.motion.apply(q, t), d, on_boundary
+
+    def covers(self, x: np.ndarray, t: float, reach_mm: float | None = None) -> np.ndarray:
+        """The nodes *under* the surface: near it, and their closest point not on its edge.
+
+        For a clamping surface these are the nodes between its plates, not beyond its edge
+        or in its opening, nor far from it (farther than ``reach_mm``, default the field's
+        band, ≥ 3 mm). Exact (closest-point search, for the nodes within reach): meant for
+        once per converged step, not every iterate.
+        """
+        X = self.motion.inverse(x, t)
+        reach = self.field.band_mm if reach_mm is None else float(reach_mm)
+        near = np.abs(self.field.evaluate(X, order=0)[0]) < min(reach, self.field.band_mm)
+        if reach > self.field.band_mm:  # beyond the band the field cannot tell: measure
+            near = np.ones(len(X), dtype=bool)
+        out = np.zeros(len(X), dtype=bool)
+        if near.any():
+            _, d, on_boundary = self.surface.closest(X[near])
+            out[near] = ~on_boundary & (d < reach)
+        return out
+
+    def signed_distance(self, x: np.ndarray, t: float) -> np.ndarray:
+        """The exact signed distance (n,) in mm (no smoothing; see ``gap`` for contact)."""
+        return self.surface.signed_distance(self.motion.inverse(x, t))
