@@ -1,10 +1,10 @@
-"""The implicit truss solver: one load step with PETSc SNES, driven by hand.
+"""The implicit truss solver: one load step by Newton's method around DOLFINx assembly.
 
 :class:`TrussProblem` owns the displacement, the material state at the quadrature points, the
 Dirichlet conditions and the nodal terms (contact, blank holder: :mod:`fenicsx_drape.nodal`).
-The SNES callbacks evaluate the material laws at every iterate and assemble the residual and
-the consistent Jacobian; a converged step commits the history of the laws and of the nodal
-terms, a failed one reverts both. Load stepping with cut-back is in
+Newton's method (:mod:`~fenicsx_drape.fe.newton`) evaluates the material laws at every iterate
+and assembles the residual and the consistent Jacobian; a converged step commits the history of
+the laws and of the nodal terms, a failed one reverts both. Load stepping with cut-back is in
 :mod:`~fenicsx_drape.fe.stepping`, outputs in :mod:`~fenicsx_drape.fe.output`.
 
 Nodes are the blocks of the vector P1 space in its local order (owned nodes first, then
@@ -34,11 +34,30 @@ from fenicsx_drape.fe.coupling import ShearTensionCoupling
 from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
+from fenicsx_drape.fe.newton import Iterate, LinearSolver, Newton, NewtonResult
 from fenicsx_drape.fe.state import MaterialState, StrainError
 from fenicsx_drape.fe.stepping import StepReport, run
 from fenicsx_drape.materials.base import MaterialLaw
 
 _ids = itertools.count()
+_default_monitors: list[Callable] = []  # monitors given to problems built inside monitoring()
+
+
+@contextlib.contextmanager
+def monitoring(monitor: Callable[[TrussProblem, Iterate], None]):
+    """Hand ``monitor(problem, iterate)`` every Newton iterate of the problems built inside.
+
+    A diagnostic hook (``benchmarks/diagnose_stepping.py``) that needs no change where the
+    problem is built (the hemisphere, a forming case)::
+
+        with monitoring(probe):
+            run_hemisphere(case)
+    """
+    _default_monitors.append(monitor)
+    try:
+        yield monitor
+    finally:
+        _default_monitors.remove(monitor)
 
 
 @dataclasses.dataclass
@@ -58,11 +77,14 @@ class SolverOptions:
     drag_N_per_mm: float = 0.0  # pseudo-viscous drag c (u - u_n) per node: numerical damping
     snes_atol: float = 1e-8  # absolute residual tolerance (N)
     snes_rtol: float = 1e-9  # relative residual tolerance
-    snes_max_it: int = 25
-    line_search: str = "bt"  # PETSc SNES line search: bt, basic, l2, cp
+    snes_max_it: int = 25  # Newton iterations before a step is cut back
+    line_search: str = "l2"  # basic, bt (backtracking), l2 (parabola in ‖F‖²): newton.py
     linear_solver: str = "mumps"  # LU factorisation package (mumps, superlu_dist, petsc)
+    # Reuse a factorisation as GMRES preconditioner until GMRES needs more iterations than
+    # this (0: factorise every Jacobian); see fe/newton.py.
+    max_krylov: int = 0
     predictor: bool = True  # extrapolate the last increment, then let nodal terms project
-    petsc_options: dict = dataclasses.field(default_factory=dict)  # extra SNES/KSP options
+    petsc_options: dict = dataclasses.field(default_factory=dict)  # extra KSP/PC options
 
     def __post_init__(self):
         for name in ("tows_per_mm", "snes_atol"):
@@ -74,8 +96,6 @@ class SolverOptions:
                 raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be "
                                       ">= 0")
 
-
-_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
 
 Where = str | np.ndarray | Callable[[np.ndarray], np.ndarray]
 
@@ -145,10 +165,16 @@ class TrussProblem:
         self._evaluated_at: np.ndarray | None = None
         self._nodal_f = np.zeros((len(self.X), 3))
         self._nodal_K = np.zeros((len(self.X), 3, 3))
-        self._setup_snes()
+        # Called with (problem, Iterate) at every Newton iterate (diagnostics; None: off).
+        self.monitor: Callable[[TrussProblem, Iterate], None] | None = (
+            _default_monitors[-1] if _default_monitors else None)
+        self._A = fem_petsc.create_matrix(self.jacobian_form)
+        self._b = fem_petsc.create_vector(self.V)
+        self._x = fem_petsc.create_vector(self.V)
         self._bending = None
         if options.tow_bending_EI_Nmm2 > 0 and sheet.grid is not None:  # tow lines known
             self._setup_bending()
+        self._setup_newton()
 
     # -- geometry and selections -------------------------------------------------------
 
@@ -243,38 +269,20 @@ class TrussProblem:
         """Which displacement components of the local nodes are prescribed, (n, 3)."""
         return self.constraints.constrained
 
-    # -- SNES ---------------------------------------------------------------------------
+    # -- Newton ---------------------------------------------------------------------------
 
-    def _setup_snes(self) -> None:
+    def _setup_newton(self) -> None:
         opts = self.options
-        self._A = fem_petsc.create_matrix(self.jacobian_form)
-        self._b = fem_petsc.create_vector(self.V)
-        self._x = fem_petsc.create_vector(self.V)
-        snes = PETSc.SNES().create(self.comm)
-        prefix = f"drape_truss_{next(_ids)}_"
-        snes.setOptionsPrefix(prefix)
-        petsc_opts = {
-            "snes_type": "newtonls",
-            "snes_linesearch_type": opts.line_search,
-            "snes_atol": opts.snes_atol,
-            "snes_rtol": opts.snes_rtol,
-            "snes_stol": 0.0,
-            "snes_max_it": opts.snes_max_it,
-            "ksp_type": "preonly",
-            "pc_type": "lu",
-            "pc_factor_mat_solver_type": opts.linear_solver,
-            **opts.petsc_options,
-        }
-        options = PETSc.Options()
-        for key, val in petsc_opts.items():
-            options[prefix + key] = val
-        snes.setFromOptions()
-        # The factor (MUMPS) reads its options at the first factorisation: they stay in the
-        # database until the first solve is over (see step), then are cleared.
-        self._option_keys = [prefix + key for key in petsc_opts]
-        snes.setFunction(self._residual, self._b)
-        snes.setJacobian(self._jacobian, self._A)
-        self.snes = snes
+        options = {"pc_factor_mat_solver_type": opts.linear_solver, **opts.petsc_options}
+        self.linear = LinearSolver(self._A, self.comm, f"drape_truss_{next(_ids)}_", options,
+                                   max_krylov=opts.max_krylov)
+        self.newton = Newton(self._residual, self._jacobian, self.linear, self._b,
+                             atol=opts.snes_atol, rtol=opts.snes_rtol, max_it=opts.snes_max_it,
+                             line_search=opts.line_search, monitor=self._monitor)
+
+    def _monitor(self, iterate: Iterate) -> None:
+        if self.monitor is not None:
+            self.monitor(self, iterate)
 
     def _setup_bending(self) -> None:
         """The tow bending term, and a Jacobian whose pattern also holds its stencils.
@@ -291,7 +299,6 @@ class TrussProblem:
         A.zeroEntries()
         self._A.destroy()
         self._A = A
-        self.snes.setJacobian(self._jacobian, A)
 
     def _evaluate(self, x: PETSc.Vec) -> bool:
         """Displacement, material state and nodal terms at the iterate ``x``.
@@ -339,12 +346,10 @@ class TrussProblem:
         finally:
             self.timings[part] += time.perf_counter() - start
 
-    def _residual(self, snes, x, b) -> None:
+    def _residual(self, x: PETSc.Vec, b: PETSc.Vec) -> bool:
+        """Assemble the residual at ``x`` into ``b``; False (all ranks) outside the domain."""
         if not self._evaluate(x):
-            # A domain error (petsc4py 3.25 has no SNES.setFunctionDomainError): a non-finite
-            # residual makes the line search back off, or the step fail and be cut back.
-            b.set(np.nan)
-            return
+            return False  # a bar collapsed or a law failed: the line search backs off
         with self._timed("residual"):
             with b.localForm() as bl:
                 bl.set(0.0)
@@ -356,6 +361,7 @@ class TrussProblem:
             if self._bending is not None:
                 b.array_w[:] += self._bending.force(x)
             fem_petsc.set_bc(b, bcs, x, -1.0)
+        return True
 
     def _stale(self, x: PETSc.Vec) -> bool:
         """Whether ``x`` differs from the last evaluated iterate on any rank."""
@@ -364,9 +370,11 @@ class TrussProblem:
         changed = last is None or not np.array_equal(x.array_r[:n], last[:n])
         return self.comm.allreduce(changed, op=MPI.LOR)
 
-    def _jacobian(self, snes, x, A, P) -> None:
+    def _jacobian(self, x: PETSc.Vec) -> None:
+        """Assemble the Jacobian at ``x`` into ``self._A``."""
         if self._stale(x):
             self._evaluate(x)
+        A = self._A
         with self._timed("jacobian"):
             A.zeroEntries()
             fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self.constraints.bcs)
@@ -407,16 +415,12 @@ class TrussProblem:
             xl.array_w[:] = u
         try:
             with self._timed("solve"):
-                self.snes.solve(None, self._x)
-            reason = self.snes.getConvergedReason()
+                result = self.newton.solve(self._x)
         except PETSc.Error:
-            reason = PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
+            result = NewtonResult(False, "DIVERGED_LINEAR_SOLVE", self.options.snes_max_it)
         finally:
-            for key in self._option_keys:
-                PETSc.Options().delValue(key)
-            self._option_keys = []
-        iterations = self.snes.getIterationNumber()
-        converged = reason > 0
+            self.linear.release_options()  # the factor has read them
+        converged = result.converged
         if converged:
             if self._stale(self._x):
                 self._evaluate(self._x)
@@ -431,7 +435,10 @@ class TrussProblem:
             self.t = t
         else:
             self.revert()
-        report = StepReport(t, dt, converged, iterations, _REASONS.get(reason, str(reason)))
+        report = StepReport(t, dt, converged, result.iterations, result.reason,
+                            factorisations=result.factorisations,
+                            krylov_iterations=result.krylov_iterations,
+                            residual_evaluations=result.residual_evaluations)
         self.steps.append(report)
         return report
 
