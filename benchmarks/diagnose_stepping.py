@@ -161,14 +161,17 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--cell-mm", type=float, default=10.0)
     parser.add_argument("--full", action="store_true", help="the full sheet (else a quarter)")
+    parser.add_argument("--step-mm", type=float, default=1.0, help="punch travel per step")
     parser.add_argument("--before", action="store_true",
                         help="issue 17's solver: bt line search, contact projected onto the tool")
     parser.add_argument("--show", type=int, nargs="*", default=[],
                         help="print the iterates of these attempts (1-based)")
     parser.add_argument("--json", help="write the per-attempt records here")
+    parser.add_argument("--options", default="{}", help="SolverOptions fields as JSON")
     args = parser.parse_args()
     comm = MPI.COMM_WORLD
-    options = SolverOptions(snes_atol=1e-6, petsc_options={"pc_type": "cholesky"})
+    options = SolverOptions(snes_atol=1e-6, petsc_options={"pc_type": "cholesky"},
+                            **json.loads(args.options))
     if args.before:
         options.line_search = "bt"
 
@@ -180,7 +183,8 @@ def main() -> None:
     probe = Probe()
     start = time.perf_counter()
     with monitoring(probe):
-        run = run_hemisphere(HemisphereCase(cell_mm=args.cell_mm, quarter=not args.full),
+        run = run_hemisphere(HemisphereCase(cell_mm=args.cell_mm, quarter=not args.full,
+                                            step_mm=args.step_mm),
                              options=options, allow_incomplete=True)
     wall = time.perf_counter() - start
     steps = run.problem.steps

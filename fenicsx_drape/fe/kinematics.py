@@ -62,7 +62,7 @@ def strain_variation(u: dolfinx.fem.Function, w) -> ufl.core.expr.Expr:
 
 
 def truss_forms(u: dolfinx.fem.Function, S: dolfinx.fem.Function, dS: dolfinx.fem.Function,
-                ) -> tuple[ufl.Form, ufl.Form]:
+                S_geo=None) -> tuple[ufl.Form, ufl.Form]:
     """Residual ``∫ S δε dX`` and its Jacobian, with ``S`` and ``dS = dS/dε`` given.
 
     The Jacobian is ``∫ dS δε(Δu) δε(v) + S (∇Δu t₀)·(∇v t₀)/|t₀|² dX``: material plus
@@ -75,5 +75,6 @@ def truss_forms(u: dolfinx.fem.Function, S: dolfinx.fem.Function, dS: dolfinx.fe
     t0, _ = tangents(u)
     residual = S * strain_variation(u, v) * dX
     geometric = ufl.dot(ufl.grad(du) * t0, ufl.grad(v) * t0) / ufl.dot(t0, t0)
-    jacobian = (dS * strain_variation(u, du) * strain_variation(u, v) + S * geometric) * dX
+    S_geo = S if S_geo is None else S_geo
+    jacobian = (dS * strain_variation(u, du) * strain_variation(u, v) + S_geo * geometric) * dX
     return residual, jacobian

@@ -31,7 +31,7 @@ from collections.abc import Callable, Mapping
 from petsc4py import PETSc
 
 # Line searches: the full step, backtracking on ‖F‖², parabola in ‖F‖².
-LINE_SEARCHES = ("basic", "bt", "l2")
+LINE_SEARCHES = ("basic", "bt", "l2", "l2a", "l2a0.9", "l2a0.5", "l2a0.2", "l2a0.1")
 _MAX_STEP = 1.0  # EXPERIMENT
 
 
@@ -86,8 +86,8 @@ class LinearSolver:
             ksp.setOperators(A, self.P)
             defaults.update(ksp_type="gmres", ksp_pc_side="right",
                             ksp_norm_type="unpreconditioned", ksp_rtol=krylov_rtol,
-                            ksp_atol=0.0, ksp_max_it=2 * self.max_krylov,
-                            ksp_gmres_restart=2 * self.max_krylov)
+                            ksp_atol=0.0, ksp_max_it=self.max_krylov,
+                            ksp_gmres_restart=self.max_krylov)
         else:
             self.P = A
             ksp.setOperators(A)
@@ -118,8 +118,12 @@ class LinearSolver:
         self._fresh = True
         self._refactorise = False
 
-    def solve(self, b: PETSc.Vec, x: PETSc.Vec) -> tuple[bool, int, bool]:
+    def solve(self, b: PETSc.Vec, x: PETSc.Vec, reuse: bool = True) -> tuple[bool, int, bool]:
         """Solve ``A x = b`` for the Jacobian just assembled in ``A``.
+
+        Args:
+            b, x: Right-hand side and solution.
+            reuse: Whether the factor of an earlier Jacobian may precondition this solve.
 
         Returns:
             ``(ok, krylov_iterations, factorised)``.
@@ -129,9 +133,8 @@ class LinearSolver:
             self.ksp.setOperators(self.A)
             self.ksp.solve(b, x)
             return self.ksp.getConvergedReason() > 0, 0, True
-        self._fresh = False
         factorised = False
-        if self._refactorise:
+        if self._refactorise or not reuse:
             self._factorise()
             factorised = True
         self.ksp.solve(b, x)
@@ -143,8 +146,6 @@ class LinearSolver:
             self.ksp.solve(b, x)
             its += self.ksp.getIterationNumber()
             ok = self.ksp.getConvergedReason() > 0
-        if not factorised and its > self.max_krylov:
-            self._refactorise = True
         return ok, its, factorised
 
     def invalidate(self) -> None:
@@ -178,6 +179,14 @@ class Newton:
         self.atol, self.rtol, self.max_it = float(atol), float(rtol), int(max_it)
         self.line_search = line_search
         self.monitor = monitor
+        self.updated = None  # EXPERIMENT
+        self.predict = None  # EXPERIMENT
+        self.release = None
+        self.rounds = 3
+        self.predicted = 0
+        self.first_release = None
+        self.reuse_ratio = 0.1
+        self.release_after = 1
         self._d = F.duplicate()
         self._y = F.duplicate()
         self._G = F.duplicate()
@@ -201,6 +210,13 @@ class Newton:
         α = 1e-4
         if self.line_search == "l2":
             return self._parabola(x, d, φ0)
+        if self.line_search.startswith("l2a"):  # EXPERIMENT: full step first
+            f1 = self._norm_at(x, d, 1.0)
+            factor = float(self.line_search[3:] or 0.5)
+            if f1 <= factor * math.sqrt(φ0):
+                return 1.0, f1, 1
+            λ, f, n = self._parabola(x, d, φ0)
+            return λ, f, n + 1
         f1 = self._norm_at(x, d, 1.0)
         evaluations = 1
         if self.line_search == "basic" or (f1 * f1 <= φ0 + 2 * α * slope):
@@ -281,6 +297,7 @@ class Newton:
             result.reason = "DIVERGED_FNORM_NAN"
             return result
         f0 = f
+        λ_last, f_last = 0.0, f
         while True:
             if f <= self.atol:
                 result.converged, result.reason = True, "CONVERGED_FNORM_ABS"
@@ -293,8 +310,10 @@ class Newton:
                 return result
             self.jacobian(x)
             F.scale(-1.0)
+            # Reuse a factor only where Newton converges fast (the Jacobian changes little).
+            reuse = result.iterations > 0 and λ_last == 1.0 and f <= self.reuse_ratio * f_last
             try:
-                solved, its, factorised = self.linear.solve(F, d)
+                solved, its, factorised = self.linear.solve(F, d, reuse)
             finally:
                 F.scale(-1.0)
             result.iterations += 1
@@ -303,12 +322,34 @@ class Newton:
             if not solved:
                 result.reason = "DIVERGED_LINEAR_SOLVE"
                 return result
+            if self.predict is not None:
+                for _ in range(self.rounds):
+                    if not self.predict(x, d):
+                        break
+                    self.residual(x, self._G)
+                    result.residual_evaluations += 1
+                    self.jacobian(x)
+                    self._G.scale(-1.0)
+                    solved, its, factorised = self.linear.solve(self._G, d)
+                    result.krylov_iterations += its
+                    result.factorisations += factorised
+                    self.predicted += 1
+                self.release()
+            f_last = f
             λ, f, evaluations = self._search(x, d, f)
+            λ_last = λ
             result.residual_evaluations += evaluations
             if λ == 0.0:
                 result.reason = "DIVERGED_LINE_SEARCH"
                 return result
             x.axpy(λ, d)
+            if self.updated is not None:
+                self.updated(λ, d)
             self._G.copy(F)
+            if self.first_release is not None and result.iterations == self.release_after:
+                if self.first_release():
+                    self.residual(x, F)
+                    result.residual_evaluations += 1
+                    f = F.norm()
             if self.monitor is not None:
                 self.monitor(Iterate(result.iterations, f, λ, its, factorised, evaluations))

@@ -83,6 +83,13 @@ class SolverOptions:
     # Reuse a factorisation as GMRES preconditioner until GMRES needs more iterations than
     # this (0: factorise every Jacobian); see fe/newton.py.
     max_krylov: int = 0
+    krylov_rtol: float = 1e-10  # EXPERIMENT
+    geo_mode: str = ""  # EXPERIMENT
+    geo_pred: bool = False  # EXPERIMENT
+    pdas_rounds: int = 0  # EXPERIMENT
+    taut_first: int = 0  # EXPERIMENT
+    reuse_ratio: float = 0.1  # EXPERIMENT: iterations with tows taut at the last step kept taut
+    pdas_margin: float = 0.0  # EXPERIMENT
     predictor: bool = True  # extrapolate the last increment, then let nodal terms project
     petsc_options: dict = dataclasses.field(default_factory=dict)  # extra KSP/PC options
 
@@ -149,7 +156,8 @@ class TrussProblem:
                 raise DrapeInputError("shear_tension_coupling needs the unit cells of a "
                                       "structured sheet (truss_sheet)")
             self._coupling = ShearTensionCoupling(self, model.parameters["k_st"])
-        residual, jacobian = truss_forms(self.u, self.state.S, self.state.dS)
+        self.state.geo_mode = options.geo_mode
+        residual, jacobian = truss_forms(self.u, self.state.S, self.state.dS, self.state.S_geo)
         self.residual_form = dolfinx.fem.form(residual)
         self.jacobian_form = dolfinx.fem.form(jacobian)
         self.constraints = Constraints(V, self.X)
@@ -275,10 +283,46 @@ class TrussProblem:
         opts = self.options
         options = {"pc_factor_mat_solver_type": opts.linear_solver, **opts.petsc_options}
         self.linear = LinearSolver(self._A, self.comm, f"drape_truss_{next(_ids)}_", options,
-                                   max_krylov=opts.max_krylov)
+                                   max_krylov=opts.max_krylov, krylov_rtol=opts.krylov_rtol)
         self.newton = Newton(self._residual, self._jacobian, self.linear, self._b,
                              atol=opts.snes_atol, rtol=opts.snes_rtol, max_it=opts.snes_max_it,
                              line_search=opts.line_search, monitor=self._monitor)
+        self.newton.updated = self._updated
+        self.newton.reuse_ratio = opts.reuse_ratio
+        if opts.taut_first:
+            self.newton.first_release = self._release_first
+            self.newton.release_after = opts.taut_first
+        if opts.pdas_rounds:
+            self.newton.predict = self._predict
+            self.newton.release = self._release
+            self.newton.rounds = opts.pdas_rounds
+
+    def _updated(self, λ, d) -> None:
+        if self.options.geo_mode != "mixed":
+            return
+        d.ghostUpdate(PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+        with d.localForm() as dl:
+            self.state.set_update(λ * dl.array_r)
+
+    def _predict(self, x, d) -> bool:
+        d.ghostUpdate(PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
+        with d.localForm() as dl:
+            n = self.state.predict_switches(dl.array_r.copy(), self.options.pdas_margin)
+        n = self.comm.allreduce(n)
+        if n:
+            self._evaluated_at = None
+        return n > 0
+
+    def _release_first(self) -> bool:
+        had = self.state.forced is not None
+        self.state.forced = None
+        self._evaluated_at = None
+        return had
+
+    def _release(self) -> None:
+        if self.state.forced is not None:
+            self.state.forced = None
+            self._evaluated_at = None
 
     def _monitor(self, iterate: Iterate) -> None:
         if self.monitor is not None:
@@ -375,6 +419,7 @@ class TrussProblem:
         if self._stale(x):
             self._evaluate(x)
         A = self._A
+        self.state.geo_update()
         with self._timed("jacobian"):
             A.zeroEntries()
             fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self.constraints.bcs)
@@ -411,8 +456,24 @@ class TrussProblem:
             free = ~self.constrained.ravel()
             u[free] = projected.ravel()[free]
         self.u.x.scatter_forward()
+        if self.options.geo_mode == "mixed":
+            if self.options.geo_pred:
+                self.state.set_update(u - self._u_n)
+            else:
+                self.state.q[:] = 0.0
         with self._x.localForm() as xl:
             xl.array_w[:] = u
+        if self.options.geo_mode.startswith("rel"):
+            factor, floor = (float(v) for v in self.options.geo_mode[3:].split(","))
+            S_n = self.state._committed[3][self.state.dofs]
+            top = self.comm.allreduce(float(np.abs(S_n).max(initial=0.0)), op=MPI.MAX)
+            self.state.geo_cap = max(factor * top, floor)
+        if self.options.taut_first and self._du_n is not None:
+            points, law = self.state.groups["tow"]
+            if "tow_buckling" in law.effects:
+                e_n = self.state._committed[0][self.state.dofs[points]]
+                self.state.forced = np.where(e_n >= 0.0, 1, 0).astype(np.int8)
+                self._evaluated_at = None
         try:
             with self._timed("solve"):
                 result = self.newton.solve(self._x)
