@@ -27,6 +27,7 @@ predictor that projected penetrating nodes onto the tool surface (lifting presse
 
 import argparse
 import collections
+import itertools
 import json
 import time
 
@@ -115,7 +116,7 @@ def switches(probe: Probe, comm) -> list[list[dict[str, int]]]:
     out = []
     for its in probe.attempts:
         rows = []
-        for a, b in zip(its[:-1], its[1:]):
+        for a, b in itertools.pairwise(its):
             row = {}
             for key in b["status"]:
                 k = "contact" if key.startswith("contact") else key

@@ -1,25 +1,29 @@
-"""Newton's method for one load step, around PETSc assembly and a reused direct factorisation.
+"""Newton's method for one load step, around PETSc assembly and a direct factorisation.
 
 The problem supplies its residual ``F(x)`` and Jacobian ``J(x)`` as callbacks that fill PETSc
 objects; :class:`Newton` drives the iteration, :class:`LinearSolver` solves ``J d = −F``.
-It replaces PETSc SNES for three reasons (issue 17):
+It replaces PETSc SNES (issue 17), whose ``bt`` and ``l2`` line searches it reproduces
+iterate for iterate, for three reasons:
 
-- **Factorisation reuse.** On large sheets the sparse factorisation is three quarters of the
-  time. The factor of an earlier Jacobian is kept and used as the preconditioner of GMRES on
-  the current one (right preconditioning, so the Newton direction is that of the current
-  Jacobian to ``krylov_rtol``); it is refactorised only when GMRES needs more than
-  ``max_krylov`` iterations or fails. SNES's lagging cannot fall back within an iteration.
-- **Line searches** on the residual norm that accept the full step when it reduces the
-  residual enough (the common case: one residual evaluation per iteration) and otherwise
-  fit a parabola to ‖F(x + λd)‖² (the ``l2`` search of PETSc, which never cut a hemisphere
-  step back; the backtracking ``bt`` search did five times at Δ = 10 mm).
-- **A hook per iterate** (``monitor``) for the diagnostics of ``benchmarks/bench_stepping.py``
-  without slowing normal runs.
+- **The line search** ``full-l2`` takes the full Newton step when it halves ‖F‖ (one residual
+  evaluation, most iterations), and otherwise the step to the minimum of the parabola through
+  ‖F(x + λd)‖² at λ = 0, ½, 1, whatever ‖F‖ is there (PETSc's ``l2``). Backtracking on ‖F‖²
+  (``bt``) crawls at λ = 0.1 for tens of iterations where the Newton step straightens a
+  buckled tow (eq. 4) or drives a node into a tool: the residual of such a step is large but
+  cheap to correct at the next iteration. On the hemisphere ``bt`` cut five steps back at
+  Δ = 10 mm and fifteen on the full 2.5 mm sheet; ``l2`` none and two.
+- **Factorisation reuse** (``max_krylov`` > 0): once Newton converges fast (the last step was
+  full and cut ‖F‖ tenfold) the Jacobian changes little, and the factor of an earlier one
+  preconditions GMRES on it (right preconditioning: the Newton direction is that of the
+  current Jacobian to ``krylov_rtol``); a GMRES solve that does not converge within
+  ``max_krylov`` iterations is redone with a fresh factorisation.
+- **A hook per iterate** (``monitor``) for diagnostics (``benchmarks/diagnose_stepping.py``)
+  that costs nothing when unused.
 
-Iteration counts, reasons and tolerances follow SNES: an iteration is one linear solve and
-update; converged when ‖F‖ ≤ ``atol`` or ‖F‖ ≤ ``rtol`` ‖F₀‖; ``DIVERGED_MAX_IT`` after
-``max_it`` iterations; a non-finite residual (a bar collapsed, a law failed) makes the line
-search back off, or fails the solve when it is the starting point.
+Iterations, reasons and tolerances follow SNES: an iteration is one linear solve and update;
+converged when ‖F‖ ≤ ``atol`` or ‖F‖ ≤ ``rtol`` ‖F₀‖; ``DIVERGED_MAX_IT`` after ``max_it``
+iterations. A residual that cannot be evaluated (a bar collapsed, a law failed) makes the line
+search back off, or fails the solve (``DIVERGED_FNORM_NAN``) at the starting point.
 """
 
 from __future__ import annotations
@@ -30,9 +34,11 @@ from collections.abc import Callable, Mapping
 
 from petsc4py import PETSc
 
-# Line searches: the full step, backtracking on ‖F‖², parabola in ‖F‖².
-LINE_SEARCHES = ("basic", "bt", "l2", "l2a", "l2a0.9", "l2a0.5", "l2a0.2", "l2a0.1")
-_MAX_STEP = 1.0  # EXPERIMENT
+LINE_SEARCHES = ("full-l2", "l2", "bt", "basic")
+"""``full-l2`` (default), PETSc's ``l2`` and ``bt``, and the full step ``basic``."""
+
+_FULL_STEP_REDUCTION = 0.5  # full-l2 keeps the full step when it cuts ‖F‖ at least this much
+_REUSE_REDUCTION = 0.1  # a factor is reused after a full step that cut ‖F‖ at least this much
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,9 +48,9 @@ class Iterate:
     iteration: int  # 0 for the starting point
     residual_norm: float  # ‖F‖₂ at the iterate (N)
     step_length: float  # λ of the line search that led here (0 at the start)
-    krylov_iterations: int  # GMRES iterations of the solve that led here (0: direct)
+    krylov_iterations: int  # GMRES iterations of the solve that led here
     factorised: bool  # whether that solve factorised the Jacobian
-    residual_evaluations: int  # residual evaluations of the line search that led here
+    residual_evaluations: int  # residuals evaluated by the line search that led here
 
 
 @dataclasses.dataclass
@@ -60,17 +66,17 @@ class NewtonResult:
 
 
 class LinearSolver:
-    """``J d = b`` by a direct factorisation that is reused while it pays.
+    """``J d = b`` by a direct factorisation, optionally reused as a GMRES preconditioner.
 
     Args:
         A: The Jacobian matrix (reassembled in place before every solve).
         comm: Its communicator.
-        prefix: PETSc options prefix of the KSP (user options under it override ours).
-        options: PETSc options (``pc_type``, ``pc_factor_mat_solver_type``, ``mat_mumps_*``),
-            set under ``prefix`` before the first factorisation.
-        max_krylov: Refactorise when GMRES on a stale factor needs more than this many
-            iterations; 0 factorises every Jacobian (no reuse).
-        krylov_rtol: Relative tolerance of GMRES on a stale factor.
+        prefix: PETSc options prefix of the KSP.
+        options: PETSc options (``pc_type``, ``pc_factor_mat_solver_type``, ``mat_mumps_*``)
+            set under ``prefix`` until the first factorisation has read them.
+        max_krylov: GMRES iterations allowed on a reused factor (0: factorise every
+            Jacobian).
+        krylov_rtol: Relative tolerance of GMRES.
     """
 
     def __init__(self, A: PETSc.Mat, comm, prefix: str, options: Mapping[str, object],
@@ -81,7 +87,7 @@ class LinearSolver:
         ksp.setOptionsPrefix(prefix)
         defaults: dict[str, object] = {"pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
         if self.max_krylov:
-            # P holds the factorised Jacobian; PETSc refactorises when P changes.
+            # P holds the factorised Jacobian: PETSc refactorises when P changes.
             self.P = A.duplicate()
             ksp.setOperators(A, self.P)
             defaults.update(ksp_type="gmres", ksp_pc_side="right",
@@ -95,14 +101,11 @@ class LinearSolver:
         db = PETSc.Options()
         self._keys = []
         for key, value in {**defaults, **options}.items():
-            if not db.hasName(prefix + key):
-                db[prefix + key] = value
-                self._keys.append(prefix + key)
+            db[prefix + key] = value
+            self._keys.append(prefix + key)
         ksp.setFromOptions()
         self.ksp = ksp
-        self.factorisations = 0
-        self._fresh = False  # P holds the current Jacobian
-        self._refactorise = True  # the next solve factorises
+        self._factorised = False
 
     def release_options(self) -> None:
         """Remove our options from the database (the factor has read them)."""
@@ -112,35 +115,32 @@ class LinearSolver:
         self._keys = []
 
     def _factorise(self) -> None:
-        if self.P is not self.A:
-            self.A.copy(self.P, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        self.factorisations += 1
-        self._fresh = True
-        self._refactorise = False
+        self.A.copy(self.P, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        self.ksp.setOperators(self.A, self.P)
+        self._factorised = True
 
-    def solve(self, b: PETSc.Vec, x: PETSc.Vec, reuse: bool = True) -> tuple[bool, int, bool]:
+    def solve(self, b: PETSc.Vec, x: PETSc.Vec, reuse: bool = False) -> tuple[bool, int, bool]:
         """Solve ``A x = b`` for the Jacobian just assembled in ``A``.
 
         Args:
-            b, x: Right-hand side and solution.
+            b: Right-hand side.
+            x: Solution.
             reuse: Whether the factor of an earlier Jacobian may precondition this solve.
 
         Returns:
             ``(ok, krylov_iterations, factorised)``.
         """
-        if self.P is self.A:  # no reuse: factorise every Jacobian
-            self.factorisations += 1
-            self.ksp.setOperators(self.A)
+        if self.P is self.A:
+            self.ksp.setOperators(self.A)  # the KSP sees a new matrix: refactorise
             self.ksp.solve(b, x)
             return self.ksp.getConvergedReason() > 0, 0, True
-        factorised = False
-        if self._refactorise or not reuse:
+        factorised = not (reuse and self._factorised)
+        if factorised:
             self._factorise()
-            factorised = True
         self.ksp.solve(b, x)
         its = self.ksp.getIterationNumber()
         ok = self.ksp.getConvergedReason() > 0
-        if not ok and not factorised:  # the stale factor no longer preconditions: refresh
+        if not ok and not factorised:  # the old factor no longer preconditions: refresh
             self._factorise()
             factorised = True
             self.ksp.solve(b, x)
@@ -148,28 +148,25 @@ class LinearSolver:
             ok = self.ksp.getConvergedReason() > 0
         return ok, its, factorised
 
-    def invalidate(self) -> None:
-        """Factorise at the next solve (e.g. after the matrix changed structurally)."""
-        self._refactorise = True
-
 
 class Newton:
     """Newton's method with a line search on one PETSc vector of unknowns.
 
     Args:
-        residual: ``residual(x, F) -> bool`` fills ``F(x)`` (owned entries, ghosts updated by
-            the callee); False (on every rank) when ``x`` is outside the domain.
+        residual: ``residual(x, F) -> bool`` fills ``F(x)``; False (on every rank) when ``x``
+            is outside the domain.
         jacobian: ``jacobian(x)`` assembles ``J(x)`` into the linear solver's matrix.
         linear: The :class:`LinearSolver`.
-        F: Work vector for the residual (its layout is that of ``x``).
+        F: Work vector for the residual (the layout of ``x``); holds F at the last iterate.
         atol, rtol, max_it: Convergence test (see the module docstring).
         line_search: One of :data:`LINE_SEARCHES`.
-        monitor: Called with an :class:`Iterate` at the start and after every iteration.
+        monitor: Called with an :class:`Iterate` at the start and after every iteration,
+            when the problem's state is that of the iterate.
     """
 
     def __init__(self, residual: Callable[[PETSc.Vec, PETSc.Vec], bool],
                  jacobian: Callable[[PETSc.Vec], None], linear: LinearSolver, F: PETSc.Vec,
-                 *, atol: float, rtol: float, max_it: int, line_search: str = "l2",
+                 *, atol: float, rtol: float, max_it: int, line_search: str = "full-l2",
                  monitor: Callable[[Iterate], None] | None = None):
         if line_search not in LINE_SEARCHES:
             raise ValueError(f"line search {line_search!r}: choose from "
@@ -179,20 +176,12 @@ class Newton:
         self.atol, self.rtol, self.max_it = float(atol), float(rtol), int(max_it)
         self.line_search = line_search
         self.monitor = monitor
-        self.updated = None  # EXPERIMENT
-        self.predict = None  # EXPERIMENT
-        self.release = None
-        self.rounds = 3
-        self.predicted = 0
-        self.first_release = None
-        self.reuse_ratio = 0.1
-        self.release_after = 1
         self._d = F.duplicate()
         self._y = F.duplicate()
         self._G = F.duplicate()
 
     def _norm_at(self, x: PETSc.Vec, d: PETSc.Vec, λ: float) -> float:
-        """‖F(x + λ d)‖ (inf outside the domain); leaves F(x + λ d) in ``self._G``."""
+        """‖F(x + λd)‖ (inf outside the domain); leaves F(x + λd) in ``self._G``."""
         x.copy(self._y)
         self._y.axpy(λ, d)
         if not self.residual(self._y, self._G):
@@ -201,58 +190,64 @@ class Newton:
         return value if math.isfinite(value) else math.inf
 
     def _search(self, x: PETSc.Vec, d: PETSc.Vec, f0: float) -> tuple[float, float, int]:
-        """Pick λ along ``d`` from ``x`` (‖F(x)‖ = f0); returns (λ, ‖F‖ there, evaluations).
+        """Step length along ``d`` from ``x``, where ‖F‖ = f0: (λ, ‖F‖ there, evaluations).
 
-        On return ``self._G`` holds F at the chosen point (λ = 0 on failure).
+        On return the problem's state and ``self._G`` are those at x + λd (λ = 0: failed).
         """
         φ0 = f0 * f0
-        slope = -φ0  # d/dλ ‖F‖² / 2 at 0 along an exact Newton direction is −‖F‖²
-        α = 1e-4
         if self.line_search == "l2":
-            return self._parabola(x, d, φ0)
-        if self.line_search.startswith("l2a"):  # EXPERIMENT: full step first
-            f1 = self._norm_at(x, d, 1.0)
-            factor = float(self.line_search[3:] or 0.5)
-            if f1 <= factor * math.sqrt(φ0):
+            return self._parabola(x, d, φ0, None)
+        f1 = self._norm_at(x, d, 1.0)
+        if self.line_search == "basic":
+            return 1.0, f1, 1
+        if self.line_search == "full-l2":
+            if f1 <= _FULL_STEP_REDUCTION * f0:
                 return 1.0, f1, 1
-            λ, f, n = self._parabola(x, d, φ0)
-            return λ, f, n + 1
-        f1 = self._norm_at(x, d, 1.0)
-        evaluations = 1
-        if self.line_search == "basic" or (f1 * f1 <= φ0 + 2 * α * slope):
-            return 1.0, f1, evaluations
-        return self._backtrack(x, d, φ0, slope, 1.0, evaluations, f1 * f1)
+            λ, f, evaluations = self._parabola(x, d, φ0, f1)
+            return λ, f, evaluations + 1
+        return self._backtrack(x, d, φ0, 1.0, 1, f1 * f1)
 
-    def _parabola(self, x, d, φ0):
-        """The parabola through ‖F‖² at λ = 0, ½ and 1, and the step to its minimum.
+    def _parabola(self, x, d, φ0: float, f1: float | None) -> tuple[float, float, int]:
+        """The step to the minimum of the parabola through ‖F‖² at λ = 0, ½ and 1.
 
-        The step is taken whatever ‖F‖ is there (PETSc's ``l2`` with one iteration): a
-        larger residual after a step that straightens a buckled tow (eq. 4) is cheaper to
-        correct at the next iteration than to back off from. A parabola open downwards
-        gives the step downhill from λ = 1; a non-finite residual at λ = 1 (a collapsed bar)
-        falls back to backtracking.
+        It is taken whatever ‖F‖ is there (PETSc's ``l2``, one secant iteration, steps up
+        to 1). A parabola open downwards gives the step downhill from λ = 1. ``f1`` is
+        ‖F(x + d)‖ if known; ``_norm_at`` is called in PETSc's order (½, then 1, then λ) so
+        that the iterates equal SNES's.
         """
-        f1 = self._norm_at(x, d, 1.0)
-        if not math.isfinite(f1):
-            return self._backtrack(x, d, φ0, -φ0, 0.5, 1)
+        evaluations = 0
         fh = self._norm_at(x, d, 0.5)
+        evaluations += 1
+        if f1 is None:
+            f1 = self._norm_at(x, d, 1.0)
+            evaluations += 1
+        if not (math.isfinite(f1) and math.isfinite(fh)):
+            λ, f, n = self._backtrack(x, d, φ0, 0.5 if math.isfinite(fh) else 0.25, 0)
+            return λ, f, evaluations + n
         φ1, φh = f1 * f1, fh * fh
-        slope1 = 3 * φ1 - 4 * φh + φ0  # dφ/dλ at 1 and ...
-        slope0 = -3 * φ0 + 4 * φh - φ1  # ... at 0, of the parabola
+        slope1 = 3 * φ1 - 4 * φh + φ0  # dφ/dλ of the parabola at 1 ...
+        slope0 = -3 * φ0 + 4 * φh - φ1  # ... and at 0
         curvature = slope1 - slope0
         λ = 1.0 - slope1 / curvature if curvature > 0 else 1.0 + slope1 / curvature
-        if not math.isfinite(λ) or λ > _MAX_STEP:
+        if not math.isfinite(λ) or λ > 1.0:
             λ = 1.0
         elif λ < 1e-8:
             λ = 0.5
         f = self._norm_at(x, d, λ)
+        evaluations += 1
         if not math.isfinite(f):
-            return self._backtrack(x, d, φ0, -φ0, 0.5 * λ, 3)
-        return λ, f, 3
+            λ, f, n = self._backtrack(x, d, φ0, 0.5 * λ, 0)
+            evaluations += n
+        return λ, f, evaluations
 
-    def _backtrack(self, x, d, φ0, slope, λ, evaluations, φλ=None):
-        """Armijo backtracking on ‖F‖²/2 with quadratic, then cubic, interpolation (bt)."""
-        α, λ_prev, φ_prev = 1e-4, None, None
+    def _backtrack(self, x, d, φ0: float, λ: float, evaluations: int,
+                   φλ: float | None = None) -> tuple[float, float, int]:
+        """Armijo backtracking on ‖F‖²/2 with quadratic, then cubic, models (PETSc's ``bt``).
+
+        Along a Newton direction the slope of ‖F‖²/2 at λ = 0 is −‖F‖².
+        """
+        α, slope = 1e-4, -φ0
+        λ_prev = φ_prev = None
         while True:
             if φλ is None:
                 f = self._norm_at(x, d, λ)
@@ -287,17 +282,15 @@ class Newton:
     def solve(self, x: PETSc.Vec) -> NewtonResult:
         """Iterate from ``x`` (updated in place) to convergence or failure."""
         F, d = self.F, self._d
-        result = NewtonResult(False, "", 0)
-        ok = self.residual(x, F)
-        result.residual_evaluations = 1
-        f = F.norm() if ok else math.inf
+        result = NewtonResult(False, "", 0, residual_evaluations=1)
+        f = F.norm() if self.residual(x, F) else math.inf
+        f = f if math.isfinite(f) else math.inf
         if self.monitor is not None:
             self.monitor(Iterate(0, f, 0.0, 0, False, 1))
         if not math.isfinite(f):
             result.reason = "DIVERGED_FNORM_NAN"
             return result
-        f0 = f
-        λ_last, f_last = 0.0, f
+        f0, fast = f, False
         while True:
             if f <= self.atol:
                 result.converged, result.reason = True, "CONVERGED_FNORM_ABS"
@@ -310,10 +303,8 @@ class Newton:
                 return result
             self.jacobian(x)
             F.scale(-1.0)
-            # Reuse a factor only where Newton converges fast (the Jacobian changes little).
-            reuse = result.iterations > 0 and λ_last == 1.0 and f <= self.reuse_ratio * f_last
             try:
-                solved, its, factorised = self.linear.solve(F, d, reuse)
+                solved, its, factorised = self.linear.solve(F, d, reuse=fast)
             finally:
                 F.scale(-1.0)
             result.iterations += 1
@@ -322,34 +313,14 @@ class Newton:
             if not solved:
                 result.reason = "DIVERGED_LINEAR_SOLVE"
                 return result
-            if self.predict is not None:
-                for _ in range(self.rounds):
-                    if not self.predict(x, d):
-                        break
-                    self.residual(x, self._G)
-                    result.residual_evaluations += 1
-                    self.jacobian(x)
-                    self._G.scale(-1.0)
-                    solved, its, factorised = self.linear.solve(self._G, d)
-                    result.krylov_iterations += its
-                    result.factorisations += factorised
-                    self.predicted += 1
-                self.release()
-            f_last = f
-            λ, f, evaluations = self._search(x, d, f)
-            λ_last = λ
+            λ, f_new, evaluations = self._search(x, d, f)
             result.residual_evaluations += evaluations
             if λ == 0.0:
                 result.reason = "DIVERGED_LINE_SEARCH"
                 return result
+            fast = λ == 1.0 and f_new <= _REUSE_REDUCTION * f
+            f = f_new
             x.axpy(λ, d)
-            if self.updated is not None:
-                self.updated(λ, d)
             self._G.copy(F)
-            if self.first_release is not None and result.iterations == self.release_after:
-                if self.first_release():
-                    self.residual(x, F)
-                    result.residual_evaluations += 1
-                    f = F.norm()
             if self.monitor is not None:
                 self.monitor(Iterate(result.iterations, f, λ, its, factorised, evaluations))

@@ -7,6 +7,19 @@ and assembles the residual and the consistent Jacobian; a converged step commits
 the laws and of the nodal terms, a failed one reverts both. Load stepping with cut-back is in
 :mod:`~fenicsx_drape.fe.stepping`, outputs in :mod:`~fenicsx_drape.fe.output`.
 
+Two choices make the Newton iteration of forming robust without changing its solution
+(issue 17; the residual is exact, only the path to its zero changes):
+
+- **The geometric stiffness is limited** to the largest bar force of the last converged step
+  (``limit_geometric_stiffness``). A Newton step that straightens a buckled tow or rotates a
+  stiff one stretches it, and the stretched tow carries tens of newtons for one iterate
+  (l_t E_o = 2.4 kN per unit strain) where converged tows carry 1-3 N; its geometric stiffness
+  S/L then pins its nodes in every direction and slows the next iterations. Near convergence
+  no bar exceeds the limit and the Jacobian is exact: Newton converges quadratically. On the
+  hemisphere it saves 12 % of the iterations at Δ = 10 mm, 22 % at 5 mm.
+- **The predictor** extrapolates the last increment and lets the nodal terms project it
+  (contact keeps pressed nodes on their gap, :mod:`~fenicsx_drape.forming.contact`).
+
 Nodes are the blocks of the vector P1 space in its local order (owned nodes first, then
 ghosts); that is the order of every nodal array this module hands out or takes.
 """
@@ -34,7 +47,7 @@ from fenicsx_drape.fe.coupling import ShearTensionCoupling
 from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
-from fenicsx_drape.fe.newton import Iterate, LinearSolver, Newton, NewtonResult
+from fenicsx_drape.fe.newton import LINE_SEARCHES, Iterate, LinearSolver, Newton, NewtonResult
 from fenicsx_drape.fe.state import MaterialState, StrainError
 from fenicsx_drape.fe.stepping import StepReport, run
 from fenicsx_drape.materials.base import MaterialLaw
@@ -78,18 +91,14 @@ class SolverOptions:
     snes_atol: float = 1e-8  # absolute residual tolerance (N)
     snes_rtol: float = 1e-9  # relative residual tolerance
     snes_max_it: int = 25  # Newton iterations before a step is cut back
-    line_search: str = "l2"  # basic, bt (backtracking), l2 (parabola in ‖F‖²): newton.py
+    line_search: str = "full-l2"  # full-l2, l2, bt, basic: fe/newton.py
     linear_solver: str = "mumps"  # LU factorisation package (mumps, superlu_dist, petsc)
-    # Reuse a factorisation as GMRES preconditioner until GMRES needs more iterations than
-    # this (0: factorise every Jacobian); see fe/newton.py.
+    # GMRES iterations allowed on a reused factorisation once Newton converges fast (0: a
+    # factorisation per iteration); fe/newton.py.
     max_krylov: int = 0
-    krylov_rtol: float = 1e-10  # EXPERIMENT
-    geo_mode: str = ""  # EXPERIMENT
-    geo_pred: bool = False  # EXPERIMENT
-    pdas_rounds: int = 0  # EXPERIMENT
-    taut_first: int = 0  # EXPERIMENT
-    reuse_ratio: float = 0.1  # EXPERIMENT: iterations with tows taut at the last step kept taut
-    pdas_margin: float = 0.0  # EXPERIMENT
+    # The geometric stiffness takes the bar forces limited to the largest force of the last
+    # converged step (solver docstring); the residual, hence the solution, is unchanged.
+    limit_geometric_stiffness: bool = True
     predictor: bool = True  # extrapolate the last increment, then let nodal terms project
     petsc_options: dict = dataclasses.field(default_factory=dict)  # extra KSP/PC options
 
@@ -97,6 +106,12 @@ class SolverOptions:
         for name in ("tows_per_mm", "snes_atol"):
             if not getattr(self, name) > 0:
                 raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be > 0")
+        if self.line_search not in LINE_SEARCHES:
+            raise DrapeInputError(f"solver option line_search = {self.line_search!r}: choose "
+                                  f"from {', '.join(LINE_SEARCHES)}")
+        if not (isinstance(self.max_krylov, int) and self.max_krylov >= 0):
+            raise DrapeInputError(f"solver option max_krylov = {self.max_krylov!r} must be an "
+                                  "integer >= 0")
         for name in ("edge_tow_factor", "buckled_tow_stiffness_N", "tow_bending_EI_Nmm2",
                      "drag_N_per_mm"):
             if not getattr(self, name) >= 0:
@@ -156,8 +171,8 @@ class TrussProblem:
                 raise DrapeInputError("shear_tension_coupling needs the unit cells of a "
                                       "structured sheet (truss_sheet)")
             self._coupling = ShearTensionCoupling(self, model.parameters["k_st"])
-        self.state.geo_mode = options.geo_mode
-        residual, jacobian = truss_forms(self.u, self.state.S, self.state.dS, self.state.S_geo)
+        residual, jacobian = truss_forms(self.u, self.state.S, self.state.dS,
+                                         self.state.S_geometric)
         self.residual_form = dolfinx.fem.form(residual)
         self.jacobian_form = dolfinx.fem.form(jacobian)
         self.constraints = Constraints(V, self.X)
@@ -283,46 +298,10 @@ class TrussProblem:
         opts = self.options
         options = {"pc_factor_mat_solver_type": opts.linear_solver, **opts.petsc_options}
         self.linear = LinearSolver(self._A, self.comm, f"drape_truss_{next(_ids)}_", options,
-                                   max_krylov=opts.max_krylov, krylov_rtol=opts.krylov_rtol)
+                                   max_krylov=opts.max_krylov)
         self.newton = Newton(self._residual, self._jacobian, self.linear, self._b,
                              atol=opts.snes_atol, rtol=opts.snes_rtol, max_it=opts.snes_max_it,
                              line_search=opts.line_search, monitor=self._monitor)
-        self.newton.updated = self._updated
-        self.newton.reuse_ratio = opts.reuse_ratio
-        if opts.taut_first:
-            self.newton.first_release = self._release_first
-            self.newton.release_after = opts.taut_first
-        if opts.pdas_rounds:
-            self.newton.predict = self._predict
-            self.newton.release = self._release
-            self.newton.rounds = opts.pdas_rounds
-
-    def _updated(self, λ, d) -> None:
-        if self.options.geo_mode != "mixed":
-            return
-        d.ghostUpdate(PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
-        with d.localForm() as dl:
-            self.state.set_update(λ * dl.array_r)
-
-    def _predict(self, x, d) -> bool:
-        d.ghostUpdate(PETSc.InsertMode.INSERT, PETSc.ScatterMode.FORWARD)
-        with d.localForm() as dl:
-            n = self.state.predict_switches(dl.array_r.copy(), self.options.pdas_margin)
-        n = self.comm.allreduce(n)
-        if n:
-            self._evaluated_at = None
-        return n > 0
-
-    def _release_first(self) -> bool:
-        had = self.state.forced is not None
-        self.state.forced = None
-        self._evaluated_at = None
-        return had
-
-    def _release(self) -> None:
-        if self.state.forced is not None:
-            self.state.forced = None
-            self._evaluated_at = None
 
     def _monitor(self, iterate: Iterate) -> None:
         if self.monitor is not None:
@@ -419,7 +398,6 @@ class TrussProblem:
         if self._stale(x):
             self._evaluate(x)
         A = self._A
-        self.state.geo_update()
         with self._timed("jacobian"):
             A.zeroEntries()
             fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self.constraints.bcs)
@@ -456,24 +434,12 @@ class TrussProblem:
             free = ~self.constrained.ravel()
             u[free] = projected.ravel()[free]
         self.u.x.scatter_forward()
-        if self.options.geo_mode == "mixed":
-            if self.options.geo_pred:
-                self.state.set_update(u - self._u_n)
-            else:
-                self.state.q[:] = 0.0
         with self._x.localForm() as xl:
             xl.array_w[:] = u
-        if self.options.geo_mode.startswith("rel"):
-            factor, floor = (float(v) for v in self.options.geo_mode[3:].split(","))
-            S_n = self.state._committed[3][self.state.dofs]
+        if self.options.limit_geometric_stiffness:
+            S_n = self.state.S.x.array[self.state.dofs]  # the forces of the last step
             top = self.comm.allreduce(float(np.abs(S_n).max(initial=0.0)), op=MPI.MAX)
-            self.state.geo_cap = max(factor * top, floor)
-        if self.options.taut_first and self._du_n is not None:
-            points, law = self.state.groups["tow"]
-            if "tow_buckling" in law.effects:
-                e_n = self.state._committed[0][self.state.dofs[points]]
-                self.state.forced = np.where(e_n >= 0.0, 1, 0).astype(np.int8)
-                self._evaluated_at = None
+            self.state.geometric_force_limit_N = top if top > 0 else np.inf
         try:
             with self._timed("solve"):
                 result = self.newton.solve(self._x)

@@ -68,22 +68,11 @@ class MaterialState:
         self.tangent = function("tangent_per_tow_N")  # dσ/dε per tow
         self.S = function("S_N")  # n_t σ / λ, work-conjugate of ε (N)
         self.dS = function("dS_N")  # dS/dε (N)
-        self.S_geo = function("S_geo_N")  # EXPERIMENT
-        self.geo_mode = ""
-        self.geo_cap = np.inf
+        # S limited to ±geometric_force_limit_N, for the geometric stiffness (solver.py).
+        self.S_geometric = function("S_geometric_N")
+        self.geometric_force_limit_N = np.inf
         self._expression = dolfinx.fem.Expression(green_lagrange(u),
                                                   Q.element.interpolation_points)
-        import ufl
-        self.du = dolfinx.fem.Function(u.function_space)
-        t0 = ufl.Jacobian(u.function_space.mesh)[:, 0]
-        g = ufl.grad(self.du) * t0
-        self._quad = dolfinx.fem.Expression(ufl.dot(g, g) / ufl.dot(t0, t0) / 2,
-                                            Q.element.interpolation_points)
-        self.q = np.zeros(n)
-        self._dexpr = dolfinx.fem.Expression(
-            ufl.dot(t0 + ufl.grad(u) * t0, g) / ufl.dot(t0, t0), Q.element.interpolation_points)
-        self.forced: np.ndarray | None = None  # EXPERIMENT: +1 taut, -1 slack, 0 free (tows)
-        self._active_law = None
         self._cells = np.arange(n, dtype=np.int32)
         roles = np.array([ROLE_OF_KIND[int(k)] for k in kinds]) if n else np.array([], str)
         self.groups: dict[str, tuple[np.ndarray, MaterialLaw]] = {}
@@ -135,52 +124,9 @@ class MaterialState:
                 compressed = ε[points] < 0
                 stress = stress + self.buckled_tow_stiffness_N * np.minimum(ε[points], 0.0)
                 tangent = tangent + self.buckled_tow_stiffness_N * compressed
-                if self.forced is not None and self.forced.any():
-                    if self._active_law is None:
-                        import dataclasses
-                        self._active_law = dataclasses.replace(law, tow_buckling=False)
-                    e = ε[points]
-                    sa, ta, _ = self._active_law.update(e, dt, self._history(role))
-                    k = self.buckled_tow_stiffness_N
-                    stress = np.where(self.forced > 0, sa, np.where(self.forced < 0, k * e, stress))
-                    tangent = np.where(self.forced > 0, ta, np.where(self.forced < 0, k, tangent))
             σ[points], C[points] = stress, tangent
         self.strain.x.array[self.dofs] = ε
         self._write(np.arange(len(ε)), σ, C)
-
-    def predict_switches(self, d: np.ndarray, margin: float = 0.0) -> int:
-        """EXPERIMENT (PDAS): force the tows the step ``d`` would switch; returns how many changed."""
-        points, law = self.groups["tow"]
-        if "tow_buckling" not in law.effects:
-            return 0
-        self.du.x.array[:] = d
-        δε = self._dexpr.eval(self.space.mesh, self._cells).reshape(-1)[points]
-        ε = self.strain.x.array[self.dofs[points]]
-        if self.forced is None:
-            self.forced = np.zeros(len(points), dtype=np.int8)
-        taut_now = np.where(self.forced != 0, self.forced > 0, ε >= 0.0)
-        taut_next = ε + δε > margin
-        change = taut_now != taut_next
-        self.forced = np.where(change, np.where(taut_next, 1, -1), self.forced).astype(np.int8)
-        return int(change.sum())
-
-    def set_update(self, du: np.ndarray) -> None:
-        self.du.x.array[:] = du
-        self.q = self._quad.eval(self.space.mesh, self._cells).reshape(-1)
-
-    def geo_update(self) -> None:
-        """EXPERIMENT: geometric-stiffness force of the tows at the linearised strain."""
-        if self.geo_mode != "mixed":
-            return
-        points, law = self.groups["tow"]
-        dofs = self.dofs[points]
-        ε = self.strain.x.array[dofs]
-        ε̂ = ε - self.q[points]
-        σ, _, _ = law.update(ε̂, 0.0, np.zeros((len(points), 0)))
-        if self.buckled_tow_stiffness_N and "tow_buckling" in law.effects:
-            σ = σ + self.buckled_tow_stiffness_N * np.minimum(ε̂, 0.0)
-        λ = np.sqrt(1.0 + 2.0 * ε)
-        self.S_geo.x.array[dofs] = self.tows[points] * σ / λ
 
     def _write(self, points: np.ndarray, σ: np.ndarray, C: np.ndarray) -> None:
         """Store σ, dσ/dε of ``points`` and their work-conjugate S = n_t σ/λ and dS/dε."""
@@ -189,18 +135,11 @@ class MaterialState:
         n_t = self.tows[points]
         self.stress.x.array[dofs] = σ
         self.tangent.x.array[dofs] = C
-        self.S.x.array[dofs] = n_t * σ / λ
+        S = n_t * σ / λ
+        self.S.x.array[dofs] = S
         self.dS.x.array[dofs] = n_t * (C / λ - σ / λ**3)
-        g = n_t * σ / λ
-        if self.geo_mode == "notow":
-            tow = np.isin(self.kinds[points], (1, 2))
-            g = np.where(tow, 0.0, g)
-        elif self.geo_mode.startswith("cap"):
-            cap = float(self.geo_mode[3:])
-            g = np.minimum(g, cap)
-        elif self.geo_mode.startswith("rel"):
-            g = np.clip(g, -self.geo_cap, self.geo_cap)
-        self.S_geo.x.array[dofs] = g
+        limit = self.geometric_force_limit_N
+        self.S_geometric.x.array[dofs] = np.clip(S, -limit, limit)
 
     def scale_shear(self, factor: np.ndarray) -> None:
         """Multiply the stress and tangent of the shear diagonals by ``factor`` (per point).
@@ -228,6 +167,7 @@ class MaterialState:
         for f, saved in zip((self.strain, self.stress, self.tangent, self.S, self.dS),
                             self._committed):
             f.x.array[:] = saved
+        self.S_geometric.x.array[:] = self.S.x.array
 
     def functions(self) -> list[dolfinx.fem.Function]:
         """All quadrature functions: strain, stress, tangent and every internal variable."""
