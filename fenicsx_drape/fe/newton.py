@@ -39,6 +39,7 @@ LINE_SEARCHES = ("full-l2", "l2", "bt", "basic")
 
 _FULL_STEP_REDUCTION = 0.5  # full-l2 keeps the full step when it cuts ‖F‖ at least this much
 _REUSE_REDUCTION = 0.1  # a factor is reused after a full step that cut ‖F‖ at least this much
+_GLOBAL_ITERATIONS = 6  # iterations after which the exact Jacobian is asked in any case
 
 
 @dataclasses.dataclass(frozen=True)
@@ -155,7 +156,9 @@ class Newton:
     Args:
         residual: ``residual(x, F) -> bool`` fills ``F(x)``; False (on every rank) when ``x``
             is outside the domain.
-        jacobian: ``jacobian(x)`` assembles ``J(x)`` into the linear solver's matrix.
+        jacobian: ``jacobian(x, local)`` assembles ``J(x)`` into the linear solver's matrix;
+            ``local`` says that Newton converges fast (see :meth:`solve`), where the exact
+            Jacobian is due.
         linear: The :class:`LinearSolver`.
         F: Work vector for the residual (the layout of ``x``); holds F at the last iterate.
         atol, rtol, max_it: Convergence test (see the module docstring).
@@ -165,7 +168,7 @@ class Newton:
     """
 
     def __init__(self, residual: Callable[[PETSc.Vec, PETSc.Vec], bool],
-                 jacobian: Callable[[PETSc.Vec], None], linear: LinearSolver, F: PETSc.Vec,
+                 jacobian: Callable[[PETSc.Vec, bool], None], linear: LinearSolver, F: PETSc.Vec,
                  *, atol: float, rtol: float, max_it: int, line_search: str = "full-l2",
                  monitor: Callable[[Iterate], None] | None = None):
         if line_search not in LINE_SEARCHES:
@@ -280,7 +283,11 @@ class Newton:
             φλ = None
 
     def solve(self, x: PETSc.Vec) -> NewtonResult:
-        """Iterate from ``x`` (updated in place) to convergence or failure."""
+        """Iterate from ``x`` (updated in place) to convergence or failure.
+
+        The iteration is *local* from the first full step that cuts ‖F‖ tenfold (Newton
+        converges fast: the Jacobian is asked exact) or after ``_GLOBAL_ITERATIONS``.
+        """
         F, d = self.F, self._d
         result = NewtonResult(False, "", 0, residual_evaluations=1)
         f = F.norm() if self.residual(x, F) else math.inf
@@ -290,7 +297,7 @@ class Newton:
         if not math.isfinite(f):
             result.reason = "DIVERGED_FNORM_NAN"
             return result
-        f0, fast = f, False
+        f0, fast, local = f, False, False
         while True:
             if f <= self.atol:
                 result.converged, result.reason = True, "CONVERGED_FNORM_ABS"
@@ -301,7 +308,8 @@ class Newton:
             if result.iterations >= self.max_it:
                 result.reason = "DIVERGED_MAX_IT"
                 return result
-            self.jacobian(x)
+            local = local or fast or result.iterations >= _GLOBAL_ITERATIONS
+            self.jacobian(x, local)
             F.scale(-1.0)
             try:
                 solved, its, factorised = self.linear.solve(F, d, reuse=fast)

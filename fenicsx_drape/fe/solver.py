@@ -188,6 +188,7 @@ class TrussProblem:
         self._evaluated_at: np.ndarray | None = None
         self._nodal_f = np.zeros((len(self.X), 3))
         self._nodal_K = np.zeros((len(self.X), 3, 3))
+        self._geometric_limit_N = np.inf
         # Called with (problem, Iterate) at every Newton iterate (diagnostics; None: off).
         self.monitor: Callable[[TrussProblem, Iterate], None] | None = (
             _default_monitors[-1] if _default_monitors else None)
@@ -393,10 +394,15 @@ class TrussProblem:
         changed = last is None or not np.array_equal(x.array_r[:n], last[:n])
         return self.comm.allreduce(changed, op=MPI.LOR)
 
-    def _jacobian(self, x: PETSc.Vec) -> None:
-        """Assemble the Jacobian at ``x`` into ``self._A``."""
+    def _jacobian(self, x: PETSc.Vec, local: bool = True) -> None:
+        """Assemble the Jacobian at ``x`` into ``self._A``.
+
+        Away from convergence (``local`` False) its geometric stiffness takes the bar forces
+        limited to the largest force of the last step (``limit_geometric_stiffness``).
+        """
         if self._stale(x):
             self._evaluate(x)
+        self.state.limit_geometric_force(np.inf if local else self._geometric_limit_N)
         A = self._A
         with self._timed("jacobian"):
             A.zeroEntries()
@@ -436,10 +442,9 @@ class TrussProblem:
         self.u.x.scatter_forward()
         with self._x.localForm() as xl:
             xl.array_w[:] = u
-        if self.options.limit_geometric_stiffness:
-            S_n = self.state.S.x.array[self.state.dofs]  # the forces of the last step
-            top = self.comm.allreduce(float(np.abs(S_n).max(initial=0.0)), op=MPI.MAX)
-            self.state.geometric_force_limit_N = top if top > 0 else np.inf
+        if self.options.limit_geometric_stiffness:  # the largest force of the last step
+            top = self.comm.allreduce(self.state.largest_force(), op=MPI.MAX)
+            self._geometric_limit_N = top if top > 0 else np.inf
         try:
             with self._timed("solve"):
                 result = self.newton.solve(self._x)
