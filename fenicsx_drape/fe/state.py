@@ -135,6 +135,7 @@ class MaterialState:
         self.stress.x.array[dofs] = σ
         self.tangent.x.array[dofs] = C
         self.S.x.array[dofs] = n_t * σ / λ
+        self.S_geometric.x.array[dofs] = self.S.x.array[dofs]
         self.dS.x.array[dofs] = n_t * (C / λ - σ / λ**3)
 
     def limit_geometric_force(self, limit_N: float = np.inf) -> None:
@@ -171,6 +172,7 @@ class MaterialState:
         for f, saved in zip((self.strain, self.stress, self.tangent, self.S, self.dS),
                             self._committed):
             f.x.array[:] = saved
+        self.S_geometric.x.array[:] = self.S.x.array
 
     def functions(self) -> list[dolfinx.fem.Function]:
         """All quadrature functions: strain, stress, tangent and every internal variable."""
