@@ -62,12 +62,14 @@ def strain_variation(u: dolfinx.fem.Function, w) -> ufl.core.expr.Expr:
 
 
 def truss_forms(u: dolfinx.fem.Function, S: dolfinx.fem.Function, dS: dolfinx.fem.Function,
-                ) -> tuple[ufl.Form, ufl.Form]:
+                S_geometric: dolfinx.fem.Function | None = None) -> tuple[ufl.Form, ufl.Form]:
     """Residual ``∫ S δε dX`` and its Jacobian, with ``S`` and ``dS = dS/dε`` given.
 
     The Jacobian is ``∫ dS δε(Δu) δε(v) + S (∇Δu t₀)·(∇v t₀)/|t₀|² dX``: material plus
     geometric stiffness. With ``dS`` the consistent algorithmic tangent it is the exact
-    derivative of the residual.
+    derivative of the residual. ``S_geometric`` (default ``S``) is the force the geometric
+    stiffness is taken with (the solver may limit it: the Jacobian is then inexact, the
+    residual and its solution are not).
     """
     V = u.function_space
     v, du = ufl.TestFunction(V), ufl.TrialFunction(V)
@@ -75,5 +77,6 @@ def truss_forms(u: dolfinx.fem.Function, S: dolfinx.fem.Function, dS: dolfinx.fe
     t0, _ = tangents(u)
     residual = S * strain_variation(u, v) * dX
     geometric = ufl.dot(ufl.grad(du) * t0, ufl.grad(v) * t0) / ufl.dot(t0, t0)
-    jacobian = (dS * strain_variation(u, du) * strain_variation(u, v) + S * geometric) * dX
+    S_g = S if S_geometric is None else S_geometric
+    jacobian = (dS * strain_variation(u, du) * strain_variation(u, v) + S_g * geometric) * dX
     return residual, jacobian

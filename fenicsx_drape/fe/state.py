@@ -68,6 +68,8 @@ class MaterialState:
         self.tangent = function("tangent_per_tow_N")  # dσ/dε per tow
         self.S = function("S_N")  # n_t σ / λ, work-conjugate of ε (N)
         self.dS = function("dS_N")  # dS/dε (N)
+        # The force of the geometric stiffness: S, or S limited (limit_geometric_force).
+        self.S_geometric = function("S_geometric_N")
         self._expression = dolfinx.fem.Expression(green_lagrange(u),
                                                   Q.element.interpolation_points)
         self._cells = np.arange(n, dtype=np.int32)
@@ -133,7 +135,16 @@ class MaterialState:
         self.stress.x.array[dofs] = σ
         self.tangent.x.array[dofs] = C
         self.S.x.array[dofs] = n_t * σ / λ
+        self.S_geometric.x.array[dofs] = self.S.x.array[dofs]
         self.dS.x.array[dofs] = n_t * (C / λ - σ / λ**3)
+
+    def limit_geometric_force(self, limit_N: float = np.inf) -> None:
+        """Set the force of the geometric stiffness: S limited to ±``limit_N`` (N)."""
+        np.clip(self.S.x.array, -limit_N, limit_N, out=self.S_geometric.x.array)
+
+    def largest_force(self) -> float:
+        """The largest |S| (N) of the owned bars."""
+        return float(np.abs(self.S.x.array[self.dofs]).max(initial=0.0))
 
     def scale_shear(self, factor: np.ndarray) -> None:
         """Multiply the stress and tangent of the shear diagonals by ``factor`` (per point).
@@ -161,6 +172,7 @@ class MaterialState:
         for f, saved in zip((self.strain, self.stress, self.tangent, self.S, self.dS),
                             self._committed):
             f.x.array[:] = saved
+        self.S_geometric.x.array[:] = self.S.x.array
 
     def functions(self) -> list[dolfinx.fem.Function]:
         """All quadrature functions: strain, stress, tangent and every internal variable."""

@@ -28,8 +28,11 @@ class StepReport:
     time_s: float  # time at the end of the step
     dt_s: float  # step length
     converged: bool
-    iterations: int  # SNES (Newton) iterations
-    reason: str  # SNES converged/diverged reason
+    iterations: int  # Newton iterations (linear solves)
+    reason: str  # converged/diverged reason (SNES names, fe/newton.py)
+    factorisations: int = 0  # Jacobians factorised
+    krylov_iterations: int = 0  # GMRES iterations on reused factorisations
+    residual_evaluations: int = 0  # residuals assembled (line searches included)
 
 
 class Steppable(Protocol):

@@ -147,9 +147,19 @@ class PenaltyContact:
         return None if np.array_equal(Q, np.eye(3)) else Q
 
     def project(self, x: np.ndarray, t: float) -> np.ndarray:
-        """Move penetrating nodes back onto the tool surface along its normal (predictor)."""
+        """Predictor: nodes in contact at the last step keep their gap, others do not penetrate.
+
+        A node pressed on the tool at the last converged step is moved along the normal to the
+        same (negative) gap: an extrapolated position off the surface would leave the first
+        Newton iteration without its contact stiffness (the quadratic penalty has none at
+        φ ≥ 0), and the step would push it deep into the tool (issue 17). Other nodes that
+        penetrate are moved onto the surface.
+        """
         g = self.tool.gap(x, t)
-        return x - np.minimum(g.phi, 0.0)[:, None] * g.normal
+        φ_n = self.tool.gap(self._x_n, self._t_n).phi
+        pressed = φ_n < 0.0
+        move = np.where(pressed, g.phi - φ_n, np.minimum(g.phi, 0.0))
+        return x - move[:, None] * g.normal
 
     def commit(self) -> None:
         """Accept the last positions as the start of the next step's slip."""

@@ -1,0 +1,107 @@
+"""MUMPS on the hemisphere's Jacobian: orderings, flops, factor size and time, per rank count.
+
+    ./drape exec python3 benchmarks/bench_factorisation.py                 # full sheet, 2.5 mm
+    ./drape exec mpirun -n 2 python3 benchmarks/bench_factorisation.py
+    ./drape exec python3 benchmarks/bench_factorisation.py --cell-mm 5 --icntl-4 2
+
+The Jacobian is the full sheet's after one half step of punch travel (the contact and the
+holder active). Every ordering factorises it once (analysis and factorisation), then three
+times more with the analysis reused (the cost of a Newton iteration); the solve is timed too.
+``INFOG(7)`` says which ordering MUMPS really used: Debian's ``libmumps-5.9`` is built with
+PORD only, METIS (5) and SCOTCH (3) fall back to AMF (2) with the warning of ``--icntl-4 2``.
+Debian's ``libmumps-ptscotch-5.9`` has SCOTCH and PT-Scotch under other library names; to
+try it without rebuilding PETSc, extract the package and put symbolic links named
+``libdmumps-5.9.so`` etc. to its libraries first on ``LD_LIBRARY_PATH``. No Debian MUMPS has
+METIS or ParMETIS.
+"""
+
+import argparse
+import time
+
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fenicsx_drape.fe import solver as fe_solver
+from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+
+ORDERINGS = {  # name: MUMPS options (ICNTL(7) sequential, ICNTL(28)/(29) parallel analysis)
+    "PORD": {"mat_mumps_icntl_7": 4},
+    "AMD": {"mat_mumps_icntl_7": 0},
+    "AMF": {"mat_mumps_icntl_7": 2},
+    "QAMD": {"mat_mumps_icntl_7": 6},
+    "METIS": {"mat_mumps_icntl_7": 5},
+    "SCOTCH": {"mat_mumps_icntl_7": 3},
+    "PT-Scotch": {"mat_mumps_icntl_28": 2, "mat_mumps_icntl_29": 1},
+    "ParMETIS": {"mat_mumps_icntl_28": 2, "mat_mumps_icntl_29": 2},
+}
+
+parser = argparse.ArgumentParser()
+parser.add_argument("--cell-mm", type=float, default=2.5)
+parser.add_argument("--lu", action="store_true", help="LU instead of symmetric LDLᵀ")
+parser.add_argument("--icntl-4", type=int, default=0, help="MUMPS print level")
+args = parser.parse_args()
+comm = MPI.COMM_WORLD
+
+
+def study(problem) -> None:
+    problem._jacobian(problem._x)
+    A = problem._A
+    b = A.createVecLeft()
+    b.set(1.0)
+    y = b.duplicate()
+    for k, (name, options) in enumerate(ORDERINGS.items()):
+        prefix = f"bench_factor_{k}_"
+        db = PETSc.Options()
+        for key, value in {"ksp_type": "preonly", "pc_type": "lu" if args.lu else "cholesky",
+                           "pc_factor_mat_solver_type": "mumps",
+                           "mat_mumps_icntl_4": args.icntl_4, **options}.items():
+            db[prefix + key] = value
+        ksp = PETSc.KSP().create(comm)
+        ksp.setOptionsPrefix(prefix)
+        ksp.setOperators(A)
+        ksp.setFromOptions()
+        comm.Barrier()
+        start = time.perf_counter()
+        try:
+            ksp.setUp()
+        except PETSc.Error:
+            if comm.rank == 0:
+                print(f"{name:10s} {comm.size} rank(s): not available (MUMPS error)", flush=True)
+            continue
+        first = time.perf_counter() - start
+        F = ksp.getPC().getFactorMatrix()
+        if F.getMumpsInfog(1) < 0:
+            if comm.rank == 0:
+                print(f"{name:10s} {comm.size} rank(s): MUMPS error INFOG(1) = "
+                      f"{F.getMumpsInfog(1)}, INFOG(2) = {F.getMumpsInfog(2)}", flush=True)
+            ksp.destroy()
+            continue
+        numeric = []
+        for rep in range(3):  # a changed matrix, the same analysis
+            A.scale(1.0 + 1e-12 * (rep + 1))
+            ksp.setOperators(A)
+            comm.Barrier()
+            start = time.perf_counter()
+            ksp.setUp()
+            numeric.append(time.perf_counter() - start)
+        comm.Barrier()
+        start = time.perf_counter()
+        for _ in range(5):
+            ksp.solve(b, y)
+        solve = (time.perf_counter() - start) / 5
+        if comm.rank == 0:
+            print(f"{name:10s} {comm.size} rank(s): used ordering {F.getMumpsInfog(7)}, "
+                  f"{F.getMumpsRinfog(3):.3g} flops, {F.getMumpsInfog(29):.3g} factor entries, "
+                  f"first {first:.3f} s, factorisation {min(numeric):.3f} s, "
+                  f"solve {1e3 * solve:.1f} ms", flush=True)
+        ksp.destroy()
+    raise SystemExit
+
+
+def one_step_then_study(self, duration_s, dt_s, **kwargs):
+    self.step(self.t + dt_s / 2)
+    study(self)
+
+
+fe_solver.TrussProblem.run = one_step_then_study
+run_hemisphere(HemisphereCase(cell_mm=args.cell_mm, quarter=False))

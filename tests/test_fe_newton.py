@@ -1,0 +1,146 @@
+"""Newton's method of the load steps (fe/newton.py, issue 17) on the hemisphere and a patch."""
+
+import pytest
+
+pytest.importorskip("dolfinx")
+
+from mpi4py import MPI
+
+import numpy as np
+
+from fenicsx_drape.fe import SolverOptions, TrussProblem, truss_sheet
+from fenicsx_drape.fe.solver import monitoring
+from fenicsx_drape.forming.contact import PenaltyContact
+from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.model import default_model
+
+# The solver as issue 17 found it: backtracking line search, exact geometric stiffness.
+BEFORE = {"line_search": "bt", "limit_geometric_stiffness": False}
+OPTIONS = {"snes_atol": 1e-6, "petsc_options": {"pc_type": "cholesky"}}
+
+# The coarse quarter hemisphere (20 mm cells, 8 s) formed by the solver of commit 4c390df
+# (82 steps, 2 cut back, 713 Newton iterations): x (mm) of the formed nodes [i, j] (y is its
+# transpose: the quarter is symmetric about x = y), z (mm), maximum shear and draw-in.
+X_BEFORE = np.array([
+    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [19.72, 19.687, 19.59, 17.98, 14.825, 9.446, 4.286],
+    [37.249, 36.938, 36.026, 32.736, 26.282, 23.121, 20.373],
+    [50.796, 49.964, 47.735, 42.648, 39.934, 41.101, 38.98],
+    [58.677, 57.342, 54.407, 54.74, 58.963, 59.573, 58.551],
+    [61.211, 61.861, 66.823, 74.167, 77.941, 79.408, 78.506],
+    [76.077, 77.916, 86.453, 93.789, 97.915, 99.265, 98.492]])
+Z_BEFORE = np.array([
+    [79.986, 76.643, 67.012, 52.298, 33.927, 14.088, 0.705],
+    [76.643, 73.109, 62.986, 47.893, 29.572, 10.845, 0.089],
+    [67.012, 62.986, 51.623, 35.744, 18.028, 2.668, 0.0],
+    [52.298, 47.893, 35.744, 20.31, 4.612, 0.0, 0.0],
+    [33.927, 29.572, 18.028, 4.612, 0.133, 0.0, 0.0],
+    [14.088, 10.845, 2.668, 0.0, 0.0, 0.0, 0.0],
+    [0.705, 0.089, 0.0, 0.0, 0.0, 0.0, 0.0]])
+MAX_SHEAR_BEFORE_DEG = 26.4347
+DRAW_IN_BEFORE_MM = {"mid_side_mm": 43.9231, "corner_mm": 30.4169}
+
+
+def _hemisphere(cell_mm, **options):
+    case = HemisphereCase(cell_mm=cell_mm, duration_s=8.0)
+    return run_hemisphere(case, options=SolverOptions(**{**OPTIONS, **options}),
+                          comm=MPI.COMM_SELF, allow_incomplete=True)
+
+
+@pytest.mark.skip_in_parallel
+@pytest.mark.slow
+def test_the_first_step_off_the_flat_sheet_converges_without_a_cut_back():
+    """Every tow of the flat sheet sits on the kink of eq. 4 when the punch touches it.
+
+    Backtracking on ‖F‖² crawls at λ = 0.1 and gives up after 25 iterations (the step is cut
+    back); the full-l2 line search and the limited geometric stiffness converge at once.
+    """
+    before = _hemisphere(30.0, **BEFORE)
+    first = before.problem.steps[0]
+    assert not first.converged and first.reason == "DIVERGED_MAX_IT"  # the case provokes it
+    run = _hemisphere(30.0)
+    first = run.problem.steps[0]
+    assert first.converged and first.iterations <= 15  # of 25 allowed
+    assert run.cutbacks == 0 and run.stopped is None
+    assert run.iterations / run.steps <= 6.0  # 5.3 Newton iterations per step
+
+
+@pytest.mark.skip_in_parallel
+@pytest.mark.slow
+def test_the_coarse_hemisphere_is_formed_as_before_within_the_discretisation_tolerance():
+    """Nodes within 0.1 mm, maximum shear within 0.5° of the numbers of the old solver."""
+    run = _hemisphere(20.0)
+    assert run.cutbacks == 0
+    x = run.grid.x
+    np.testing.assert_allclose(x[..., 0], X_BEFORE, atol=0.1)
+    np.testing.assert_allclose(x[..., 1], X_BEFORE.T, atol=0.1)
+    np.testing.assert_allclose(x[..., 2], Z_BEFORE, atol=0.1)
+    assert abs(np.abs(run.grid.shear_deg()).max() - MAX_SHEAR_BEFORE_DEG) < 0.5
+    for key, value in DRAW_IN_BEFORE_MM.items():
+        assert run.draw_in_mm[key] == pytest.approx(value, abs=0.1)
+
+
+@pytest.mark.skip_in_parallel
+@pytest.mark.slow
+def test_a_reused_factorisation_gives_the_same_iterations_and_sheet():
+    """GMRES on an old factor gives the Newton directions of the current Jacobian."""
+    plain = _hemisphere(30.0)
+    reused = _hemisphere(30.0, max_krylov=8)
+    assert [s.iterations for s in reused.problem.steps] == \
+        [s.iterations for s in plain.problem.steps]
+    factorised = sum(s.factorisations for s in reused.problem.steps)
+    assert factorised < 0.9 * plain.iterations  # factors were reused ...
+    assert sum(s.krylov_iterations for s in reused.problem.steps) > 0
+    np.testing.assert_allclose(reused.grid.x, plain.grid.x, atol=1e-6)  # ... to the same end
+
+
+@pytest.mark.parallel
+def test_the_monitor_sees_every_iterate_down_to_the_tolerance():
+    """monitoring() hands every Newton iterate of the problems built inside it."""
+    seen = []
+
+    def monitor(problem, iterate):
+        seen.append((problem.t + problem.dt, iterate.iteration, iterate.residual_norm))
+
+    sheet = truss_sheet(40.0, 10.0, rotation_deg=45.0)
+    with monitoring(monitor):
+        problem = TrussProblem(sheet, default_model(), options=SolverOptions(snes_atol=1e-8))
+    problem.fix("all", (2,))
+    d = 40.0 * np.sqrt(2.0)
+    problem.fix("border", (0,), lambda t, X: 0.006 * t * X[:, [0]])
+    problem.fix(lambda X: np.isclose(np.abs(X[:, 0]), d / 2), (1,))
+    report = problem.run(20.0, 10.0)
+    assert len(seen) == report.iterations + len(report.steps)  # the start of each attempt too
+    ends = [k for k, (_, it, _) in enumerate(seen) if k + 1 == len(seen) or seen[k + 1][1] == 0]
+    assert len(ends) == len(report.steps)
+    for k, step in zip(ends, report.steps):
+        assert seen[k][1] == step.iterations
+        start = seen[k - step.iterations][2]  # ‖F‖ of the predictor
+        if step.converged:  # atol 1e-8 or rtol 1e-9
+            assert seen[k][2] <= max(1e-8, 1e-9 * start)
+        else:
+            assert seen[k][2] > max(1e-8, 1e-9 * start)
+    problem_later = TrussProblem(sheet, default_model())
+    assert problem_later.monitor is None  # only inside the with block
+
+
+def test_contact_predictor_keeps_pressed_nodes_on_their_gap():
+    """A node pressed on the punch at the last step keeps its gap; others do not penetrate."""
+    punch = HemisphereTools().punch(40.0)
+    term = PenaltyContact(punch, 726.0)
+    X = np.array([[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [4.0, 4.0, 0.0]])
+    term.bind(X, np.ones(3, bool), None)
+    x_n = np.array([[0.0, 0.0, 9.98], [100.0, 0.0, 0.0], [4.0, 4.0, 11.0]])  # apex at z = 10
+    term.forces(x_n, 5.0, 5.0)
+    term.commit()
+    φ_n = punch.gap(x_n, 5.0).phi
+    assert φ_n[0] < 0 and φ_n[1] > 0
+    # Extrapolated: the pressed node lifted off the rising punch (apex at 11 mm), another
+    # one inside it.
+    x = np.array([[0.0, 0.0, 11.3], [100.0, 0.0, 0.0], [4.0, 4.0, 9.0]])
+    y = term.project(x, 5.5)
+    φ = punch.gap(y, 5.5).phi
+    assert φ[0] == pytest.approx(φ_n[0], abs=1e-9)  # back on the tool, at its old gap
+    np.testing.assert_array_equal(y[1], x[1])  # free and outside: untouched
+    assert φ[2] == pytest.approx(0.0, abs=1e-9)  # penetrating: onto the surface
