@@ -175,13 +175,24 @@ class RevolvedTool:
 class HemisphereTools:
     """The paper's hemisphere tool set (section 4.1) built from its parameters.
 
-    The punch is a spherical cap of radius ``punch_radius_mm`` whose centre lies
-    ``fillet_radius_mm`` above the punch base plane, joined to the flat base (shoulder) by a
-    concave fillet of radius ``fillet_radius_mm`` centred at r = R + R_f; the shoulder runs
-    out to ``shoulder_radius_mm`` (just inside the holder opening) where a small edge round
+    The punch is a spherical cap of radius ``punch_radius_mm`` (R) whose centre lies
+    c = R_f − ``cap_centre_drop_mm`` above the punch base plane, joined to the flat base
+    (shoulder) by a concave fillet of radius ``fillet_radius_mm`` (R_f) tangent to both,
+    centred at r_b = √((R + R_f)² − (R_f − c)²), h = R_f; the shoulder runs out to
+    ``shoulder_radius_mm`` (just inside the holder opening) where a small edge round
     ``edge_radius_mm`` turns it into the punch's cylindrical side. Apex-to-base height is
-    R + R_f (80 mm). The punch starts with its apex at z = 0 and moves ``travel_mm`` towards
-    +z, so with the default 80 mm its base reaches the sheet plane at the end.
+    R + c, the fillet's foot (the base of the part) at r_b.
+
+    The paper gives R = 60 mm and R_f = 20 mm but not where the cap's centre sits (issue 15).
+    The default drop 0 (c = R_f) makes the cap a whole hemisphere meeting the fillet at its
+    equator: height 80 mm (the travel), base at r_b = 80 mm, 125.7 mm of meridian from apex to
+    base; the kinematic drape then gives the paper's 61° (62.5°, Fig. 11a). A drop of R_f puts
+    the sphere's centre on the base plane (the fillet cuts the sphere 15 mm above it): height
+    60 mm, base at r_b = 77.5 mm, 105.5 mm of meridian, and a kinematic drape of 45.4°.
+
+    The punch moves ``travel_mm`` towards +z and its base plane reaches the sheet plane z = 0
+    at the end, so its apex starts at z = R + c − travel (on the sheet with the defaults; a
+    punch lower than the travel starts below the sheet and meets it later).
 
     The die (not given in the paper) is the matched female tool: the punch surface offset by
     the ply thickness, stationary at the punch's final position and contacted from above. Its
@@ -200,13 +211,24 @@ class HemisphereTools:
     sheet_mm: float = 240.0
     travel_mm: float = 80.0
     ply_thickness_mm: float = 0.3
+    cap_centre_drop_mm: float = 0.0  # the cap's centre below the fillet's centre (issue 15)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
+            if f.name == "cap_centre_drop_mm":
+                if not (math.isfinite(value) and 0.0 <= value <= self.fillet_radius_mm):
+                    raise ParameterError(f"HemisphereTools: cap_centre_drop_mm = {value} must "
+                                         f"lie in [0, fillet_radius_mm = "
+                                         f"{self.fillet_radius_mm}]")
+                continue
             if not (math.isfinite(value) and value > 0.0):
                 raise ParameterError(f"HemisphereTools: {f.name} = {value} must be positive")
-        base = self.punch_radius_mm + self.fillet_radius_mm
+        if self.travel_mm < self.height_mm - 1e-9:
+            raise ParameterError(f"HemisphereTools: travel_mm = {self.travel_mm} is below the "
+                                 f"punch's height {self.height_mm:g} mm (its base must reach "
+                                 "the sheet plane)")
+        base = self.base_radius_mm
         if not base + self.edge_radius_mm <= self.shoulder_radius_mm <= self.opening_radius_mm:
             raise ParameterError(
                 f"HemisphereTools: shoulder_radius_mm = {self.shoulder_radius_mm} must lie "
@@ -217,9 +239,27 @@ class HemisphereTools:
                                  "radius (the die's lip is the fillet offset by it)")
 
     @property
+    def cap_centre_mm(self) -> float:
+        """Height c of the cap's centre above the punch's base plane (mm)."""
+        return self.fillet_radius_mm - self.cap_centre_drop_mm
+
+    @property
     def height_mm(self) -> float:
         """Apex-to-base height of the punch (mm)."""
-        return self.punch_radius_mm + self.fillet_radius_mm
+        return self.punch_radius_mm + self.cap_centre_mm
+
+    @property
+    def base_radius_mm(self) -> float:
+        """Radius r_b of the fillet's foot, where the part meets the base plane (mm)."""
+        R, Rf = self.punch_radius_mm, self.fillet_radius_mm
+        return math.sqrt((R + Rf) ** 2 - (Rf - self.cap_centre_mm) ** 2)
+
+    @property
+    def meridian_mm(self) -> float:
+        """Length of the part's meridian from the apex to the fillet's foot (mm)."""
+        β = math.asin((self.fillet_radius_mm - self.cap_centre_mm)
+                      / (self.punch_radius_mm + self.fillet_radius_mm))
+        return (self.punch_radius_mm + self.fillet_radius_mm) * (0.5 * math.pi - β)
 
     @property
     def opening_radius_mm(self) -> float:
@@ -231,11 +271,12 @@ class HemisphereTools:
 
         Offset outward by ``offset`` mm; the material (the punch) lies on the right.
         """
-        R, Rf, t = self.punch_radius_mm, self.fillet_radius_mm, offset
-        base = R + Rf
+        R, Rf, t, c = self.punch_radius_mm, self.fillet_radius_mm, offset, self.cap_centre_mm
+        base = self.base_radius_mm
+        β = math.atan2(Rf - c, base)  # the tangent point of cap and fillet, seen from (0, c)
         return (
-            Arc((0.0, Rf), R + t, math.pi / 2, 0.0),
-            Arc((base, Rf), Rf - t, math.pi, 1.5 * math.pi),
+            Arc((0.0, c), R + t, math.pi / 2, β),
+            Arc((base, Rf), Rf - t, math.pi + β, 1.5 * math.pi),
             Segment((base, t), (1e4, t)),
         )
 
@@ -246,7 +287,7 @@ class HemisphereTools:
         """
         rs, re = self.shoulder_radius_mm, self.edge_radius_mm
         sphere, fillet, _ = self.part_profile()
-        base = self.height_mm
+        base = self.base_radius_mm
         return (
             sphere,
             fillet,
@@ -258,11 +299,12 @@ class HemisphereTools:
     def punch(self, duration_s: float) -> RevolvedTool:
         """The punch moving ``travel_mm`` in ``duration_s`` at constant speed.
 
-        Its apex is at z = 0 at t = 0.
+        Its base plane reaches z = 0 at the end (its apex is at z = 0 at t = 0 when the
+        travel equals the punch's height, the default).
         """
         if not duration_s > 0.0:
             raise ParameterError(f"punch: duration_s = {duration_s} must be positive")
-        return RevolvedTool("punch", self.punch_profile(), z0_mm=-self.height_mm,
+        return RevolvedTool("punch", self.punch_profile(), z0_mm=-self.travel_mm,
                             speed_mm_per_s=self.travel_mm / duration_s)
 
     def die(self) -> RevolvedTool:
@@ -277,11 +319,11 @@ class HemisphereTools:
                 pieces.append(Arc(piece.centre, piece.radius, piece.end, piece.start))
             else:
                 pieces.append(Segment(piece.b, piece.a))
-        return RevolvedTool("die", tuple(pieces), z0_mm=self.travel_mm - self.height_mm)
+        return RevolvedTool("die", tuple(pieces), z0_mm=0.0)
 
     def formed_part(self) -> RevolvedTool:
         """The formed part's surface, the one the kinematic drape maps the net onto.
 
         The punch at its final position, continued by the holder plane z = 0.
         """
-        return RevolvedTool("part", self.part_profile(), z0_mm=self.travel_mm - self.height_mm)
+        return RevolvedTool("part", self.part_profile(), z0_mm=0.0)
