@@ -19,7 +19,9 @@
 # - the rate dependence itself: the shear law without its Maxwell branch (rate-independent);
 # - the tool geometry: the cap's centre on the base plane instead of 20 mm above it.
 #
-# Writes `rate_leads.csv` (every run) and `rate_leads.md` (the spread per lead).
+# Writes `rate_leads.csv` (every run), `rate_leads.md` (the spread per lead) and `law_rate.md`
+# (the shear law alone: a diagonal's stress at 24°, 37° and 53° of shear when strained at the
+# rate of each forming time).
 #
 #     ./drape exec python3 demos/study_rate.py --out results/study_rate [--quick]
 
@@ -104,7 +106,36 @@ for reading in READINGS:
         wrink = [r.get("total_wrinkling_strain", np.nan) for r in rows]
         table.append((reading, name, shear, wrink, rows))
 
+
+
+def diagonal_stress(rate_per_s, strains=(0.2, 0.3, 0.4), steps=400):
+    """Stress per tow of a shear diagonal (Table 2) loaded at a constant rate, at ``strains``.
+
+    The law alone (eqs. 5-9), integrated in ``steps`` steps up to the largest strain.
+    """
+    law = model.laws()["shear"]
+    end = max(strains)
+    dt = end / rate_per_s / steps
+    state, eps, sig = law.initial_state(1), [0.0], [0.0]
+    for k in range(1, steps + 1):
+        σ, _, state = law.update(np.array([end * k / steps]), dt, state)
+        eps.append(end * k / steps)
+        sig.append(float(σ[0]))
+    return np.interp(strains, eps, sig)
+
+
+# The law's own rate sensitivity: a diagonal strained to 0.4 (53° of shear) over the forming
+# time, for each duration (ε_d = sin γ / 2 for inextensible tows).
+law_lines = ["| forming time | diagonal strain rate | stress at 24° / 37° / 53° of shear |",
+             "| --- | --- | --- |"]
+for d in durations:
+    σ = diagonal_stress(0.4 / d)
+    law_lines.append(f"| {d:g} s | {0.4 / d:.4f} /s | "
+                     + " / ".join(f"{v:.3f}" for v in σ) + " N/tow |")
+
 if rank0:
+    atomic_write_text(args.out / "law_rate.md", "\n".join(law_lines) + "\n")
+    print("\n".join(law_lines))
     write_rows(args.out / "rate_leads.csv", all_rows, first,
                f"hemisphere quarter, {cell:g} mm cells, 133 N, mu 0.3: leads of the rate spread")
     md = ["| reading | lead | max shear 8 / 40 / 240 s | spread 8 → 240 s | total wrinkling "

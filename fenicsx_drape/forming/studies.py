@@ -132,8 +132,8 @@ def metrics(grid: FormedGrid, case: HemisphereCase, stats: Mapping | None = None
       Green-Lagrange with every bar counted once
       (:meth:`~fenicsx_drape.forming.post.FormedGrid.total_wrinkling_strain`);
     - ``max_tow_strain``: the largest Green-Lagrange tow strain (Fig. 12b's ~0.5 % at 800 N),
-      ``mean_tow_strain_in_part``: the mean over the bars lying on the punch (inside the base
-      radius, above the holder plane);
+      ``mean_tow_strain_in_part``: the mean tensile strain (compressed bars count 0) of the
+      bars lying on the punch (inside the base radius, above the holder plane);
     - where the deepest wrinkle sits: formed radius and height of its bar's middle
       (``wrinkle_r_mm``, ``wrinkle_z_mm``), distance from the apex on the flat sheet
       (``wrinkle_flat_mm``), whether the bar lies on the sheet's free edge
@@ -159,7 +159,7 @@ def metrics(grid: FormedGrid, case: HemisphereCase, stats: Mapping | None = None
     bars = _bars(q, strains)
     r = [np.hypot(m[..., 0], m[..., 1]) for m, _, _ in bars]
     on_punch = [(rr < tools.base_radius_mm) & (m[..., 2] > 1.0) for rr, (m, _, _) in zip(r, bars)]
-    tension = np.concatenate([e[o] for e, o in zip(strains, on_punch)])
+    tension = np.concatenate([np.maximum(e[o], 0.0) for e, o in zip(strains, on_punch)])
     row["mean_tow_strain_in_part"] = float(np.mean(tension)) if tension.size else np.nan
     k = int(np.argmin([np.nanmin(e) for e in strains]))
     at = np.unravel_index(np.nanargmin(strains[k]), strains[k].shape)
@@ -223,12 +223,17 @@ def source_tag() -> str:
 
 
 def run_key(variant: Variant, tag: str) -> str:
-    """A hash of everything that decides a run's result (case, model, options, ``tag``)."""
-    model = variant.model
+    """A hash of everything that decides a run's result (case, model, options, ``tag``).
+
+    No model is the paper's model: the same key as ``default_model()`` given explicitly.
+    """
+    from fenicsx_drape.model import default_model
+
+    model = variant.model if variant.model is not None else default_model()
     described = {"case": _plain(variant.case), "tag": tag,
                  "options": _plain(variant.options) if variant.options is not None else None,
-                 "model": None if model is None else
-                 {"effects": sorted(model.effects), "parameters": _plain(model.parameters)}}
+                 "model": {"effects": sorted(model.effects),
+                           "parameters": _plain(model.parameters)}}
     text = json.dumps(described, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
