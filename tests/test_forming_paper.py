@@ -120,3 +120,18 @@ def test_misfit_on_the_paper_itself_is_the_model_experiment_spread():
     flipped = {**exact, "max_shear_deg": -51.4}  # wrong sign: ln 10 for both shear targets
     assert paper.misfit(flipped) == pytest.approx(expected + (2 * math.log(10.0)
                                                              - math.log(51.4 / 50.2)) / 12)
+
+
+def test_coarse_duration_sweep_keeps_its_documented_trend():
+    """Fig. 12a on 20 mm cells (quarter, 133 N, default reading): slower forming wrinkles less
+    and shears more (README, "Studies"), the trend the paper reports."""
+    pytest.importorskip("dolfinx")
+    from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+
+    wrinkling, shear = [], []
+    for duration in (8.0, 40.0, 240.0):
+        grid = run_hemisphere(HemisphereCase(cell_mm=20.0, duration_s=duration)).grid
+        wrinkling.append(-grid.total_wrinkling_strain())
+        shear.append(np.abs(grid.diagonal_path()[1]).max())
+    assert wrinkling[0] > wrinkling[1] > wrinkling[2] > 0.0
+    assert shear[0] < shear[1] < shear[2]
