@@ -91,7 +91,7 @@ for reading in READINGS:
 heights = [20.0, 15.0, 10.0, 5.0, 0.0]
 kinematic = []
 for c in heights:
-    tools = HemisphereTools(cap_centre_drop_mm=20.0 - c)
+    tools = HemisphereTools(cap_centre_drop_mm=20.0 - c, travel_mm=60.0 + c)
     kinematic.append((c, tools.meridian_mm, tools.base_radius_mm,
                       float(np.abs(kinematic_drape(tools, 10.0).shear_deg()).max())))
 

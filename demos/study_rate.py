@@ -81,8 +81,10 @@ def leads(base):
            ("diagonal bars × ½", base, scaled_diagonals(0.5), None),
            ("diagonal bars × 2", base, scaled_diagonals(2.0), None),
            ("rate-independent shear law", base, model.without_effects("rate_dependence"), None),
-           ("cap centre on the base plane", R(base, tools=HemisphereTools(cap_centre_drop_mm=20.0)),
-            None, None)]
+           # A 60 mm punch: travel 60 mm at the same speed (the same motion once it touches).
+           ("cap centre on the base plane",
+            R(base, duration_s=0.75 * base.duration_s,
+              tools=HemisphereTools(cap_centre_drop_mm=20.0, travel_mm=60.0)), None, None)]
     return out[:3] if args.quick else out
 
 

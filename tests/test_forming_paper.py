@@ -55,7 +55,7 @@ def test_the_default_tools_are_unchanged_by_the_cap_parameter():
 @pytest.mark.parametrize("drop", [0.0, 7.5, 20.0])
 def test_cap_and_fillet_join_with_a_common_tangent(drop):
     """The cap, the fillet and the base plane meet without a gap or a kink (G1)."""
-    t = HemisphereTools(cap_centre_drop_mm=drop)
+    t = HemisphereTools(cap_centre_drop_mm=drop, travel_mm=80.0 - drop)
     cap, fillet, shoulder = t.punch_profile()[:3]
     c = t.cap_centre_mm
     assert t.height_mm == pytest.approx(60.0 + c)
@@ -69,23 +69,24 @@ def test_cap_and_fillet_join_with_a_common_tangent(drop):
     # The meridian length from the arcs' angles.
     length = sum(abs(p.end - p.start) * p.radius for p in (cap, fillet) if isinstance(p, Arc))
     assert t.meridian_mm == pytest.approx(length)
-    # The punch's base plane reaches the sheet at the end of the travel.
-    end = t.punch(40.0).z_offset(40.0)
-    assert end == pytest.approx(0.0)
+    # With the travel of its height the punch's base plane reaches the sheet at the end.
+    assert t.punch(40.0).z_offset(40.0) == pytest.approx(0.0)
+    assert t.die().z_offset(0.0) == pytest.approx(0.0)
 
 
 def test_bad_cap_drop_is_refused():
     with pytest.raises(ParameterError, match="cap_centre_drop_mm"):
         HemisphereTools(cap_centre_drop_mm=25.0)
-    with pytest.raises(ParameterError, match="travel_mm"):
-        HemisphereTools(travel_mm=70.0)  # below the punch's 80 mm
+    with pytest.raises(ParameterError, match="cap_centre_drop_mm"):
+        HemisphereTools(cap_centre_drop_mm=-1.0)
 
 
 def test_the_kinematic_drape_reads_the_cap_position():
     """The paper's pin-jointed net reaches 61° (Fig. 11a): a whole hemisphere on the fillet
     (62.5° on 10 mm cells), not a sphere centred on the base plane (45.4°)."""
     whole = np.abs(kinematic_drape(HemisphereTools(), 10.0).shear_deg()).max()
-    low = np.abs(kinematic_drape(HemisphereTools(cap_centre_drop_mm=20.0), 10.0).shear_deg()).max()
+    low_cap = HemisphereTools(cap_centre_drop_mm=20.0, travel_mm=60.0)
+    low = np.abs(kinematic_drape(low_cap, 10.0).shear_deg()).max()
     assert abs(whole - paper.MAX_SHEAR_KINEMATIC_DEG) < 2.0
     assert abs(low - paper.MAX_SHEAR_KINEMATIC_DEG) > 10.0
 

@@ -47,7 +47,7 @@ def drape_quadrant(tools: HemisphereTools, cell_mm: float, n_cells: int) -> np.n
     Δ = float(cell_mm)
     n = n_cells + 1
     P = np.full((n, n, 3), np.nan)
-    P[0, 0] = [0.0, 0.0, tools.height_mm]  # the apex of the formed part
+    P[0, 0] = [0.0, 0.0, tools.travel_mm]
 
     # Generators: meridians in the planes y = 0 (warp) and x = 0 (weft), nodes a chord Δ apart.
     for i in range(1, n):

@@ -189,10 +189,9 @@ class HemisphereTools:
     base; the kinematic drape then gives the paper's 61° (62.5°, Fig. 11a). A drop of R_f puts
     the sphere's centre on the base plane (the fillet cuts the sphere 15 mm above it): height
     60 mm, base at r_b = 77.5 mm, 105.5 mm of meridian, and a kinematic drape of 45.4°.
-
-    The punch moves ``travel_mm`` towards +z and its base plane reaches the sheet plane z = 0
-    at the end, so its apex starts at z = R + c − travel (on the sheet with the defaults; a
-    punch lower than the travel starts below the sheet and meets it later).
+    The punch starts with its apex at z = 0 and moves ``travel_mm`` towards +z, so its base
+    reaches the sheet plane at the end when the travel equals its height (the defaults; give
+    a lowered cap the travel R + c).
 
     The die (not given in the paper) is the matched female tool: the punch surface offset by
     the ply thickness, stationary at the punch's final position and contacted from above. Its
@@ -224,10 +223,6 @@ class HemisphereTools:
                 continue
             if not (math.isfinite(value) and value > 0.0):
                 raise ParameterError(f"HemisphereTools: {f.name} = {value} must be positive")
-        if self.travel_mm < self.height_mm - 1e-9:
-            raise ParameterError(f"HemisphereTools: travel_mm = {self.travel_mm} is below the "
-                                 f"punch's height {self.height_mm:g} mm (its base must reach "
-                                 "the sheet plane)")
         base = self.base_radius_mm
         if not base + self.edge_radius_mm <= self.shoulder_radius_mm <= self.opening_radius_mm:
             raise ParameterError(
@@ -299,12 +294,11 @@ class HemisphereTools:
     def punch(self, duration_s: float) -> RevolvedTool:
         """The punch moving ``travel_mm`` in ``duration_s`` at constant speed.
 
-        Its base plane reaches z = 0 at the end (its apex is at z = 0 at t = 0 when the
-        travel equals the punch's height, the default).
+        Its apex is at z = 0 at t = 0.
         """
         if not duration_s > 0.0:
             raise ParameterError(f"punch: duration_s = {duration_s} must be positive")
-        return RevolvedTool("punch", self.punch_profile(), z0_mm=-self.travel_mm,
+        return RevolvedTool("punch", self.punch_profile(), z0_mm=-self.height_mm,
                             speed_mm_per_s=self.travel_mm / duration_s)
 
     def die(self) -> RevolvedTool:
@@ -319,11 +313,11 @@ class HemisphereTools:
                 pieces.append(Arc(piece.centre, piece.radius, piece.end, piece.start))
             else:
                 pieces.append(Segment(piece.b, piece.a))
-        return RevolvedTool("die", tuple(pieces), z0_mm=0.0)
+        return RevolvedTool("die", tuple(pieces), z0_mm=self.travel_mm - self.height_mm)
 
     def formed_part(self) -> RevolvedTool:
         """The formed part's surface, the one the kinematic drape maps the net onto.
 
         The punch at its final position, continued by the holder plane z = 0.
         """
-        return RevolvedTool("part", self.part_profile(), z0_mm=0.0)
+        return RevolvedTool("part", self.part_profile(), z0_mm=self.travel_mm - self.height_mm)
