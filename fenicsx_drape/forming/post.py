@@ -146,21 +146,51 @@ class FormedGrid:
             out.append(0.5 * (np.sum(r * r, -1) / np.sum(L * L, -1) - 1.0))
         return out[0], out[1]
 
-    def total_wrinkling_strain(self) -> float:
-        """The paper's total wrinkling strain (≤ 0), as the FE results define it.
+    def tow_stretches(self) -> tuple[np.ndarray, np.ndarray]:
+        """Engineering strains l/L − 1 of the warp bars (n_i − 1, n_j) and weft bars."""
+        out = []
+        for axis in (0, 1):
+            r, L = np.diff(self.x, axis=axis), np.diff(self.X, axis=axis)
+            out.append(np.linalg.norm(r, axis=-1) / np.linalg.norm(L, axis=-1) - 1.0)
+        return out[0], out[1]
 
-        Σ w ε⁻ / Σ w over the tow bars (all of length Δ), ε⁻ = min(ε, 0), with w = ½ for the
-        bars on the grid's edges (they stand for half a strip of tows):
-        :attr:`fenicsx_drape.fe.output.Results.total_wrinkling_strain`. A bar's w is half the
-        number of cells beside it, so the ragged edge of a clipped net has w = ½ too.
+    def total_wrinkling_strain(self, measure: str = "green_lagrange",
+                               weights: str = "strip") -> float:
+        """The paper's total wrinkling strain (≤ 0): wrinkling deformation over tow length.
+
+        Section 4.2 and Fig. 12 define it as "the sum of wrinkling deformation [over the
+        elements with negative strain] divided by the total length of tow elements". Every
+        tow bar has length Δ on the flat sheet, so it is Σ w ε⁻ / Σ w with ε⁻ = min(ε, 0):
+
+        - ``measure="green_lagrange"`` (default): ε the Green-Lagrange strain of the bar, the
+          model's strain measure (eq. 13), its deformation taken as ε L;
+          ``"engineering"``: ε = l/L − 1, so ε L = l − L is the bar's change of length, the
+          literal "wrinkling deformation". For compression |ε_GL| = |e| (1 − |e|/2) < |e|.
+        - ``weights="strip"`` (default): w = ½ for the bars on the grid's edges, which stand
+          for half a strip of tows (as
+          :attr:`fenicsx_drape.fe.output.Results.total_wrinkling_strain`; a bar's w is half the
+          number of cells beside it, so the ragged edge of a clipped net has w = ½ too);
+          ``"bars"``: every tow bar of the model counts once, the literal "total tow length of
+          the model".
+
+        The paper quotes magnitudes (0.55 %); here the value is negative.
         """
+        if measure not in ("green_lagrange", "engineering"):
+            raise DrapeInputError(f"total_wrinkling_strain: measure {measure!r} is not "
+                                  "'green_lagrange' or 'engineering'")
+        if weights not in ("strip", "bars"):
+            raise DrapeInputError(f"total_wrinkling_strain: weights {weights!r} is not "
+                                  "'strip' or 'bars'")
+        strains = self.tow_strains() if measure == "green_lagrange" else self.tow_stretches()
         cells = np.isfinite(self.shear_deg()).astype(float)
         total, weight = 0.0, 0.0
-        for axis, ε in enumerate(self.tow_strains()):
+        for axis, ε in enumerate(strains):
             pad = [(0, 0), (0, 0)]
             pad[1 - axis] = (1, 1)
             c = np.pad(cells, pad)
             w = 0.5 * (c[:, :-1] + c[:, 1:] if axis == 0 else c[:-1] + c[1:])
+            if weights == "bars":
+                w = (w > 0).astype(float)
             total += np.sum(np.where(w > 0, w * np.minimum(ε, 0), 0.0))
             weight += w.sum()
         return float(total / weight)

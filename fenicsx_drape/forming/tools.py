@@ -182,13 +182,23 @@ class RevolvedTool:
 class HemisphereTools:
     """The paper's hemisphere tool set (section 4.1) built from its parameters.
 
-    The punch is a spherical cap of radius ``punch_radius_mm`` whose centre lies
-    ``fillet_radius_mm`` above the punch base plane, joined to the flat base (shoulder) by a
-    concave fillet of radius ``fillet_radius_mm`` centred at r = R + R_f; the shoulder runs
-    out to ``shoulder_radius_mm`` (just inside the holder opening) where a small edge round
+    The punch is a spherical cap of radius ``punch_radius_mm`` (R) whose centre lies
+    c = R_f − ``cap_centre_drop_mm`` above the punch base plane, joined to the flat base
+    (shoulder) by a concave fillet of radius ``fillet_radius_mm`` (R_f) tangent to both,
+    centred at r_b = √((R + R_f)² − (R_f − c)²), h = R_f; the shoulder runs out to
+    ``shoulder_radius_mm`` (just inside the holder opening) where a small edge round
     ``edge_radius_mm`` turns it into the punch's cylindrical side. Apex-to-base height is
-    R + R_f (80 mm). The punch starts with its apex at z = 0 and moves ``travel_mm`` towards
-    +z, so with the default 80 mm its base reaches the sheet plane at the end.
+    R + c, the fillet's foot (the base of the part) at r_b.
+
+    The paper gives R = 60 mm and R_f = 20 mm but not where the cap's centre sits (issue 15).
+    The default drop 0 (c = R_f) makes the cap a whole hemisphere meeting the fillet at its
+    equator: height 80 mm (the travel), base at r_b = 80 mm, 125.7 mm of meridian from apex to
+    base; the kinematic drape then gives the paper's 61° (62.5°, Fig. 11a). A drop of R_f puts
+    the sphere's centre on the base plane (the fillet cuts the sphere 15 mm above it): height
+    60 mm, base at r_b = 77.5 mm, 105.5 mm of meridian, and a kinematic drape of 45.4°.
+    The punch starts with its apex at z = 0 and moves ``travel_mm`` towards +z, so its base
+    reaches the sheet plane at the end when the travel equals its height (the defaults; give
+    a lowered cap the travel R + c).
 
     The die (not given in the paper) is the matched female tool: the punch surface offset by
     the ply thickness, stationary at the punch's final position and contacted from above. Its
@@ -207,13 +217,20 @@ class HemisphereTools:
     sheet_mm: float = 240.0
     travel_mm: float = 80.0
     ply_thickness_mm: float = 0.3
+    cap_centre_drop_mm: float = 0.0  # the cap's centre below the fillet's centre (issue 15)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
+            if f.name == "cap_centre_drop_mm":
+                if not (math.isfinite(value) and 0.0 <= value <= self.fillet_radius_mm):
+                    raise ParameterError(f"HemisphereTools: cap_centre_drop_mm = {value} must "
+                                         f"lie in [0, fillet_radius_mm = "
+                                         f"{self.fillet_radius_mm}]")
+                continue
             if not (math.isfinite(value) and value > 0.0):
                 raise ParameterError(f"HemisphereTools: {f.name} = {value} must be positive")
-        base = self.punch_radius_mm + self.fillet_radius_mm
+        base = self.base_radius_mm
         if not base + self.edge_radius_mm <= self.shoulder_radius_mm <= self.opening_radius_mm:
             raise ParameterError(
                 f"HemisphereTools: shoulder_radius_mm = {self.shoulder_radius_mm} must lie "
@@ -224,9 +241,27 @@ class HemisphereTools:
                                  "radius (the die's lip is the fillet offset by it)")
 
     @property
+    def cap_centre_mm(self) -> float:
+        """Height c of the cap's centre above the punch's base plane (mm)."""
+        return self.fillet_radius_mm - self.cap_centre_drop_mm
+
+    @property
     def height_mm(self) -> float:
         """Apex-to-base height of the punch (mm)."""
-        return self.punch_radius_mm + self.fillet_radius_mm
+        return self.punch_radius_mm + self.cap_centre_mm
+
+    @property
+    def base_radius_mm(self) -> float:
+        """Radius r_b of the fillet's foot, where the part meets the base plane (mm)."""
+        R, Rf = self.punch_radius_mm, self.fillet_radius_mm
+        return math.sqrt((R + Rf) ** 2 - (Rf - self.cap_centre_mm) ** 2)
+
+    @property
+    def meridian_mm(self) -> float:
+        """Length of the part's meridian from the apex to the fillet's foot (mm)."""
+        β = math.asin((self.fillet_radius_mm - self.cap_centre_mm)
+                      / (self.punch_radius_mm + self.fillet_radius_mm))
+        return (self.punch_radius_mm + self.fillet_radius_mm) * (0.5 * math.pi - β)
 
     @property
     def opening_radius_mm(self) -> float:
@@ -238,11 +273,12 @@ class HemisphereTools:
 
         Offset outward by ``offset`` mm; the material (the punch) lies on the right.
         """
-        R, Rf, t = self.punch_radius_mm, self.fillet_radius_mm, offset
-        base = R + Rf
+        R, Rf, t, c = self.punch_radius_mm, self.fillet_radius_mm, offset, self.cap_centre_mm
+        base = self.base_radius_mm
+        β = math.atan2(Rf - c, base)  # the tangent point of cap and fillet, seen from (0, c)
         return (
-            Arc((0.0, Rf), R + t, math.pi / 2, 0.0),
-            Arc((base, Rf), Rf - t, math.pi, 1.5 * math.pi),
+            Arc((0.0, c), R + t, math.pi / 2, β),
+            Arc((base, Rf), Rf - t, math.pi + β, 1.5 * math.pi),
             Segment((base, t), (1e4, t)),
         )
 
@@ -253,7 +289,7 @@ class HemisphereTools:
         """
         rs, re = self.shoulder_radius_mm, self.edge_radius_mm
         sphere, fillet, _ = self.part_profile()
-        base = self.height_mm
+        base = self.base_radius_mm
         return (
             sphere,
             fillet,
