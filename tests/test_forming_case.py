@@ -382,5 +382,17 @@ def test_tools_are_built_by_role(tmp_path):
     assert tools["holder"] == FlatHolder(reference.opening_radius_mm)
     assert set(build_tools(load_case(HEMISPHERE), skip=("die",))) == {"punch", "holder"}
     case = load_case(write(tmp_path, GOOD))
-    with pytest.raises(CaseError, match=r"\[\[tool\]\] 1 'geometry': 'punch\.stl'"):
-        build_tools(case)
+    with pytest.raises(DrapeInputError, match=r"punch\.stl: no surface in it"):
+        build_tools(case)  # the empty STL files of write()
+    plate = ("solid plate\n" + "".join(
+        "facet normal 0 0 1\nouter loop\n" + "".join(f"vertex {x} {y} 0\n" for x, y in tri)
+        + "endloop\nendfacet\n"
+        for tri in (((-80, -80), (80, -80), (80, 80)), ((-80, -80), (80, 80), (-80, 80))))
+        + "endsolid plate\n")
+    for name in ("punch.stl", "clamp.stl"):
+        (tmp_path / name).write_text(plate)
+    tools = build_tools(case)
+    x = np.array([[0.0, 0.0, 1.0], [10.0, -20.0, 1.0]])
+    assert tools["clamp"].gap(x, 0.0).phi == pytest.approx([1.0, 1.0], abs=1e-6)
+    # The punch (sheet on +z by its role's default) rises 20 mm in 10 s: 2 mm at t = 1.
+    assert tools["punch"].gap(x, 1.0).phi == pytest.approx([-1.0, -1.0], abs=1e-6)

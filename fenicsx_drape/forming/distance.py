@@ -244,9 +244,14 @@ def _constant_cells(c: np.ndarray) -> np.ndarray:
     return hi == lo
 
 
+# The coarsest default grid: a few large flat triangles (an STL plate) must not give a grid
+# as coarse as they are, whose band would miss a sheet a few mm away.
+MAX_DEFAULT_SPACING_MM = 5.0
+
+
 def default_spacing(surface) -> float:
-    """The default grid spacing h (mm): the tool mesh size (of the flat triangles)."""
-    return surface.mesh_size_mm
+    """The default grid spacing h (mm): the tool mesh size, at most 5 mm."""
+    return min(surface.mesh_size_mm, MAX_DEFAULT_SPACING_MM)
 
 
 def field_key(surface, h: float, band_mm: float) -> str:
