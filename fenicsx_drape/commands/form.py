@@ -41,8 +41,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--holder-force-share", choices=("symmetric_part", "model"),
                         default=None,
                         help="eq. 1's reading: a symmetric model carries its share of the "
-                        "force, symmetry-plane nodes counting ½ (symmetric_part, the default), "
-                        "or the whole force over the model's own nodes (model)")
+                        "force, symmetry-plane nodes counting ½ (symmetric_part, a case file's "
+                        "default), or the whole force over the model's own nodes (model, the "
+                        "hemisphere's default: README, issue 15)")
     parser.add_argument("--mu", type=float, default=None,
                         help="textile-tool friction coefficient of eq. 1 (default: the case's "
                         "holder mu, else the model's)")

@@ -22,8 +22,9 @@ The parts of the model that are not the truss itself:
 - penalty contact with the punch and the die (:mod:`~fenicsx_drape.forming.contact`) of
   stiffness k = ``penalty_factor`` · l_t E_o (l_t E_o: the axial stiffness of one tow bar),
 - the blank holder (:mod:`~fenicsx_drape.forming.holder`): clamping and eq. 1 friction bars,
-  with F/4 on a quarter model (``holder_force_share = "symmetric_part"``, the default) or the
-  whole F over the quarter's own nodes (``"model"``, issue 15),
+  with the whole F over the quarter's own nodes (``holder_force_share = "model"``, the
+  default: the reading that reproduces the paper's numbers, README issue 15) or F/4 on a
+  quarter model (``"symmetric_part"``),
 - the out-of-plane stabilisation of the slack net (:mod:`~fenicsx_drape.forming.stabilisation`),
 - symmetry conditions u_x = 0 on x = 0 and u_y = 0 on y = 0 for a quarter model; the full
   sheet needs none (the holder's friction bars hold it in its plane).
@@ -67,9 +68,10 @@ class HemisphereCase:
     stabilisation_N_per_mm: float = 1.25  # out-of-plane spring to the extrapolated motion
     ply_angle_deg: float = 0.0  # tow net turned by θ in the square sheet (full sheet only)
     tools: HemisphereTools = dataclasses.field(default_factory=HemisphereTools)
-    # Eq. 1's reading (issue 15): "symmetric_part" (a quarter carries F/4, symmetry-plane
-    # nodes count ½) or "model" (the whole F over the model's own nodes under the holder).
-    holder_force_share: str = "symmetric_part"
+    # Eq. 1's reading (issue 15): "model" (the whole F over the model's own nodes under the
+    # holder; the default, chosen on the paper's numbers: README) or "symmetric_part" (a
+    # quarter carries F/4, symmetry-plane nodes count ½).
+    holder_force_share: str = "model"
 
     def __post_init__(self) -> None:
         for name in ("cell_mm", "duration_s", "penalty_factor", "step_mm"):
@@ -93,7 +95,7 @@ class HemisphereCase:
 
     @property
     def part_force_N(self) -> float:
-        """Holding force carried by the modelled part (``"symmetric_part"``: a quarter F/4)."""
+        """Holding force carried by the modelled part (F; a quarter F/4 under ``"symmetric_part"``)."""
         return part_force_N(self.holder_force_N, 2 if self.quarter else 0,
                             self.holder_force_share)
 
