@@ -83,7 +83,10 @@ def quarter():
 
 @pytest.fixture(scope="module")
 def full():
-    return run_hemisphere(HemisphereCase(**COARSE, quarter=False), comm=MPI.COMM_SELF)
+    # The default force share ("model") gives the quarter's own nodes the whole F: the full
+    # sheet with the same force per node carries 4F.
+    return run_hemisphere(HemisphereCase(**COARSE, quarter=False, holder_force_N=4 * 133.0),
+                          comm=MPI.COMM_SELF)
 
 
 @pytest.mark.skip_in_parallel

@@ -50,7 +50,9 @@ def octagon(symmetry, cell_mm=20.0):
     """The hemisphere's tools on the octagonal blank, a coarse and fast case."""
     base = load_case(HEMISPHERE, duration_s=8.0)
     blank = BlankSpec("polygon", cell_mm=cell_mm, points_mm=OCTAGON, symmetry=symmetry)
-    return dataclasses.replace(base, blank=blank)
+    # F on the whole blank, a half carrying F/2: the half model is then the full one's half.
+    holder = dataclasses.replace(base.holder, force_share="symmetric_part")
+    return dataclasses.replace(base, blank=blank, holder=holder)
 
 
 @pytest.mark.skip_in_parallel
