@@ -165,6 +165,10 @@ def run(args: argparse.Namespace) -> int:
               f"{result['min_wrinkling_strain']:.3f}, {result['steps']} steps, "
               f"{result['snes_iterations']} Newton iterations, {result['wall_time_s']:.1f} s",
               file=sys.stderr if args.quiet else sys.stdout)
+        if hemisphere and not args.quiet:
+            from fenicsx_drape.forming.paper import paper_comparison
+
+            print(paper_comparison(result))
         pictures = ["shear.png", "wrinkling.png"] + (["paths.png"] if hemisphere else [])
         print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "
               f"{args.out / 'summary.json'}")
