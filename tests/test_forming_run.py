@@ -15,6 +15,7 @@ from mpi4py import MPI
 from fenicsx_drape.forming.case import BlankSpec, ToolSpec, load_case
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
 from fenicsx_drape.forming.run import free_edge, run_case
+from fenicsx_drape.forming.tools import HemisphereTools
 
 HEMISPHERE = Path(__file__).parents[1] / "meshes" / "hemisphere" / "case.toml"
 COARSE = {"cell_mm": 30.0, "duration_s": 8.0}
@@ -139,8 +140,14 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
                                comm=MPI.COMM_SELF)
     assert summary["max_shear_deg"] == np.abs(reference.grid.shear_deg()).max()
     assert summary["snes_iterations"] == reference.iterations
+    # The kinematic drape beside it, on the same tools: the hemisphere's net at 30 mm.
+    from fenicsx_drape.forming.kinematic import kinematic_drape
+
+    net = kinematic_drape(HemisphereTools(), 30.0)
+    assert summary["kinematic_max_shear_deg"] == pytest.approx(
+        np.nanmax(np.abs(net.shear_deg())), abs=0.05)
     for name in ("shear.png", "wrinkling.png", "fields.xdmf", "provenance.json",
-                 "tools/punch.vtk", "tools/die.vtk", "tools/holder.vtk"):
+                 "kinematic_shear.png", "tools/punch.vtk", "tools/die.vtk", "tools/holder.vtk"):
         assert (out / name).stat().st_size > 0
     assert not (out / "paths.png").exists()  # the hemisphere's paths: drape form hemisphere
     provenance = json.loads((out / "provenance.json").read_text())

@@ -169,7 +169,11 @@ def run(args: argparse.Namespace) -> int:
             from fenicsx_drape.forming.paper import paper_comparison
 
             print(paper_comparison(result))
-        pictures = ["shear.png", "wrinkling.png"] + (["paths.png"] if hemisphere else [])
+        if not hemisphere and result.get("kinematic_max_shear_deg") is not None:
+            print(f"kinematic drape (pin-jointed net) on the same tools: max shear "
+                  f"{result['kinematic_max_shear_deg']:.1f}°")
+        pictures = ["shear.png", "wrinkling.png",
+                    "paths.png" if hemisphere else "kinematic_shear.png"]
         print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "
               f"{args.out / 'summary.json'}")
     return 0

@@ -95,7 +95,7 @@ class HemisphereCase:
 
     @property
     def part_force_N(self) -> float:
-        """Holding force carried by the modelled part (F; a quarter F/4 under ``"symmetric_part"``)."""
+        """Holding force the modelled part carries (F; a quarter F/4 if "symmetric_part")."""
         return part_force_N(self.holder_force_N, 2 if self.quarter else 0,
                             self.holder_force_share)
 

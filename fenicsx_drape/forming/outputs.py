@@ -5,12 +5,14 @@
 
 - ``summary.json``: max shear angle, total and minimum wrinkling strain, the free edge's
   in-plane displacement (and a rectangle's mid-side and corner draw-in), nodes, steps,
-  cut-backs, Newton iterations, wall time, penetration, ranks, travel and the case;
+  cut-backs, Newton iterations, wall time, penetration, ranks, travel and the case, and the
+  kinematic drape's max shear on the same tools (``kinematic_max_shear_deg``);
 - ``fields.xdmf`` (+ ``.h5``) every 5 mm of the fastest tool's travel; ``tools/*.vtk``: the
   tools at the end of their motion;
 - ``bundle/``: the formed part's drawn grid as a forming bundle whose test names a copy of
   the case (``case = "case/case.toml"``, with its geometry files in ``bundle/case/``), so that
   it can be compared later like a measured part;
+- ``kinematic_shear.png``: the kinematic drape (pin-jointed net) beside the FE result;
 - ``shear.png``, ``wrinkling.png``: the formed sheet (mirrored to the whole part for a
   symmetric model) coloured by shear angle, and the wrinkled tows;
 - ``provenance.json``: version, command, model, solver options and the case.
@@ -311,6 +313,8 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
             writer["file"].close()
     result = case_summary(run)
     if comm.rank == 0:
+        kinematic = _kinematic_beside(case, run, out if pictures else None)
+        result.update(kinematic)
         write_json(out / "summary.json", result)
         given = case.holder.mu if case.holder is not None else None
         μ = float(np.max(given if given is not None else model.parameters.get("mu", 0.0)))
@@ -333,6 +337,28 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
                          solver=_plain(vars(run.problem.options)))
     comm.Barrier()
     return run, result
+
+
+def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None) -> dict:
+    """The kinematic drape of the case on its formed tools, for the summary (and its picture).
+
+    A net that cannot be draped (a surface the generators leave) is reported, not raised: the
+    mechanical result it stands beside is kept.
+    """
+    from fenicsx_drape.forming.kinematic import drape_case
+
+    try:
+        net = drape_case(case, tools=run.tools)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
+        return {"kinematic_error": str(err)}
+    numbers = net.summary()
+    if pictures is not None and numbers["max_shear_deg"] is not None:
+        pictures.mkdir(parents=True, exist_ok=True)
+        plot_shear(net, pictures / "kinematic_shear.png",
+                   f"{case.name}: kinematic drape (pin-jointed net), shear angle "
+                   f"(max {numbers['max_shear_deg']:.1f}°)")
+    return {"kinematic_max_shear_deg": numbers["max_shear_deg"],
+            "kinematic_unplaced_nodes": numbers["unplaced_nodes"]}
 
 
 def write_case_tools(run: FormingRun, folder: str | os.PathLike) -> list[Path]:
