@@ -23,6 +23,7 @@ import numpy as np
 
 from fenicsx_drape.fe.solver import SolverOptions
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+from fenicsx_drape.forming.run import NODE_ATOL_N
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--full", action="store_true", help="also the full sheet at 2.5 mm")
@@ -32,15 +33,19 @@ parser.add_argument("--cells", type=float, nargs="*", default=[10.0, 5.0],
 parser.add_argument("--before", action="store_true", help="the solver as issue 17 found it")
 parser.add_argument("--max-krylov", type=int, default=0,
                     help="GMRES iterations on a reused factorisation (0: none)")
+parser.add_argument("--node-atol-N", type=float, default=None,
+                    help=f"per-node force tolerance (N; default {NODE_ATOL_N}, 0: the 2-norm only)")
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 
-options = {"snes_atol": 1e-6, "petsc_options": {"pc_type": "cholesky"},
-           "max_krylov": args.max_krylov}
+options = {"snes_atol": 1e-6, "node_atol_N": NODE_ATOL_N,
+           "petsc_options": {"pc_type": "cholesky"}, "max_krylov": args.max_krylov}
+if args.node_atol_N is not None:
+    options["node_atol_N"] = args.node_atol_N
 if args.before:
     from fenicsx_drape.forming.contact import PenaltyContact
 
-    options.update(line_search="bt", limit_geometric_stiffness=False)
+    options.update(line_search="bt", limit_geometric_stiffness=False, node_atol_N=0.0)
 
     def project(self, x, t):  # the predictor of issue 17: penetrating nodes onto the surface
         g = self.tool.gap(x, t)

@@ -43,6 +43,7 @@ from fenicsx_drape.fe.solver import SolverOptions, monitoring
 from fenicsx_drape.forming.contact import PenaltyContact
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
 from fenicsx_drape.forming.holder import BlankHolder
+from fenicsx_drape.forming.run import NODE_ATOL_N
 
 CAUSES = {
     "tow": "tow buckled ↔ taut (eq. 4)",
@@ -174,10 +175,12 @@ def main() -> None:
     parser.add_argument("--options", default="{}", help="SolverOptions fields as JSON")
     args = parser.parse_args()
     comm = MPI.COMM_WORLD
-    options = SolverOptions(snes_atol=1e-6, petsc_options={"pc_type": "cholesky"},
-                            **json.loads(args.options))
+    options = SolverOptions(**{"snes_atol": 1e-6, "node_atol_N": NODE_ATOL_N,
+                               "petsc_options": {"pc_type": "cholesky"},
+                               **json.loads(args.options)})
     if args.before:
         options.line_search, options.limit_geometric_stiffness = "bt", False
+        options.node_atol_N = 0.0
 
         def project(self, x, t):  # the predictor as issue 17 found it
             g = self.tool.gap(x, t)

@@ -22,7 +22,10 @@ iterate for iterate, for three reasons:
 
 Iterations, reasons and tolerances follow SNES: an iteration is one linear solve and update;
 converged when ‖F‖ ≤ ``atol`` or ‖F‖ ≤ ``rtol`` ‖F₀‖; ``DIVERGED_MAX_IT`` after ``max_it``
-iterations. A residual that cannot be evaluated (a bar collapsed, a law failed) makes the line
+iterations. A third test, not SNES's, is ``node_atol``: converged when no unknown carries an
+out-of-balance force above it, ‖F‖∞ ≤ ``node_atol`` (``CONVERGED_FNORM_NODE``). Unlike the
+2-norm it does not tighten as the mesh is refined (issue 17: the forming cases use 1e-3 N).
+A residual that cannot be evaluated (a bar collapsed, a law failed) makes the line
 search back off, or fails the solve (``DIVERGED_FNORM_NAN``) at the starting point.
 """
 
@@ -162,6 +165,7 @@ class Newton:
         linear: The :class:`LinearSolver`.
         F: Work vector for the residual (the layout of ``x``); holds F at the last iterate.
         atol, rtol, max_it: Convergence test (see the module docstring).
+        node_atol: Largest out-of-balance force of any unknown at convergence (0: unused).
         line_search: One of :data:`LINE_SEARCHES`.
         monitor: Called with an :class:`Iterate` at the start and after every iteration,
             when the problem's state is that of the iterate.
@@ -169,14 +173,15 @@ class Newton:
 
     def __init__(self, residual: Callable[[PETSc.Vec, PETSc.Vec], bool],
                  jacobian: Callable[[PETSc.Vec, bool], None], linear: LinearSolver, F: PETSc.Vec,
-                 *, atol: float, rtol: float, max_it: int, line_search: str = "full-l2",
-                 monitor: Callable[[Iterate], None] | None = None):
+                 *, atol: float, rtol: float, max_it: int, node_atol: float = 0.0,
+                 line_search: str = "full-l2", monitor: Callable[[Iterate], None] | None = None):
         if line_search not in LINE_SEARCHES:
             raise ValueError(f"line search {line_search!r}: choose from "
                              f"{', '.join(LINE_SEARCHES)}")
         self.residual, self.jacobian, self.linear = residual, jacobian, linear
         self.F = F
         self.atol, self.rtol, self.max_it = float(atol), float(rtol), int(max_it)
+        self.node_atol = float(node_atol)
         self.line_search = line_search
         self.monitor = monitor
         self._d = F.duplicate()
@@ -304,6 +309,9 @@ class Newton:
                 return result
             if f <= self.rtol * f0:
                 result.converged, result.reason = True, "CONVERGED_FNORM_RELATIVE"
+                return result
+            if self.node_atol and F.norm(PETSc.NormType.INFINITY) <= self.node_atol:
+                result.converged, result.reason = True, "CONVERGED_FNORM_NODE"
                 return result
             if result.iterations >= self.max_it:
                 result.reason = "DIVERGED_MAX_IT"

@@ -90,6 +90,9 @@ class SolverOptions:
     drag_N_per_mm: float = 0.0  # pseudo-viscous drag c (u - u_n) per node: numerical damping
     snes_atol: float = 1e-8  # absolute residual tolerance (N)
     snes_rtol: float = 1e-9  # relative residual tolerance
+    # Converged also when no unknown carries an out-of-balance force above this (N; 0: off);
+    # fe/newton.py. Unlike snes_atol it does not tighten as the mesh is refined.
+    node_atol_N: float = 0.0
     snes_max_it: int = 25  # Newton iterations before a step is cut back
     line_search: str = "full-l2"  # full-l2, l2, bt, basic: fe/newton.py
     linear_solver: str = "mumps"  # LU factorisation package (mumps, superlu_dist, petsc)
@@ -113,7 +116,7 @@ class SolverOptions:
             raise DrapeInputError(f"solver option max_krylov = {self.max_krylov!r} must be an "
                                   "integer >= 0")
         for name in ("edge_tow_factor", "buckled_tow_stiffness_N", "tow_bending_EI_Nmm2",
-                     "drag_N_per_mm"):
+                     "drag_N_per_mm", "node_atol_N"):
             if not getattr(self, name) >= 0:
                 raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be "
                                       ">= 0")
@@ -303,7 +306,8 @@ class TrussProblem:
                                    max_krylov=opts.max_krylov)
         self.newton = Newton(self._residual, self._jacobian, self.linear, self._b,
                              atol=opts.snes_atol, rtol=opts.snes_rtol, max_it=opts.snes_max_it,
-                             line_search=opts.line_search, monitor=self._monitor)
+                             node_atol=opts.node_atol_N, line_search=opts.line_search,
+                             monitor=self._monitor)
 
     def _monitor(self, iterate: Iterate) -> None:
         if self.monitor is not None:

@@ -15,8 +15,9 @@ is the paper's hemisphere on top of it. The terms of the model, for any case:
   along the nearest tool's normal.
 
 Load steps move the fastest tool ``step_mm``; a step whose Newton solve fails is halved, and
-steps grow back (×1.5, up to ``step_mm``) after solves of at most 15 iterations. The solver's
-residual tolerance is 1e-6 N (forces on a node are 0.01-1 N). The Jacobian is symmetric unless
+steps grow back (×1.5, up to ``step_mm``) after solves of at most 15 iterations. A step has
+converged when ‖F‖ ≤ 1e-6 N or no node carries more than :data:`NODE_ATOL_N` out of balance
+(forces on a node are 0.01-1 N). The Jacobian is symmetric unless
 tool friction or the shear-tension coupling acts or the holder's surface is curved: it is then
 factored with MUMPS's symmetric LDLᵀ (about 20 % less time than LU).
 """
@@ -37,6 +38,15 @@ from fenicsx_drape.forming.post import FormedGrid
 from fenicsx_drape.forming.stabilisation import ExtrapolationSpring
 
 CONTACT_ROLES = ("punch", "die", "surface")
+
+NODE_ATOL_N = 1e-3
+"""A step has converged when no node carries an out-of-balance force above this (N).
+
+Issue 17: the 2-norm test ‖F‖ ≤ 1e-6 N alone spent about one Newton iteration per step
+polishing an equilibrium that no longer moved: on the hemisphere at Δ = 10, 5 and 2.5 mm
+(quarter) stopping at 1e-3 N per node moves no node by more than 1e-4 mm. Holder friction puts
+F μ / n_s ≥ 0.008 N on a node even on the full 2.5 mm sheet, eight times this.
+"""
 
 
 @dataclasses.dataclass
@@ -124,7 +134,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
         # about 20 % less time.
         flat = holder_surface is None or bool(getattr(holder_surface, "flat", False))
         symmetric = μ_t == 0.0 and "shear_tension_coupling" not in model.effects and flat
-        options = SolverOptions(snes_atol=1e-6,
+        options = SolverOptions(snes_atol=1e-6, node_atol_N=NODE_ATOL_N,
                                 petsc_options={"pc_type": "cholesky"} if symmetric else {})
     comm = comm or MPI.COMM_WORLD
     start = time.perf_counter()
