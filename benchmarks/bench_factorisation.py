@@ -33,6 +33,10 @@ ORDERINGS = {  # name: MUMPS options (ICNTL(7) sequential, ICNTL(28)/(29) parall
     "SCOTCH": {"mat_mumps_icntl_7": 3},
     "PT-Scotch": {"mat_mumps_icntl_28": 2, "mat_mumps_icntl_29": 1},
     "ParMETIS": {"mat_mumps_icntl_28": 2, "mat_mumps_icntl_29": 2},
+    # Symmetric LDLᵀ without threshold pivoting (CNTL(1) = 0): the Jacobian is positive
+    # definite on the forming runs once the geometric stiffness is limited.
+    "PORD nopiv": {"mat_mumps_icntl_7": 4, "mat_mumps_cntl_1": 0.0},
+    "AMF nopiv": {"mat_mumps_icntl_7": 2, "mat_mumps_cntl_1": 0.0},
     # PETSc's own sequential factorisations with its nested dissection (one rank only).
     "PETSc nd": {"pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "nd"},
     "PETSc rcm": {"pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "rcm"},
