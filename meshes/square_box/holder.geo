@@ -1,11 +1,11 @@
 // The square box's blank holder: the plane z = 0 outside a rounded-square opening
 // (opening_mm x opening_mm, corner radius corner_mm) around the punch (square_box.py: a 100 mm
-// square with 20 mm corners, 5 mm foot radius), 15 mm clear of its wall all round (the corner
+// square with 20 mm corners, 5 mm foot radius), 20 mm clear of its wall all round (the corner
 // radius concentric with the punch's), out beyond the blank. A node is under the holder when
 // its closest point is not on the plate's edges.
 DefineConstant[
-  opening_mm = 130.0,
-  corner_mm = 35.0,
+  opening_mm = 140.0,
+  corner_mm = 40.0,
   outer_mm = 280.0,
   mesh_mm = 5.0
 ];
