@@ -11,6 +11,20 @@ lifted by clearance + ply): every convex radius grows by it, the concave foot ra
 """
 
 
+def _edges(gmsh, volume):
+    """The curves of a volume, each with its bounding box (x0, y0, z0, x1, y1, z1)."""
+    faces = gmsh.model.getBoundary([(3, volume)], combined=False)
+    curves = {t for _, t in gmsh.model.getBoundary(faces, combined=False, oriented=False)}
+    return [(t, gmsh.model.getBoundingBox(1, t)) for t in sorted(curves)]
+
+
+def _level_edges(gmsh, volume, z, half_side):
+    """The horizontal curves at height z within |x|, |y| ≤ half_side (the box's rim)."""
+    return [t for t, (x0, y0, z0, x1, y1, z1) in _edges(gmsh, volume)
+            if max(abs(x0), abs(x1), abs(y0), abs(y1)) < half_side + 1e-3
+            and abs(z0 - z) < 1e-3 and abs(z1 - z) < 1e-3]
+
+
 def build(gmsh, half_side_mm=50.0, corner_radius_mm=20.0, fillet_radius_mm=15.0,
           foot_radius_mm=5.0, depth_mm=30.0, half_extent_mm=135.0, z_base_mm=0.0,
           offset_mm=0.0):
@@ -29,57 +43,31 @@ def build(gmsh, half_side_mm=50.0, corner_radius_mm=20.0, fillet_radius_mm=15.0,
     """
     occ = gmsh.model.occ
     o = float(offset_mm)
-    a, rc, rb, rf = half_side_mm + o, corner_radius_mm + o, fillet_radius_mm + o, \
-        foot_radius_mm - o
-    z0 = z_base_mm + o
+    a, rc, rb, rf = (half_side_mm + o, corner_radius_mm + o, fillet_radius_mm + o,
+                     foot_radius_mm - o)
+    z0, z1 = z_base_mm + o, z_base_mm + o + depth_mm
     plate_mm = 5.0  # thickness of the base plate: only its top face is kept
     plate = occ.addBox(-half_extent_mm, -half_extent_mm, z0 - plate_mm, 2 * half_extent_mm,
                        2 * half_extent_mm, plate_mm)
     box = occ.addBox(-a, -a, z0 - plate_mm, 2 * a, 2 * a, depth_mm + plate_mm)
     occ.synchronize()
-    # The four vertical edges of the box: curves whose ends differ only in z.
-    edges = {t for _, t in gmsh.model.getBoundary(
-        gmsh.model.getBoundary([(3, box)], combined=False), combined=False, oriented=False)}
-    vertical = []
-    for t in edges:
-        x0, y0, zz0, x1, y1, zz1 = gmsh.model.getBoundingBox(1, t)
-        if abs(x1 - x0) < 1e-6 and abs(y1 - y0) < 1e-6:
-            vertical.append(t)
+    vertical = [t for t, (x0, y0, _, x1, y1, _) in _edges(gmsh, box)
+                if abs(x1 - x0) < 1e-6 and abs(y1 - y0) < 1e-6]
     box = occ.fillet([box], vertical, [rc])[0][1]
-    solid, _ = occ.fuse([(3, plate)], [(3, box)])
+    (solid, *_), _ = occ.fuse([(3, plate)], [(3, box)])
     occ.synchronize()
-    vol = solid[0][1]
-    # Round the box's top edges (convex, at z0 + depth), then the foot (concave, at z0).
-    top = []
-    edges = {t for _, t in gmsh.model.getBoundary(
-        gmsh.model.getBoundary([(3, vol)], combined=False), combined=False, oriented=False)}
-    for t in edges:
-        x0, y0, zz0, x1, y1, zz1 = gmsh.model.getBoundingBox(1, t)
-        inner = max(abs(x0), abs(x1), abs(y0), abs(y1)) < a + 1e-3
-        if inner and abs(zz0 - (z0 + depth_mm)) < 1e-3 and abs(zz1 - zz0) < 1e-3:
-            top.append(t)
-    out = occ.fillet([vol], top, [rb])
-    vol = out[0][1]
+    vol = occ.fillet([solid[1]], _level_edges(gmsh, solid[1], z1, a), [rb])[0][1]
     if rf > 0:
         occ.synchronize()
-        edges = {t for _, t in gmsh.model.getBoundary(
-            gmsh.model.getBoundary([(3, vol)], combined=False), combined=False,
-            oriented=False)}
-        foot = []
-        for t in edges:
-            x0, y0, zz0, x1, y1, zz1 = gmsh.model.getBoundingBox(1, t)
-            inner = max(abs(x0), abs(x1), abs(y0), abs(y1)) < a + 1e-3
-            if inner and abs(zz0 - z0) < 1e-3 and abs(zz1 - zz0) < 1e-3:
-                foot.append(t)
-        vol = occ.fillet([vol], foot, [rf])[0][1]
+        vol = occ.fillet([vol], _level_edges(gmsh, vol, z0, a), [rf])[0][1]
     occ.synchronize()
     # Keep the faces the sheet can touch: all but the plate's bottom and its four sides.
-    faces = [t for _, t in gmsh.model.getBoundary([(3, vol)], combined=False, oriented=False)]
     drop = []
-    for t in faces:
+    for _, t in gmsh.model.getBoundary([(3, vol)], combined=False, oriented=False):
         x0, y0, zz0, x1, y1, zz1 = gmsh.model.getBoundingBox(2, t)
-        if zz1 < z0 - 1e-3 or max(abs(x0), abs(x1), abs(y0), abs(y1)) > half_extent_mm - 1e-3 \
-                and zz1 - zz0 > 1e-3:
+        side = max(abs(x0), abs(x1), abs(y0), abs(y1)) > half_extent_mm - 1e-3 \
+            and zz1 - zz0 > 1e-3
+        if zz1 < z0 - 1e-3 or side:
             drop.append(t)
     occ.remove([(3, vol)])
     occ.remove([(2, t) for t in drop], recursive=True)
