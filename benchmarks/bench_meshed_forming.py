@@ -1,14 +1,14 @@
 """Speed of the meshed hemisphere against the closed form (issue 13), and contact's share.
 
 Forms the quarter of ``meshes/hemisphere/case.toml`` (closed-form tools) and of
-``case_meshed.toml`` (punch, die and holder meshed from Gmsh, 2 mm second order) at each Δ,
-with the tools built beforehand (the distance fields read from the warm cache: run it twice,
-or once before, for a cold cache builds them), the fastest of ``--repeat`` runs, and prints per run: wall time, steps, Newton
-iterations, time per Newton iteration, and the share of the run spent in the tools' ``gap``
-and ``covers`` (contact search and evaluation: the distance field's spline, the closest-point
-search of the holder) and in the nodal contact and holder terms altogether (their forces,
-Jacobians, predictor and the stabilisation's normals, which call ``gap`` too). Prints, no
-assertions::
+``case_meshed.toml`` (tools meshed from Gmsh) at each Δ, with the tools built beforehand (the
+distance fields read from the warm cache: a cold cache builds them on the first run), the
+fastest of ``--repeat`` runs (the machine may be shared), and prints per run: wall time,
+steps, cut-backs, Newton iterations, time per iteration, and two shares of the wall time: in
+the tools' ``gap`` and ``covers`` (contact search and evaluation, for every caller: contact,
+holder, predictor, the stabilisation's normals) and in the nodal contact and holder terms
+(``PenaltyContact.forces``/``project``, ``BlankHolder.forces``/``commit``: gap, forces,
+Jacobians, friction bars). Prints, no assertions::
 
     ./drape exec python3 benchmarks/bench_meshed_forming.py [--cells 10 5]
 """
