@@ -61,10 +61,25 @@ def test_a_plane_is_exact_with_zero_curvature():
 
 def test_beyond_an_open_surface_s_edge_is_outside():
     f = build_field(plate(half=20.0), 1.0, 5.0)
-    # Below the plate's edge, off to the side: closest to the edge, counted outside.
-    X = np.array([[23.0, 0.0, -1.0], [21.0, 5.0, -2.0], [0.0, 0.0, -2.0]])  # grid points
-    np.testing.assert_allclose(f.samples(X), [np.hypot(3, 1), np.hypot(1, 2), -2.0],
+    # Below the plate's edge, 3 h off to the side: closest to the edge, counted outside.
+    X = np.array([[23.0, 0.0, -1.0], [24.0, 5.0, -2.0], [0.0, 0.0, -2.0]])  # grid points
+    np.testing.assert_allclose(f.samples(X), [np.hypot(3, 1), np.hypot(4, 2), -2.0],
                                atol=1e-5)
+
+
+def test_a_plate_s_plane_continues_just_beyond_its_edge():
+    """Within 2.5 h beyond an open edge the samples are the distance to the plate's plane, so
+    the spline of a point on the plate up to its edge is the plane's gap exactly (a holder's
+    opening: the meshed hemisphere stalled on the false round the edge distance made)."""
+    f = build_field(plate(half=20.0), 1.0, 5.0)
+    X = np.array([[21.0, 0.0, -1.0], [22.0, 5.0, 2.0], [22.0, -3.0, -2.0]])
+    np.testing.assert_allclose(f.samples(X), [-1.0, 2.0, -2.0], atol=1e-5)
+    x = np.column_stack([np.linspace(15.0, 20.0, 50), np.linspace(-19.0, 19.0, 50),
+                         np.linspace(-0.5, 0.5, 50)])
+    phi, grad, hess = f.evaluate(x)
+    np.testing.assert_allclose(phi, x[:, 2], atol=1e-5)
+    np.testing.assert_allclose(grad, np.tile([0.0, 0.0, 1.0], (50, 1)), atol=1e-5)
+    assert np.abs(hess).max() < 1e-4
 
 
 def test_sphere_values_normals_and_curvature(sphere):

@@ -66,9 +66,20 @@ edge round). This is 5-10 times faster than the exact search for every sample.
 **Sign.** The sign of a sample is that of (x − q)·N with q its closest surface point and N the
 angle-weighted pseudo-normal of the feature q lies on (Bærentzen & Aanæs 2005: correct for
 any closed, consistently oriented triangle mesh); beyond the boundary of an open surface
-(closest feature on a boundary edge) samples count as outside, so the plane of a holder's
-plate continues as "outside" across its opening and a punch's open rim adds no spurious
-inside region near the sheet (:mod:`~fenicsx_drape.forming.surfaces`).
+(closest feature on a boundary edge, farther than 2.5 h) samples count as outside, so a
+holder's opening is "outside" and a punch's open rim adds no spurious inside region near the
+sheet (:mod:`~fenicsx_drape.forming.surfaces`).
+
+**Open edges.** Within 2.5 h beyond the boundary of an open surface the samples are the
+signed distance to the plane of the closest triangle (the surface continued straight across
+its edge), farther out the distance to the edge counted outside. The spline of a point on the
+surface within 2h of its edge reads samples beyond it: with the distance to the edge (which is
+positive above and below the surface) a plane's gap became a false round there, φ > 0 and a
+tilted normal and ~1/h curvature on the plane itself. On the hemisphere's meshed holder this
+held the nodes just outside its 170 mm opening on that round and the quarter stalled at
+64 mm of travel (DIVERGED_MAX_IT from 38 mm on); with the plane continued, the holder's gap is
+exactly z up to its edge (a spline reproduces linear functions) and the run matches the
+closed form (README, "Forming cases").
 
 **Cache.** The hemisphere's punch at h = 1 mm (2 mm second-order mesh) has a 185 × 185 × 107
 grid with 0.6 M band samples, built in about 10 s (19 MB; peak memory of the build 270 MB).
@@ -93,7 +104,11 @@ import numpy as np
 from fenicsx_drape.errors import ParameterError
 
 #: Bump when the construction changes: cached grids of older versions are not read.
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+
+#: How far (in grid spacings) beyond an open edge the surface's plane continues: the spline's
+#: support (2h) and a margin.
+EDGE_EXTENSION = 2.5
 
 
 def cache_folder() -> Path:
@@ -189,7 +204,10 @@ class DistanceField:
             return phi, grad, hess
         n_live = len(idx)
         C = np.take(self._flat, base[:, None] + self._offsets).astype(float)
-        wx, wy, wz = _weights(frac[:, 0]), _weights(frac[:, 1]), _weights(frac[:, 2])
+        # One call for the three axes: at the sheet's few hundred nodes per call the cost is
+        # NumPy's per-call overhead, not arithmetic.
+        w = _weights(frac.ravel()).reshape(n_live, 3, 4, 3)
+        wx, wy, wz = w[:, 0], w[:, 1], w[:, 2]
         K = order + 1  # derivative orders 0 … order along each axis
         # Contract z, then y, then x with small batched products (einsum is slower here).
         Cz = np.matmul(C.reshape(n_live, 16, 4), wz[:, :, :K])  # [n, (x, y), dz]
@@ -351,8 +369,17 @@ def build_field(surface, h: float, band_mm: float) -> DistanceField:
     N, on_boundary = surface._feature_normals(best_t, region)
     side = np.einsum("ij,ij->i", X - q, N)
     d = np.sqrt(best)
+    phi = np.where(on_boundary | (side >= 0.0), d, -d)
+    # Just beyond an open edge the surface continues along its last triangle: the spline of a
+    # node on the surface near its edge reads samples up to 2h beyond it, and the Euclidean
+    # distance to the edge there (positive on both sides) bends the holder's plane at its
+    # opening into a false round (the meshed hemisphere's stall: docstring, "Open edges").
+    along = np.einsum("ij,ij->i", X - q, surface.face_normals[best_t])
+    across = np.sqrt(np.maximum(best - along * along, 0.0))
+    extend = on_boundary & (across <= EDGE_EXTENSION * h)
+    phi[extend] = along[extend]
     values = np.empty(tuple(shape), dtype=np.float32)
-    values.flat[idx] = np.clip(np.where(on_boundary | (side >= 0.0), d, -d), -band_mm, band_mm)
+    values.flat[idx] = np.clip(phi, -band_mm, band_mm)
     del X, q, N
     # Beyond the band: ±band with the sign of the nearest band point.
     nearest = distance_transform_edt(~band, return_distances=False, return_indices=True)

@@ -367,10 +367,25 @@ class MeshedTool:
         self.surface = surface
         self.motion = motion if motion is not None else RigidMotion.fixed()
         self.field = distance_field(surface, spacing_mm, band_mm, cache=cache, comm=comm)
+        self._flat: bool | None = None
 
     def __repr__(self) -> str:
         return (f"MeshedTool({self.name!r}, {self.surface!r}, h = {self.field.h:g} mm, "
                 f"band = {self.field.band_mm:g} mm)")
+
+    @property
+    def flat(self) -> bool:
+        """Whether the surface is a plane (then a holder on it has a symmetric stiffness).
+
+        A flat clamping surface is solved as the closed-form plate is (symmetric LDLᵀ,
+        :func:`~fenicsx_drape.forming.run.run_case`); its field is then linear up to the
+        float32 rounding of the coefficients (open edges continued, ``forming.distance``).
+        """
+        if self._flat is None:
+            nf = self.surface.face_normals
+            nf = nf[np.linalg.norm(nf, axis=1) > 0.5]
+            self._flat = bool(len(nf)) and bool(np.all(nf @ nf[0] > 1.0 - 1e-9))
+        return self._flat
 
     def gap(self, x: np.ndarray, t: float) -> Gap:
         """Signed gap, normal and curvature at the positions ``x`` (n, 3) in mm at time ``t``."""
