@@ -11,6 +11,7 @@ holder, predictor, the stabilisation's normals) and in the nodal contact and hol
 Jacobians, friction bars). Prints, no assertions::
 
     ./drape exec python3 benchmarks/bench_meshed_forming.py [--cells 10 5]
+    ./drape exec python3 benchmarks/bench_meshed_forming.py --cells 2.5 --full --repeat 1
 """
 
 import argparse
@@ -55,9 +56,9 @@ for cls, names in ((PenaltyContact, ("forces", "project")), (BlankHolder, ("forc
         setattr(cls, name, timed(getattr(cls, name), "terms"))
 
 
-def form(name: str, cell_mm: float):
+def form(name: str, cell_mm: float, full: bool = False):
     """One run with its tools' gap/covers timed; (run, seconds in tools, seconds in terms)."""
-    case = load_case(HERE / name, cell_mm=cell_mm)
+    case = load_case(HERE / name, cell_mm=cell_mm, **({"symmetry": []} if full else {}))
     tools = build_tools(case)
     for tool in tools.values():
         for method in ("gap", "covers"):
@@ -72,6 +73,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--cells", type=float, nargs="+", default=[10.0, 5.0])
     parser.add_argument("--repeat", type=int, default=3, help="runs per case; the fastest")
+    parser.add_argument("--full", action="store_true", help="the whole sheet (else a quarter)")
     args = parser.parse_args()
     print("case            Δ (mm)  wall (s)  steps  cut  Newton  ms/iter  gap+covers  "
           "contact terms  max shear")
@@ -79,7 +81,7 @@ def main() -> None:
         walls = {}
         for name in ("case.toml", "case_meshed.toml"):
             # The fastest of a few runs: the machine is shared, the slower runs are noise.
-            run, t_tools, t_terms = min((form(name, cell) for _ in range(args.repeat)),
+            run, t_tools, t_terms = min((form(name, cell, args.full) for _ in range(args.repeat)),
                                         key=lambda r: r[0].wall_time_s)
             walls[name] = run.wall_time_s
             shear = float(np.nanmax(np.abs(run.grid.shear_deg())))
