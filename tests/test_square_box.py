@@ -100,15 +100,3 @@ def test_the_square_box_is_symmetric_about_the_diagonal(quarter):
     assert abs(i - j) <= 1
     assert np.nanmax(np.abs(γ)) > 20.0
     assert np.nanmax(np.abs(γ[0, :])) < 5.0 and np.nanmax(np.abs(γ[:, 0])) < 5.0
-
-
-@pytest.mark.parallel
-@pytest.mark.slow
-def test_serial_and_parallel_square_box_agree():
-    """The coarse quarter on meshed box tools on all ranks equals the run on one process."""
-    case = load_case(SQUARE_BOX, **COARSE)
-    parallel = run_case(case, comm=MPI.COMM_WORLD)
-    serial = run_case(case, comm=MPI.COMM_SELF)
-    assert parallel.stopped is None and serial.stopped is None
-    np.testing.assert_allclose(parallel.grid.x, serial.grid.x, atol=1e-3)
-    assert parallel.max_penetration_mm == pytest.approx(serial.max_penetration_mm, rel=1e-3)

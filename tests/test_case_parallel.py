@@ -1,0 +1,28 @@
+"""Forming cases on meshed tools: every rank count forms the same part (issue 13)."""
+
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("dolfinx")
+from mpi4py import MPI
+
+import numpy as np
+
+from fenicsx_drape.forming.case import load_case
+from fenicsx_drape.forming.run import run_case
+
+MESHES = Path(__file__).resolve().parents[1] / "meshes"
+
+
+@pytest.mark.parallel
+@pytest.mark.slow
+@pytest.mark.parametrize("case_file", ["double_dome/case.toml", "square_box/case.toml"])
+def test_serial_and_parallel_runs_agree(case_file):
+    """The coarse quarter on meshed tools on all ranks equals the run on one process."""
+    case = load_case(MESHES / case_file, cell_mm=20.0)
+    parallel = run_case(case, comm=MPI.COMM_WORLD)
+    serial = run_case(case, comm=MPI.COMM_SELF)
+    assert parallel.stopped is None and serial.stopped is None
+    np.testing.assert_allclose(parallel.grid.x, serial.grid.x, atol=1e-3)
+    assert parallel.max_penetration_mm == pytest.approx(serial.max_penetration_mm, rel=1e-3)
