@@ -37,6 +37,10 @@ ORDERINGS = {  # name: MUMPS options (ICNTL(7) sequential, ICNTL(28)/(29) parall
     # definite on the forming runs once the geometric stiffness is limited.
     "PORD nopiv": {"mat_mumps_icntl_7": 4, "mat_mumps_cntl_1": 0.0},
     "AMF nopiv": {"mat_mumps_icntl_7": 2, "mat_mumps_cntl_1": 0.0},
+    # Block low-rank factorisation (ICNTL(35) = 2) with dropping tolerance CNTL(7): the
+    # off-diagonal blocks of the fronts compressed to that relative accuracy.
+    "PORD BLR 1e-10": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_35": 2, "mat_mumps_cntl_7": 1e-10},
+    "PORD BLR 1e-6": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_35": 2, "mat_mumps_cntl_7": 1e-6},
     # PETSc's own sequential factorisations with its nested dissection (one rank only).
     "PETSc nd": {"pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "nd"},
     "PETSc rcm": {"pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "rcm"},

@@ -35,11 +35,14 @@ parser.add_argument("--max-krylov", type=int, default=0,
                     help="GMRES iterations on a reused factorisation (0: none)")
 parser.add_argument("--node-atol-N", type=float, default=None,
                     help=f"per-node force tolerance (N; default {NODE_ATOL_N}, 0: the 2-norm only)")
+parser.add_argument("--line-search", default=None, help="line search (fe/newton.py)")
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 
 options = {"snes_atol": 1e-6, "node_atol_N": NODE_ATOL_N,
            "petsc_options": {"pc_type": "cholesky"}, "max_krylov": args.max_krylov}
+if args.line_search is not None:
+    options["line_search"] = args.line_search
 if args.node_atol_N is not None:
     options["node_atol_N"] = args.node_atol_N
 if args.before:
