@@ -3,6 +3,7 @@
     ./drape exec python3 benchmarks/bench_factorisation.py                 # full sheet, 2.5 mm
     ./drape exec mpirun -n 2 python3 benchmarks/bench_factorisation.py
     ./drape exec python3 benchmarks/bench_factorisation.py --cell-mm 5 --icntl-4 2
+    ./drape exec python3 benchmarks/bench_factorisation.py --no-bending    # the truss pattern
 
 The Jacobian is the full sheet's after one half step of punch travel (the contact and the
 holder active). Every ordering factorises it once (analysis and factorisation), then three
@@ -41,6 +42,8 @@ ORDERINGS = {  # name: MUMPS options (ICNTL(7) sequential, ICNTL(28)/(29) parall
     # off-diagonal blocks of the fronts compressed to that relative accuracy.
     "PORD BLR 1e-10": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_35": 2, "mat_mumps_cntl_7": 1e-10},
     "PORD BLR 1e-6": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_35": 2, "mat_mumps_cntl_7": 1e-6},
+    # The root front factorised by one process instead of with ScaLAPACK (ICNTL(13) = 1).
+    "PORD root1": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_13": 1},
     # PETSc's own sequential factorisations with its nested dissection (one rank only).
     "PETSc nd": {"pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "nd"},
     "PETSc rcm": {"pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "rcm"},
@@ -51,6 +54,8 @@ ORDERINGS = {  # name: MUMPS options (ICNTL(7) sequential, ICNTL(28)/(29) parall
 parser = argparse.ArgumentParser()
 parser.add_argument("--cell-mm", type=float, default=2.5)
 parser.add_argument("--lu", action="store_true", help="LU instead of symmetric LDLᵀ")
+parser.add_argument("--no-bending", action="store_true",
+                    help="without the tow bending stencils (tow_bending_EI_Nmm2 = 0)")
 parser.add_argument("--icntl-4", type=int, default=0, help="MUMPS print level")
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
@@ -121,4 +126,5 @@ def one_step_then_study(self, duration_s, dt_s, **kwargs):
 
 
 fe_solver.TrussProblem.run = one_step_then_study
-run_hemisphere(HemisphereCase(cell_mm=args.cell_mm, quarter=False))
+options = fe_solver.SolverOptions(tow_bending_EI_Nmm2=0.0) if args.no_bending else None
+run_hemisphere(HemisphereCase(cell_mm=args.cell_mm, quarter=False), options=options)

@@ -176,3 +176,48 @@ def test_the_per_node_tolerance_stops_where_the_sheet_no_longer_moves():
     np.testing.assert_allclose(loose.grid.x, tight.grid.x, atol=1e-3)
     assert abs(np.abs(loose.grid.shear_deg()).max()
                - np.abs(tight.grid.shear_deg()).max()) < 0.01
+
+
+@pytest.mark.skip_in_parallel
+def test_a_full_step_that_lowers_the_residual_is_taken():
+    """F(x) = sign(x)|x|^0.6: each Newton step overshoots to −⅔ x and lowers |F| by 22 %.
+
+    ``full-l2`` takes it (issue 17: asking the full step to halve ‖F‖ sent such steps to the
+    parabola); ``l2`` (PETSc's parabola) does not, which shows the test can fail.
+    """
+    from petsc4py import PETSc
+
+    from fenicsx_drape.fe.newton import LinearSolver, Newton
+
+    p = 0.6
+
+    def residual(x, F):
+        v = x.getValue(0)
+        F.setValue(0, np.sign(v) * abs(v) ** p)
+        F.assemble()
+        return True
+
+    def run(line_search):
+        A = PETSc.Mat().createAIJ((1, 1), nnz=1, comm=MPI.COMM_SELF)
+        A.setUp()
+
+        def jacobian(x, local):
+            A.setValue(0, 0, p * abs(x.getValue(0)) ** (p - 1.0))
+            A.assemble()
+
+        x = PETSc.Vec().createSeq(1)
+        x.setValue(0, 1.0)
+        x.assemble()
+        seen = []
+        newton = Newton(residual, jacobian, LinearSolver(A, MPI.COMM_SELF, f"t_{line_search}_", {}),
+                        x.duplicate(), atol=1e-3, rtol=0.0, max_it=60, line_search=line_search,
+                        monitor=seen.append)
+        return newton.solve(x), seen
+
+    result, seen = run("full-l2")
+    assert result.converged
+    assert all(it.step_length == 1.0 for it in seen[1:])
+    ratios = [b.residual_norm / a.residual_norm for a, b in zip(seen, seen[1:])]
+    np.testing.assert_allclose(ratios, (2 / 3) ** p, rtol=1e-9)  # the full step, every time
+    _, seen = run("l2")
+    assert seen[1].step_length < 1.0
