@@ -1,5 +1,7 @@
 """Newton's method of the load steps (fe/newton.py, issue 17) on the hemisphere and a patch."""
 
+import itertools
+
 import pytest
 
 pytest.importorskip("dolfinx")
@@ -217,7 +219,7 @@ def test_a_full_step_that_lowers_the_residual_is_taken():
     result, seen = run("full-l2")
     assert result.converged
     assert all(it.step_length == 1.0 for it in seen[1:])
-    ratios = [b.residual_norm / a.residual_norm for a, b in zip(seen, seen[1:])]
+    ratios = [b.residual_norm / a.residual_norm for a, b in itertools.pairwise(seen)]
     np.testing.assert_allclose(ratios, (2 / 3) ** p, rtol=1e-9)  # the full step, every time
     _, seen = run("l2")
     assert seen[1].step_length < 1.0
