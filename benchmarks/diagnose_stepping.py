@@ -4,6 +4,7 @@
     ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 10 --before   # issue 17's
     ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 2.5 --full --json out.json
     ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 10 --show 73 74
+    ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 2.5 --along-step 78
 
 A monitor on every Newton iterate (:func:`fenicsx_drape.fe.solver.monitoring`) records
 
@@ -39,6 +40,7 @@ from mpi4py import MPI
 import numpy as np
 
 from fenicsx_drape.fe.grid import SYMMETRY_X, SYMMETRY_Y
+from fenicsx_drape.fe.newton import Newton
 from fenicsx_drape.fe.solver import SolverOptions, monitoring
 from fenicsx_drape.forming.contact import PenaltyContact
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
@@ -162,6 +164,46 @@ def show(probe: Probe, sw, steps, which) -> None:
             print(f"  {k:2d} |F| {it['fnorm']:9.2e}  λ {it['lam']:5.3f}  {changes:45s} {where}")
 
 
+def along_step(newton, x, problem) -> None:
+    """At the predictor ``x``: the exact Jacobian against central differences along the
+    Newton step d, ‖F(x + λd)‖ along it, how far d moves the nodes, and the tows' strains."""
+    F, G, H, d = (x.duplicate() for _ in range(4))
+    newton.residual(x, F)
+    newton.jacobian(x, True)
+    F.scale(-1.0)
+    newton.linear.solve(F, d)
+    F.scale(-1.0)
+    Jd = d.duplicate()
+    newton.linear.A.mult(d, Jd)
+    for ε in (1e-5, 1e-7):
+        for sign, V in ((1.0, G), (-1.0, H)):
+            y = x.copy()
+            y.axpy(sign * ε, d)
+            newton.residual(y, V)
+        G.axpy(-1.0, H)
+        G.scale(0.5 / ε)
+        G.axpy(-1.0, Jd)
+        print(f"  central difference (ε = {ε:g}) against J d: relative error "
+              f"{G.norm() / Jd.norm():.1e}")
+    along = []
+    for λ in (0.0, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0):
+        y = x.copy()
+        y.axpy(λ, d)
+        newton.residual(y, G)
+        along.append(f"{λ:g}: {G.norm():.3g}")
+    print("  ‖F(x + λd)‖ (N):", ", ".join(along))
+    n = problem.num_owned
+    moved = np.linalg.norm(d.array_r[: 3 * n].reshape(-1, 3), axis=1)
+    print(f"  the step moves {np.sum(moved > 0.1)} of {n} nodes by more than 0.1 mm "
+          f"(largest {moved.max():.2f} mm, median {np.median(moved):.3f} mm)")
+    points, _ = problem.state.groups["tow"]
+    ε_t = problem.state.strain.x.array[problem.state.dofs[points]]
+    slight = np.sum((ε_t < 0) & (ε_t > -0.01))
+    print(f"  tows: {np.sum(ε_t < 0)} of {len(ε_t)} compressed, {slight} of them by less "
+          "than 1 %")
+    newton.residual(x, F)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--cell-mm", type=float, default=10.0)
@@ -172,6 +214,9 @@ def main() -> None:
     parser.add_argument("--show", type=int, nargs="*", default=[],
                         help="print the iterates of these attempts (1-based)")
     parser.add_argument("--json", help="write the per-attempt records here")
+    parser.add_argument("--along-step", type=int, default=0,
+                        help="at the predictor of this attempt (1-based; one rank): the "
+                             "Jacobian against differences, ‖F‖ along the Newton step")
     parser.add_argument("--options", default="{}", help="SolverOptions fields as JSON")
     args = parser.parse_args()
     comm = MPI.COMM_WORLD
@@ -187,6 +232,16 @@ def main() -> None:
             return x - np.minimum(g.phi, 0.0)[:, None] * g.normal
 
         PenaltyContact.project = project
+    if args.along_step:
+        solve, attempts = Newton.solve, itertools.count(1)
+
+        def solve_and_look(self, x):
+            if next(attempts) == args.along_step:
+                print(f"attempt {args.along_step}, at the predictor:")
+                along_step(self, x, self.residual.__self__)
+            return solve(self, x)
+
+        Newton.solve = solve_and_look
     probe = Probe()
     start = time.perf_counter()
     with monitoring(probe):
