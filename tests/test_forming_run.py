@@ -207,3 +207,24 @@ def test_a_tool_given_in_python_moves_by_its_motion_table():
     assert run.steps >= travel / case.step_mm
     np.testing.assert_allclose(run.grid.x[0, 0], [0.0, 0.0, travel], atol=0.05)
     assert run.max_penetration_mm < 0.1
+
+
+@pytest.mark.skip_in_parallel
+def test_a_punch_that_never_reaches_the_blank_is_reported():
+    """A punch started 100 mm too low passes under the blank: the run says so."""
+    from fenicsx_drape.forming.case import build_tools
+
+    case = load_case(HEMISPHERE, **COARSE)
+    punch = build_tools(case)["punch"]
+    low = dataclasses.replace(punch, z0_mm=punch.z0_mm - 100.0)
+    with pytest.warns(UserWarning, match="no node of the blank touched 'punch', 'die'"):
+        run = run_case(case, tools={"punch": low}, comm=MPI.COMM_SELF)
+    assert run.travel_mm == pytest.approx(80.0)
+    assert np.abs(run.grid.x - run.grid.X)[..., 2].max() < 0.01  # the sheet stayed flat
+
+
+@pytest.mark.skip_in_parallel
+def test_a_run_that_forms_the_blank_does_not_warn(recwarn):
+    run = run_case(load_case(HEMISPHERE, **COARSE), comm=MPI.COMM_SELF)
+    assert run.max_penetration_mm > 0.0
+    assert not [w for w in recwarn if "touched" in str(w.message)]

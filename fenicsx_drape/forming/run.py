@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from collections.abc import Callable, Mapping
 
 import numpy as np
@@ -169,15 +170,30 @@ def run_case(case: FormingCase, model=None, options=None, *,
             progress(f"step {len(problem.steps):4d}  t = {step.time_s:7.3f} s  travel = "
                      f"{travel:6.2f} mm  Newton {step.iterations:2d}  {state}")
 
+    touched = False  # whether a node ever touched a punch, die or surface
+
+    def after_step(problem) -> None:
+        nonlocal touched
+        if not touched:
+            x = problem.positions()[: problem.num_owned]
+            touched = any(bool(np.any(c.tool.gap(x, problem.t).phi < 0.0)) for c in contact)
+        if on_step is not None:
+            on_step(problem)
+
     dt = case.step_mm / case.max_speed_mm_per_s
     stopped = None
     try:
         problem.run(case.duration_s, dt, dt_max_s=dt, easy_iterations=15, progress=report,
-                    on_step=on_step)
+                    on_step=after_step)
     except SolverError as error:
         if not allow_incomplete:
             raise
         stopped = str(error)
+    if contact and not comm.allreduce(touched, op=MPI.LOR):
+        names = ", ".join(repr(t.name) for t in case.tools if t.role in CONTACT_ROLES)
+        warnings.warn(f"case {case.name!r}: no node of the blank touched {names} in "
+                      f"{case.travel_mm(problem.t):g} mm of travel; check the tools' start "
+                      "positions and motions", stacklevel=2)
     res = problem.results()
     both = planes == ("x", "y")
     formed = FormedGrid(res.X, res.x, both, None if both or not planes else planes)
