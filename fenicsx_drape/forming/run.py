@@ -189,7 +189,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
         if not allow_incomplete:
             raise
         stopped = str(error)
-    if contact and not comm.allreduce(touched, op=MPI.LOR):
+    if contact and stopped is None and not comm.allreduce(touched, op=MPI.LOR):
         names = ", ".join(repr(t.name) for t in case.tools if t.role in CONTACT_ROLES)
         warnings.warn(f"case {case.name!r}: no node of the blank touched {names} in "
                       f"{case.travel_mm(problem.t):g} mm of travel; check the tools' start "
