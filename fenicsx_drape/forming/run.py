@@ -88,6 +88,22 @@ def case_model(case: FormingCase):
     return load_model(case.model) if case.model is not None else default_model()
 
 
+def forming_options(model, *, flat_holder: bool = True, **changes):
+    """The forming cases' solver options, with ``changes`` (SolverOptions fields).
+
+    Residual tolerances of 1e-6 N (2-norm) and :data:`NODE_ATOL_N` per node. The Jacobian is
+    symmetric unless tool friction, the shear-tension coupling or a curved clamping surface
+    (``flat_holder`` False) acts: it is then factorised with MUMPS's symmetric indefinite
+    LDLᵀ, about 20 % less time than LU.
+    """
+    from fenicsx_drape.fe.solver import SolverOptions
+
+    μ_t = float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
+    symmetric = μ_t == 0.0 and "shear_tension_coupling" not in model.effects and flat_holder
+    return SolverOptions(snes_atol=1e-6, node_atol_N=NODE_ATOL_N,
+                         petsc_options={"pc_type": "cholesky"} if symmetric else {}, **changes)
+
+
 def run_case(case: FormingCase, model=None, options=None, *,
              tools: Mapping[str, object] | None = None,
              progress: Callable[[str], None] | None = None,
@@ -115,7 +131,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
     from mpi4py import MPI
 
     from fenicsx_drape.fe.mesh import grid_to_sheet
-    from fenicsx_drape.fe.solver import SolverOptions, TrussProblem
+    from fenicsx_drape.fe.solver import TrussProblem
     from fenicsx_drape.fe.stepping import RunReport
 
     model = model or case_model(case)
@@ -130,13 +146,8 @@ def run_case(case: FormingCase, model=None, options=None, *,
     holder_surface = built[case.holder.tool] if case.holder is not None else None
     μ_t = float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
     if options is None:
-        # The Jacobian is symmetric unless tool friction, the shear-tension coupling or a
-        # curved clamping surface acts: a symmetric (indefinite LDLᵀ) factorisation then costs
-        # about 20 % less time.
         flat = holder_surface is None or bool(getattr(holder_surface, "flat", False))
-        symmetric = μ_t == 0.0 and "shear_tension_coupling" not in model.effects and flat
-        options = SolverOptions(snes_atol=1e-6, node_atol_N=NODE_ATOL_N,
-                                petsc_options={"pc_type": "cholesky"} if symmetric else {})
+        options = forming_options(model, flat_holder=flat)
     comm = comm or MPI.COMM_WORLD
     start = time.perf_counter()
     planes = case.planes

@@ -90,19 +90,12 @@ def default_options(model=None, **changes):
     """The hemisphere's default solver options with ``changes`` (e.g. ``tow_bending_EI_Nmm2``).
 
     As :func:`~fenicsx_drape.forming.hemisphere.run_hemisphere` builds them when given none:
-    residual tolerances of 1e-6 N (2-norm) and ``NODE_ATOL_N`` per node, and a symmetric
-    (Cholesky/LDLᵀ) factorisation unless tool friction or the shear-tension coupling makes the
-    Jacobian unsymmetric.
+    :func:`~fenicsx_drape.forming.run.forming_options` for the hemisphere's flat holder.
     """
-    from fenicsx_drape.fe.solver import SolverOptions
-    from fenicsx_drape.forming.run import NODE_ATOL_N
+    from fenicsx_drape.forming.run import forming_options
     from fenicsx_drape.model import default_model
 
-    model = model or default_model()
-    μ_t = float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
-    symmetric = μ_t == 0.0 and "shear_tension_coupling" not in model.effects
-    return SolverOptions(snes_atol=1e-6, node_atol_N=NODE_ATOL_N,
-                         petsc_options={"pc_type": "cholesky"} if symmetric else {}, **changes)
+    return forming_options(model or default_model(), **changes)
 
 
 def _bars(q: FormedGrid, strains):
