@@ -9,7 +9,6 @@ from mpi4py import MPI
 
 import numpy as np
 
-from fenicsx_drape.fe.solver import SolverOptions
 from fenicsx_drape.forming.case import load_case
 from fenicsx_drape.forming.run import run_case
 
@@ -19,15 +18,11 @@ MESHES = Path(__file__).resolve().parents[1] / "meshes"
 @pytest.mark.parallel
 @pytest.mark.slow
 @pytest.mark.parametrize("case_file", ["double_dome/case.toml", "square_box/case.toml"])
-def test_serial_and_parallel_runs_agree(case_file):
+def test_serial_and_parallel_runs_agree(case_file, tight_solver):
     """The coarse quarter on meshed tools on all ranks equals the run on one process."""
     case = load_case(MESHES / case_file, cell_mm=20.0)
-    # At the forming tolerance (1e-3 N per node) a solve stops anywhere in a ball of about
-    # 2e-3 mm around the equilibrium, and round-off picks the iterates that get there (issue
-    # 17: 1.3e-4 to 1.9e-3 mm over four 3-rank runs); at 1e-5 N the ranks agree to 1e-7 mm.
-    tight = SolverOptions(snes_atol=1e-8, node_atol_N=1e-5)
-    parallel = run_case(case, options=tight, comm=MPI.COMM_WORLD)
-    serial = run_case(case, options=tight, comm=MPI.COMM_SELF)
+    parallel = run_case(case, options=tight_solver, comm=MPI.COMM_WORLD)
+    serial = run_case(case, options=tight_solver, comm=MPI.COMM_SELF)
     assert parallel.stopped is None and serial.stopped is None
     np.testing.assert_allclose(parallel.grid.x, serial.grid.x, atol=1e-5)
     assert parallel.max_penetration_mm == pytest.approx(serial.max_penetration_mm, rel=1e-3)

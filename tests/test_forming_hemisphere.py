@@ -134,15 +134,11 @@ def test_formed_quarter_zero_shear_at_apex_and_wrinkling_on_the_tow_axes(quarter
 
 @pytest.mark.parallel
 @pytest.mark.slow
-def test_serial_and_parallel_runs_agree():
+def test_serial_and_parallel_runs_agree(tight_solver):
     """The coarse quarter on all ranks equals the same run on one process."""
     case = HemisphereCase(**COARSER, quarter=True)
-    # At the forming tolerance (1e-3 N per node) a solve stops anywhere in a ball of about
-    # 2e-3 mm around the equilibrium, and round-off picks the iterates that get there (issue
-    # 17: 1.3e-4 to 1.9e-3 mm over four 3-rank runs); at 1e-5 N the ranks agree to 1e-7 mm.
-    tight = SolverOptions(snes_atol=1e-8, node_atol_N=1e-5)
-    parallel = run_hemisphere(case, options=tight, comm=MPI.COMM_WORLD)
-    serial = run_hemisphere(case, options=tight, comm=MPI.COMM_SELF)
+    parallel = run_hemisphere(case, options=tight_solver, comm=MPI.COMM_WORLD)
+    serial = run_hemisphere(case, options=tight_solver, comm=MPI.COMM_SELF)
     assert parallel.problem.sheet.num_nodes_global == serial.grid.X[..., 0].size
     np.testing.assert_allclose(parallel.grid.x, serial.grid.x, atol=1e-5)
     assert parallel.max_penetration_mm == pytest.approx(serial.max_penetration_mm, rel=1e-3)

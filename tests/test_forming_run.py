@@ -12,7 +12,6 @@ pytest.importorskip("dolfinx")
 
 from mpi4py import MPI
 
-from fenicsx_drape.fe.solver import SolverOptions
 from fenicsx_drape.forming.case import BlankSpec, ToolSpec, load_case
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
 from fenicsx_drape.forming.run import free_edge, run_case
@@ -175,14 +174,10 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
 
 @pytest.mark.parallel
 @pytest.mark.slow
-def test_a_case_gives_the_same_sheet_on_any_number_of_ranks():
+def test_a_case_gives_the_same_sheet_on_any_number_of_ranks(tight_solver):
     case = octagon(("x",), cell_mm=30.0)
-    # At the forming tolerance (1e-3 N per node) a solve stops anywhere in a ball of about
-    # 2e-3 mm around the equilibrium, and round-off picks the iterates that get there (issue
-    # 17: 1.3e-4 to 1.9e-3 mm over four 3-rank runs); at 1e-5 N the ranks agree to 1e-7 mm.
-    tight = SolverOptions(snes_atol=1e-8, node_atol_N=1e-5)
-    parallel = run_case(case, options=tight, comm=MPI.COMM_WORLD)
-    serial = run_case(case, options=tight, comm=MPI.COMM_SELF)
+    parallel = run_case(case, options=tight_solver, comm=MPI.COMM_WORLD)
+    serial = run_case(case, options=tight_solver, comm=MPI.COMM_SELF)
     assert parallel.problem.sheet.num_nodes_global == serial.grid.present.sum()
     np.testing.assert_allclose(parallel.grid.x, serial.grid.x, atol=1e-5)
     assert parallel.holder.n_s == serial.holder.n_s
