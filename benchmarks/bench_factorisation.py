@@ -53,6 +53,9 @@ ORDERINGS = {  # name: MUMPS options (ICNTL(7) sequential, ICNTL(28)/(29) parall
     # off-diagonal blocks of the fronts compressed to that relative accuracy.
     "PORD BLR 1e-10": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_35": 2, "mat_mumps_cntl_7": 1e-10},
     "PORD BLR 1e-6": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_35": 2, "mat_mumps_cntl_7": 1e-6},
+    # The factor in single precision (PETSc's mixed-precision MUMPS, -pc_precision).
+    "PORD single": {"mat_mumps_icntl_7": 4, "pc_precision": "single"},
+    "AMF single": {"mat_mumps_icntl_7": 2, "pc_precision": "single"},
     # The root front factorised by one process instead of with ScaLAPACK (ICNTL(13) = 1).
     "PORD root1": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_13": 1},
     # PETSc's own sequential factorisations with its nested dissection (one rank only).
@@ -142,12 +145,17 @@ def study(problem) -> None:
         for _ in range(5):
             ksp.solve(b, y)
         solve = (time.perf_counter() - start) / 5
+        r = b.duplicate()
+        A.mult(y, r)
+        r.axpy(-1.0, b)
+        error = r.norm() / b.norm()  # relative residual of the direct solve
         if comm.rank == 0:
             what = (f"used ordering {F.getMumpsInfog(7)}, {F.getMumpsRinfog(3):.3g} flops, "
                     f"{F.getMumpsInfog(29):.3g} factor entries" if mumps else
                     f"{F.getInfo()['nz_used']:.3g} factor entries")
             print(f"{name:10s} {comm.size} rank(s): {what}, first {first:.3f} s, "
-                  f"factorisation {min(numeric):.3f} s, solve {1e3 * solve:.1f} ms", flush=True)
+                  f"factorisation {min(numeric):.3f} s, solve {1e3 * solve:.1f} ms, "
+                  f"relative residual {error:.1e}", flush=True)
         ksp.destroy()
     if args.structure:
         krylov(A, problem)

@@ -5,6 +5,7 @@
     ./drape --np 2 exec python3 benchmarks/bench_forming.py --full    # the same on two ranks
     ./drape exec python3 benchmarks/bench_forming.py --before         # the solver of issue 17
     ./drape exec python3 benchmarks/bench_forming.py --max-krylov 8   # reuse factorisations
+    ./drape exec python3 benchmarks/bench_forming.py --single-factor  # factor in single precision
 
 A JIT warm-up run (30 mm cells) comes first. ``--before`` runs the solver as issue 17 found it
 (backtracking line search, exact geometric stiffness, penetrating nodes projected onto the
@@ -21,7 +22,7 @@ from mpi4py import MPI
 
 import numpy as np
 
-from fenicsx_drape.fe.solver import SolverOptions
+from fenicsx_drape.fe.solver import SINGLE_PRECISION_FACTOR, SolverOptions
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
 from fenicsx_drape.forming.run import NODE_ATOL_N
 
@@ -36,6 +37,8 @@ parser.add_argument("--max-krylov", type=int, default=0,
 parser.add_argument("--node-atol-N", type=float, default=None,
                     help=f"per-node force tolerance (N; default {NODE_ATOL_N}, 0: the 2-norm only)")
 parser.add_argument("--line-search", default=None, help="line search (fe/newton.py)")
+parser.add_argument("--single-factor", action="store_true",
+                    help="MUMPS factor in single precision, GMRES to 1e-3 on it (fe/solver.py)")
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 
@@ -43,6 +46,8 @@ options = {"snes_atol": 1e-6, "node_atol_N": NODE_ATOL_N,
            "petsc_options": {"pc_type": "cholesky"}, "max_krylov": args.max_krylov}
 if args.line_search is not None:
     options["line_search"] = args.line_search
+if args.single_factor:
+    options["petsc_options"].update(SINGLE_PRECISION_FACTOR)
 if args.node_atol_N is not None:
     options["node_atol_N"] = args.node_atol_N
 if args.before:

@@ -11,7 +11,7 @@ from mpi4py import MPI
 import numpy as np
 
 from fenicsx_drape.fe import SolverOptions, TrussProblem, truss_sheet
-from fenicsx_drape.fe.solver import monitoring
+from fenicsx_drape.fe.solver import SINGLE_PRECISION_FACTOR, monitoring
 from fenicsx_drape.forming.contact import PenaltyContact
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
 from fenicsx_drape.forming.tools import HemisphereTools
@@ -96,6 +96,18 @@ def test_a_reused_factorisation_gives_the_same_iterations_and_sheet():
     assert factorised < 0.9 * plain.iterations  # factors were reused ...
     assert sum(s.krylov_iterations for s in reused.problem.steps) > 0
     np.testing.assert_allclose(reused.grid.x, plain.grid.x, atol=1e-6)  # ... to the same end
+
+
+@pytest.mark.skip_in_parallel
+def test_a_single_precision_factor_with_gmres_gives_the_same_iterations_and_sheet():
+    """GMRES to 1e-3 on a single-precision factor: the Newton iterates of the double factor."""
+    plain = _hemisphere(30.0)
+    single = _hemisphere(30.0, petsc_options={**OPTIONS["petsc_options"],
+                                              **SINGLE_PRECISION_FACTOR})
+    assert [s.iterations for s in single.problem.steps] == \
+        [s.iterations for s in plain.problem.steps]
+    assert sum(s.krylov_iterations for s in single.problem.steps) >= single.iterations
+    np.testing.assert_allclose(single.grid.x, plain.grid.x, atol=1e-4)
 
 
 @pytest.mark.parallel

@@ -139,7 +139,9 @@ class LinearSolver:
         if self.P is self.A:
             self.ksp.setOperators(self.A)  # the KSP sees a new matrix: refactorise
             self.ksp.solve(b, x)
-            return self.ksp.getConvergedReason() > 0, 0, True
+            krylov = self.ksp.getType() != PETSc.KSP.Type.PREONLY  # e.g. on a single factor
+            its = self.ksp.getIterationNumber() if krylov else 0
+            return self.ksp.getConvergedReason() > 0, its, True
         factorised = not (reuse and self._factorised)
         if factorised:
             self._factorise()
