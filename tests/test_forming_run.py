@@ -14,8 +14,9 @@ from mpi4py import MPI
 
 from fenicsx_drape.forming.case import BlankSpec, ToolSpec, load_case
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
-from fenicsx_drape.forming.run import free_edge, run_case
+from fenicsx_drape.forming.run import forming_options, free_edge, run_case
 from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.model import default_model
 
 HEMISPHERE = Path(__file__).parents[1] / "meshes" / "hemisphere" / "case.toml"
 COARSE = {"cell_mm": 30.0, "duration_s": 8.0}
@@ -228,3 +229,13 @@ def test_a_run_that_forms_the_blank_does_not_warn(recwarn):
     run = run_case(load_case(HEMISPHERE, **COARSE), comm=MPI.COMM_SELF)
     assert run.max_penetration_mm > 0.0
     assert not [w for w in recwarn if "touched" in str(w.message)]
+
+
+def test_petsc_options_given_to_forming_options_add_to_the_factorisation_chosen():
+    """LDLᵀ for a symmetric Jacobian, LU with tool friction; a user's options on top of both."""
+    extra = {"pc_precision": "single"}
+    assert forming_options(default_model(), petsc_options=extra).petsc_options == \
+        {"pc_type": "cholesky", "pc_precision": "single"}
+    friction = default_model().with_effects("tool_friction")
+    assert forming_options(friction, petsc_options=extra).petsc_options == extra
+    assert forming_options(default_model(), snes_max_it=7).snes_max_it == 7

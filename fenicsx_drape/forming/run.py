@@ -94,14 +94,16 @@ def forming_options(model, *, flat_holder: bool = True, **changes):
     Residual tolerances of 1e-6 N (2-norm) and :data:`NODE_ATOL_N` per node. The Jacobian is
     symmetric unless tool friction, the shear-tension coupling or a curved clamping surface
     (``flat_holder`` False) acts: it is then factorised with MUMPS's symmetric indefinite
-    LDLᵀ, about 20 % less time than LU.
+    LDLᵀ, about 20 % less time than LU. ``petsc_options`` given in ``changes`` are added to
+    that choice (e.g. :data:`~fenicsx_drape.fe.solver.SINGLE_PRECISION_FACTOR`).
     """
     from fenicsx_drape.fe.solver import SolverOptions
 
     μ_t = float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
     symmetric = μ_t == 0.0 and "shear_tension_coupling" not in model.effects and flat_holder
-    return SolverOptions(snes_atol=1e-6, node_atol_N=NODE_ATOL_N,
-                         petsc_options={"pc_type": "cholesky"} if symmetric else {}, **changes)
+    petsc = {"pc_type": "cholesky"} if symmetric else {}
+    petsc.update(changes.pop("petsc_options", {}))
+    return SolverOptions(snes_atol=1e-6, node_atol_N=NODE_ATOL_N, petsc_options=petsc, **changes)
 
 
 def run_case(case: FormingCase, model=None, options=None, *,
