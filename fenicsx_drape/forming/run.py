@@ -88,6 +88,11 @@ def case_model(case: FormingCase):
     return load_model(case.model) if case.model is not None else default_model()
 
 
+def tool_friction(model) -> float:
+    """The Coulomb coefficient μ_t of tool contact: ``mu_tool`` with ``tool_friction``, else 0."""
+    return float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
+
+
 def forming_options(model, *, flat_holder: bool = True, **changes):
     """The forming cases' solver options, with ``changes`` (SolverOptions fields).
 
@@ -99,8 +104,8 @@ def forming_options(model, *, flat_holder: bool = True, **changes):
     """
     from fenicsx_drape.fe.solver import SolverOptions
 
-    μ_t = float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
-    symmetric = μ_t == 0.0 and "shear_tension_coupling" not in model.effects and flat_holder
+    symmetric = (tool_friction(model) == 0.0 and "shear_tension_coupling" not in model.effects
+                 and flat_holder)
     petsc = {"pc_type": "cholesky"} if symmetric else {}
     petsc.update(changes.pop("petsc_options", {}))
     return SolverOptions(snes_atol=1e-6, node_atol_N=NODE_ATOL_N, petsc_options=petsc, **changes)
@@ -146,7 +151,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
     built = {**build_tools(case, skip=tuple(given)), **given}
     built = {t.name: built[t.name] for t in case.tools}  # in the case's order
     holder_surface = built[case.holder.tool] if case.holder is not None else None
-    μ_t = float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
+    μ_t = tool_friction(model)
     if options is None:
         flat = holder_surface is None or bool(getattr(holder_surface, "flat", False))
         options = forming_options(model, flat_holder=flat)
