@@ -194,7 +194,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
         nonlocal touched
         if not touched:
             x = problem.positions()[: problem.num_owned]
-            touched = any(bool(np.any(c.tool.gap(x, problem.t).phi < 0.0)) for c in contact)
+            touched = any(bool(np.any(c.penetration(x, problem.t) > 0.0)) for c in contact)
         if on_step is not None:
             on_step(problem)
 
