@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-COUPON_KINDS = ("tensile", "bias_extension")
+COUPON_KINDS = ("tensile", "bias_extension", "picture_frame")
 TEST_KINDS = (*COUPON_KINDS, "forming")
 
 
@@ -81,8 +81,8 @@ EFFECTS: dict[str, Effect] = {
             "stress that grows with the shear rate, relaxes at constant strain and recovers "
             "on reloading. Without it the diagonal is rate-independent (elastic-plastic plus "
             "the lock-up term at the reference rate).",
-            "shear", ("eta_o", "E_v"), (), ("bias_extension", "forming"), (), True,
-            "eqs. 5-7, 9"),
+            "shear", ("eta_o", "E_v"), (), ("bias_extension", "picture_frame", "forming"), (),
+            True, "eqs. 5-7, 9"),
         Effect(
             "strain_dependent_viscosity",
             "viscosity grows with viscous strain (lock-up)",
@@ -93,7 +93,7 @@ EFFECTS: dict[str, Effect] = {
             "in unloading. Without rate_dependence the same shape is a non-linear elastic "
             "lock-up term in the total diagonal strain.",
             "shear", ("s_o", "s_inf", "alpha_v", "eps_v_bar"), (),
-            ("bias_extension", "forming"), (), True, "eq. 8"),
+            ("bias_extension", "picture_frame", "forming"), (), True, "eq. 8"),
         Effect(
             "decrimping",
             "non-linear (bilinear) tow law",
@@ -134,7 +134,8 @@ EFFECTS: dict[str, Effect] = {
             "The resin's viscosity falls with temperature: η_o is multiplied by "
             "exp(E_a/R (1/T − 1/T_ref)), T_ref = 20 °C, T the test's temperature_C. Tests at "
             "several temperatures expose it; at one temperature it is absorbed in η_o.",
-            "shear", ("Ea_kJ_per_mol",), ("temperature_C",), ("bias_extension", "forming"),
+            "shear", ("Ea_kJ_per_mol",), ("temperature_C",),
+            ("bias_extension", "picture_frame", "forming"),
             ("rate_dependence",), False, "beyond the paper"),
         Effect(
             "shear_tension_coupling",

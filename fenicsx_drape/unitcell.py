@@ -363,6 +363,141 @@ def bias_extension(
                    diagonal_stress_N=out["tau_1"])
 
 
+def picture_frame_shear_angle(displacement_mm, frame_side_mm: float) -> np.ndarray:
+    r"""Shear angle γ (deg) of a picture frame pulled along its diagonal, Cao et al. eqs. 1-2.
+
+    A rhombus of side L_frame hinged at its corners, pulled apart at two opposite corners
+    by d: its diagonal is 2 L_frame cos θ, θ the angle of a side to the pulled diagonal, and
+    √2 L_frame at the start (θ = 45°), so
+
+        cos θ = (√2 L_frame + d) / (2 L_frame),   γ = 90° − 2θ,                   (Cao eq. 1-2)
+
+    i.e. cos(π/4 − γ/2) = (√2 L_frame + d)/(2 L_frame). The frame locks at γ = 90° (θ = 0,
+    d = (2 − √2) L_frame) and folds the other way at d = −√2 L_frame.
+
+    Args:
+        displacement_mm: Crosshead displacement d (mm).
+        frame_side_mm: Frame side L_frame, hinge to hinge (mm).
+    """
+    c = (math.sqrt(2.0) * frame_side_mm + np.asarray(displacement_mm, dtype=float)) / (
+        2.0 * frame_side_mm)
+    if np.any((c <= 0.0) | (c >= 1.0)):
+        raise DrapeInputError(
+            f"picture frame: displacement outside ({-math.sqrt(2.0) * frame_side_mm:.4g}, "
+            f"{picture_frame_lock_mm(frame_side_mm):.4g}) mm, where the frame of side "
+            f"{frame_side_mm:g} mm folds or locks (shear angle ±90°)")
+    return 90.0 - 2.0 * np.degrees(np.arccos(c))
+
+
+def picture_frame_displacement(shear_deg, frame_side_mm: float) -> np.ndarray:
+    """Crosshead displacement (mm) at a shear angle: the inverse of eqs. 1-2 (Cao et al.)."""
+    γ = np.radians(np.asarray(shear_deg, dtype=float))
+    return frame_side_mm * (2.0 * np.cos(0.25 * math.pi - 0.5 * γ) - math.sqrt(2.0))
+
+
+def picture_frame_lock_mm(frame_side_mm: float) -> float:
+    """The displacement at which the frame locks (γ = 90°): (2 − √2) L_frame (mm)."""
+    return (2.0 - math.sqrt(2.0)) * frame_side_mm
+
+
+def picture_frame_shear_force(force_N, displacement_mm, frame_side_mm: float,
+                              fabric_side_mm: float | None = None) -> np.ndarray:
+    """Shear force F_s = F/(2 cos θ) (Cao eq. 3), normalised by L_frame/L_fabric² (eq. 10).
+
+    Without ``fabric_side_mm``: F_s in N, the force along the frame's sides. With it: the
+    energy method's normalised shear force F_s L_frame / L_fabric² in N/mm (Peng et al.,
+    Cao et al. eq. 10; Harrison et al. 2004's F_s/L when the fabric fills the frame), the
+    measure that makes frames of different sizes comparable.
+    """
+    θ = np.radians(45.0 - 0.5 * picture_frame_shear_angle(displacement_mm, frame_side_mm))
+    shear = np.asarray(force_N, dtype=float) / (2.0 * np.cos(θ))
+    return shear if fabric_side_mm is None else shear * frame_side_mm / fabric_side_mm**2
+
+
+def picture_frame(
+    model: Model,
+    time_s,
+    displacement_mm,
+    *,
+    frame_side_mm: float,
+    fabric_side_mm: float,
+    conditions: Mapping[str, float] | None = None,
+) -> UnitCellCurve:
+    r"""Picture-frame test: the unit cell in pure shear, driven by the frame's kinematics.
+
+    **Kinematics.** The frame's hinges hold the tows along its sides at their length, so the
+    cell shears at the frame's angle with inextensible tows (ε_a = ε_b = 0): by eq. 15
+    the diagonals have ε_d1,2 = ± a·b/(2L²) = ± sin γ / 2, with γ from
+    :func:`picture_frame_shear_angle` (Cao et al. eqs. 1-2). No balance is left to solve:
+    the frame is a mechanism of one degree of freedom. The diagonals' laws follow this
+    strain history row by row (the shear rate follows from the measured d(t), so rate
+    dependence, holds and unloading act as in the other coupons).
+
+    **Force through the linkage (virtual work).** The net's power per unit reference area is
+    √2 l_t Σ τ_i λ̇_i (l_t tows per mm, a diagonal standing for the tows of its cell, λ_i =
+    √(1 + 2ε_i); the same density that gives eq. 20 in bias extension). The fabric square of
+    side L_fabric takes it all; the crosshead gives F ḋ with ḋ = L_frame sin θ γ̇. With
+    λ_1 = √2 cos θ, λ_2 = √2 sin θ (θ = 45° − γ/2) this is
+
+        F = l_t L_fabric² / L_frame · (τ_1 − τ_2 cot θ),
+
+    the bias extension's per-tow force f/2 (eq. 20) carried by the fabric's l_t L_fabric
+    tows and scaled by L_fabric/L_frame. It agrees with the usual reduction of a
+    picture-frame test: the shear force F_s = F/(2 cos θ) (Cao et al. eq. 3; Harrison et al.
+    2004) normalised by the energy method, F_s L_frame/L_fabric² (Peng et al. 2004; Cao et
+    al. eq. 10), is the fabric's shear force per unit length l_t (τ_1 − τ_2 cot θ)/(2 cos θ),
+    independent of the frame's and the fabric's sizes (:func:`picture_frame_shear_force`),
+    and the torque per unit area is that times cos γ (Cao et al. eq. 17). ``force_N`` is the
+    crosshead force of a frame without amplifying linkage (a linkage of ratio a multiplies
+    it by a, Cao et al. eq. 9); the fabric's arms outside the square are not modelled.
+
+    Args:
+        model: The model (scalar parameters, or arrays of k parameter sets).
+        time_s: Time of each row (s), non-decreasing.
+        displacement_mm: Crosshead displacement d of each row (mm).
+        frame_side_mm: Frame side L_frame, hinge to hinge (mm).
+        fabric_side_mm: Side of the sheared fabric square L_fabric (mm), at most L_frame.
+        conditions: The test's conditions (e.g. ``temperature_C``).
+
+    Returns:
+        The curve; the test force in N is ``force_per_tow_N`` times the test's tows (tows of
+        one family across the fabric side, l_t L_fabric), i.e. force_per_tow_N =
+        (L_fabric/L_frame)(τ_1 − τ_2 cot θ).
+    """
+    t, u = _history(time_s, displacement_mm)
+    if not (np.isfinite(frame_side_mm) and np.isfinite(fabric_side_mm)
+            and 0.0 < fabric_side_mm <= frame_side_mm):
+        raise DrapeInputError(f"picture frame: need 0 < fabric_side_mm <= frame_side_mm, got "
+                              f"fabric_side_mm = {fabric_side_mm}, frame_side_mm = "
+                              f"{frame_side_mm}")
+    γ = np.radians(picture_frame_shear_angle(u, frame_side_mm))
+    k, m = model.n_sets, model.n_sets or 1
+    laws = model.laws(conditions)
+    diagonals = _stacked_laws(model, conditions)["shear"]
+    # The tows stay at their length: their stress is the law's at zero strain (what a
+    # shear-tension coupling sees).
+    σ_t, _, _ = laws["tow"]._update(np.zeros(m), 0.0, laws["tow"].initial_state(m))
+    k_st = model.parameters["k_st"] if "shear_tension_coupling" in model.effects else 0.0
+    c, _ = shear_tension_factor(σ_t, k_st)
+    εd = 0.5 * np.sin(γ)
+    cot_θ = np.sqrt((1.0 + np.sin(γ)) / (1.0 - np.sin(γ)))  # λ_1/λ_2
+    n = t.size
+    force, tau_1 = np.zeros((n, m)), np.zeros((n, m))
+    state = diagonals.initial_state(2 * m)
+    for i in range(n):
+        dt = t[i] - t[i - 1] if i else 0.0
+        τ, _, state = diagonals._update(np.repeat([εd[i], -εd[i]], m), dt, state)
+        τ1, τ2 = c * τ[:m], c * τ[m:]
+        force[i] = fabric_side_mm / frame_side_mm * (τ1 - τ2 * cot_θ[i])
+        tau_1[i] = τ1
+    ones = np.ones((1, m))
+    return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=force,
+                   tow_strain=np.zeros((n, m)), diagonal_strain=εd[:, None] * ones,
+                   shear_deg=np.degrees(γ)[:, None] * ones,
+                   transverse_strain=-εd[:, None] * ones, tow_stress_N=σ_t * ones + 0.0 * force,
+                   diagonal_stress_N=tau_1)
+
+
 def diagonal_response(
     model: Model,
     time_s,

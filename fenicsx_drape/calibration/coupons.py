@@ -1,7 +1,8 @@
 """Coupon tests as least squares sees them: shared by the fit and the sensitivity analysis.
 
 - **forward model** (:func:`simulate`): the unit-cell solutions
-  (:mod:`fenicsx_drape.unitcell`) give the force per row of a tensile or bias-extension test,
+  (:mod:`fenicsx_drape.unitcell`) give the force per row of a tensile, bias-extension or
+  picture-frame test (the crosshead force of a frame without linkage),
   for one parameter set or, vectorised, for k sets at once;
 - **noise** (:func:`test_noise`): the per-row standard deviation a row is weighed with, from
   ``force_sd_N`` or the model-free estimate of :mod:`fenicsx_drape.measurements.noise`;
@@ -29,9 +30,9 @@ from fenicsx_drape.measurements.noise import (
     noise_from_second_differences,
 )
 
-COUPON_KINDS = ("tensile", "bias_extension")
+COUPON_KINDS = ("tensile", "bias_extension", "picture_frame")
 # The law role whose parameters each coupon kind identifies (the paper's blocks).
-BLOCK_ROLE = {"tensile": "tow", "bias_extension": "shear"}
+BLOCK_ROLE = {"tensile": "tow", "bias_extension": "shear", "picture_frame": "shear"}
 # Forward-difference step in the fitting variables (log parameters): 1e-6 relative.
 FD_STEP = 1e-6
 # Bounds: at most this many decades away from the starting value (within physical bounds).
@@ -61,6 +62,11 @@ def simulate(bundle_or_test: Bundle | Test, model) -> np.ndarray | dict[str, np.
         curve = unitcell.bias_extension(model, test.time_s, test.displacement_mm,
                                         length_mm=test.length_mm, width_mm=test.width_mm,
                                         conditions=test.conditions)
+    elif test.kind == "picture_frame":
+        curve = unitcell.picture_frame(model, test.time_s, test.displacement_mm,
+                                       frame_side_mm=test.frame_side_mm,
+                                       fabric_side_mm=test.fabric_side_mm,
+                                       conditions=test.conditions)
     else:
         raise ValueError(f"test {test.id!r}: a {test.kind} test is not a coupon test")
     # curves are (n_rows,) or (n_rows, k): return one row per parameter set

@@ -118,25 +118,38 @@ def tow_guess(tests: Sequence[Test], decrimping: bool = True) -> dict[str, float
     return dict(zip(("E_o", "E_inf", "eps_bar", "alpha"), map(float, best)))
 
 
+def shear_curve(test: Test, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The major diagonal's strain and a bias-equivalent force per tow of a shear test's rows.
+
+    Bias extension: eq. 21 and the force per tow. Picture frame: ε_d = sin γ / 2 and the
+    force per tow scaled by 2 L_frame/L_fabric, which is the bias extension's per-tow force
+    2(τ_1 − τ_2 cot θ) of the same cell (:func:`fenicsx_drape.unitcell.picture_frame`).
+    """
+    from fenicsx_drape import unitcell
+
+    d = test.displacement_mm[rows]
+    f = test.force_N[rows] / test.tows
+    if test.kind == "picture_frame":
+        γ = np.radians(unitcell.picture_frame_shear_angle(d, test.frame_side_mm))
+        return 0.5 * np.sin(γ), 2.0 * test.frame_side_mm / test.fabric_side_mm * f
+    return np.asarray(unitcell.bias_diagonal_strain(d, test.length_mm, test.width_mm)), f
+
+
 def shear_guess(tests: Sequence[Test], eta_ref: float | None = None) -> dict[str, float]:
     """``sigma_o, eta_o, s_o, s_inf, alpha_v, eps_v_bar, E_v, E_p`` from bias curves.
 
     Forces are per tow and not yet scaled to bar stresses (see the module docstring).
 
     Args:
-        tests: Bias-extension tests, at one or more rates.
+        tests: Bias-extension or picture-frame tests, at one or more rates.
         eta_ref: For a rate-independent shear law (no ``rate_dependence``), the fixed scale
             η_o·ε̇_ref of its lock-up term: ``s_o`` and ``s_inf`` are then expressed in it at
             the tests' mean rate.
     """
-    from fenicsx_drape.unitcell import bias_diagonal_strain
-
     curves = []
     for test in tests:
         rows = _loading(test)
-        x = np.asarray(bias_diagonal_strain(test.displacement_mm[rows], test.length_mm,
-                                            test.width_mm))
-        f = test.force_N[rows] / test.tows
+        x, f = shear_curve(test, rows)
         rate = float(np.median(np.diff(x) / np.diff(test.time_s[rows])))
         curves.append((rate, x, f))
     curves.sort(key=lambda c: c[0])

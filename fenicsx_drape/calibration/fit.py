@@ -237,11 +237,12 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str],
     variables = Variables.make(model, names)
     res = Residuals(model, tests, variables)
     _, J = res.jacobian(variables.to_x(np.array([float(model.parameters[n]) for n in names])))
-    kinds = sorted({t.kind for t in tests})
+    # tests are grouped by the law they identify: bias extension and picture frame together
+    kinds = sorted({BLOCK_ROLE[t.kind] for t in tests})
     rows = np.cumsum([0] + [t.n_rows for t in tests])
     effect = np.zeros((len(kinds), len(names)))
     for i, t in enumerate(tests):
-        effect[kinds.index(t.kind)] += np.sum(J[rows[i]:rows[i + 1]] ** 2, axis=0)
+        effect[kinds.index(BLOCK_ROLE[t.kind])] += np.sum(J[rows[i]:rows[i + 1]] ** 2, axis=0)
     effect = np.sqrt(effect)
     strongest = effect.max(axis=0)
     dead = [n for n, s in zip(names, strongest) if not s > RESPONSE_FLOOR and n not in alive]
@@ -265,7 +266,7 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str],
     for k, kind in enumerate(kinds):
         block = tuple(names[j] for j in live if home[j] == k)
         if block:
-            blocks.append((block, tuple(t for t in tests if t.kind == kind)))
+            blocks.append((block, tuple(t for t in tests if BLOCK_ROLE[t.kind] == kind)))
     return blocks, dead, notes
 
 
@@ -286,7 +287,7 @@ def initial_guess(model, tests: Sequence[Test], names: Sequence[str],
     notes = [] if notes is None else notes
     guess: dict[str, float] = {}
     tensile = [t for t in tests if t.kind == "tensile"]
-    bias = [t for t in tests if t.kind == "bias_extension"]
+    bias = [t for t in tests if BLOCK_ROLE[t.kind] == "shear"]  # bias and picture frame
     rate_independent = "rate_dependence" not in model.effects
     try:
         if tensile:
@@ -309,7 +310,7 @@ def initial_guess(model, tests: Sequence[Test], names: Sequence[str],
     # rate-independent lock-up η_o ε̇_ref (f - 1) scales with s_o and s_inf.
     roles = _laws_parameters(model)
     scaled = ("s_o", "s_inf") if rate_independent else ()
-    for kind, group in (("tensile", tensile), ("bias_extension", bias)):
+    for kind, group in (("tensile", tensile), ("bias_extension", bias)):  # by law role
         force_like = [n for n in roles.get(BLOCK_ROLE[kind], ()) if n in names
                       and (parameter_info(n).unit.startswith("N") or n in scaled)]
         if not group or not force_like:

@@ -34,12 +34,18 @@ _T_DEFAULT_C = 20.0  # temperature of a test that gives none (Table 2's room tem
 
 
 def strain_rate(test) -> float:
-    """The effective diagonal strain rate of a bias test from its table (1/s, eq. 23)."""
+    """The effective diagonal strain rate of a shear test from its table (1/s).
+
+    Bias extension: eq. 23. Picture frame: the initial rate of ε_d = sin γ / 2,
+    ḋ/(√2 L_frame) (from cos(π/4 − γ/2) = (√2 L_frame + d)/(2 L_frame)).
+    """
     from fenicsx_drape.unitcell import EFFECTIVE_RATE_FACTOR
 
     rate = np.abs(np.diff(test.displacement_mm) / np.diff(test.time_s))
     moving = rate[rate > 1e-3 * rate.max()] if rate.max() > 0 else rate
     speed = float(np.median(moving)) if moving.size else 0.0
+    if test.kind == "picture_frame":
+        return speed / (np.sqrt(2.0) * test.frame_side_mm)
     return speed / (test.length_mm - test.width_mm) * EFFECTIVE_RATE_FACTOR
 
 
@@ -64,18 +70,21 @@ def undetermined(model, tests: Sequence, names: Sequence[str]) -> dict[str, str]
         for name in laws["tow"].active_parameters(model.effects):
             if name in names:
                 out[name] = ("no tensile test in the bundle: bias extension barely loads the "
-                             "tows, so the tow law is not determined")
-    bias = [t for t in tests if t.kind == "bias_extension"]
+                             "tows (a picture frame holds them at their length), so the tow "
+                             "law is not determined")
+    bias = [t for t in tests if t.kind in ("bias_extension", "picture_frame")]
     if "rate_dependence" in model.effects and "eta_o" in names:
         if not bias:
-            out["eta_o"] = "no bias-extension test: the viscous amplitude is not exercised"
+            out["eta_o"] = ("no bias-extension or picture-frame test: the viscous amplitude "
+                            "is not exercised")
         elif not any(history_varies(t) for t in bias):
             rates = [strain_rate(t) for t in bias]
             if max(rates) < RATE_SPREAD * min(rates):
                 speeds = sorted({t.speed_mm_per_min for t in bias
                                  if t.speed_mm_per_min is not None})
                 at = (f" ({', '.join(f'{s:g}' for s in speeds)} mm/min)" if speeds else "")
-                out["eta_o"] = (f"all bias-extension tests run at one strain rate"
+                out["eta_o"] = (f"all shear tests (bias extension, picture frame) run at one "
+                                f"strain rate"
                                 f"{at}, {min(rates):.3g}-{max(rates):.3g} 1/s (a spread below "
                                 f"{RATE_SPREAD:g}x), with no hold, unloading or change of "
                                 "speed: the viscous amplitude cannot be told from the "

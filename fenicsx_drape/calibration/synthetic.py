@@ -90,6 +90,27 @@ def bias_test(test_id: str, speed_mm_per_min: float, *, max_displacement_mm: flo
                 speed_mm_per_min=speed_mm_per_min, conditions=dict(conditions or {}))
 
 
+def picture_frame_test(test_id: str, speed_mm_per_min: float, *,
+                       max_shear_deg: float = 60.0, n_rows: int = 100,
+                       frame_side_mm: float = 180.0, fabric_side_mm: float = 140.0,
+                       tows_per_mm: float = PAPER_TOWS_PER_MM,
+                       conditions: Mapping[str, float] | None = None,
+                       holds: Sequence[tuple[float, float]] = ()) -> Test:
+    """A picture-frame test definition (no force yet): a ramp to ``max_shear_deg``.
+
+    Defaults: the HKUST frame of Cao et al. (2008), 180 mm frame, 140 mm fabric square.
+    """
+    from fenicsx_drape.unitcell import picture_frame_displacement
+
+    travel = float(picture_frame_displacement(max_shear_deg, frame_side_mm))
+    time_s, disp = ramp(speed_mm_per_min, travel, n_rows, holds)
+    return Test(id=test_id, kind="picture_frame", file=f"{test_id}.csv",
+                columns={"time_s": time_s, "displacement_mm": disp},
+                frame_side_mm=frame_side_mm, fabric_side_mm=fabric_side_mm,
+                tows=round(derived_tows("picture_frame", tows_per_mm, fabric_side_mm), 2),
+                speed_mm_per_min=speed_mm_per_min, conditions=dict(conditions or {}))
+
+
 def standard_tests(*, bias_speeds_mm_per_min: Sequence[float] = (10.0, 40.0, 160.0),
                    conditions: Mapping[str, float] | None = None) -> tuple[Test, ...]:
     """The paper's programme: tensile at 2 mm/min, bias extension at the given speeds."""
@@ -124,7 +145,7 @@ def synthetic_bundle(model, tests: Sequence[Test], *, noise_sd_N: float | Mappin
     rng = np.random.default_rng(seed)
     made = []
     for test in tests:
-        if test.kind not in ("tensile", "bias_extension"):
+        if test.kind not in ("tensile", "bias_extension", "picture_frame"):
             raise ValueError(f"test {test.id!r}: cannot synthesise a {test.kind} test here")
         force = simulate(test, model)
         if noise_rel is not None:
@@ -142,6 +163,8 @@ def synthetic_bundle(model, tests: Sequence[Test], *, noise_sd_N: float | Mappin
         made.append(dataclasses.replace(test, columns=columns))
     tows_per_mm = next((t.tows / t.width_mm * (math.sqrt(2) if t.kind == "bias_extension" else 1)
                         for t in made if t.tows and t.width_mm), None)
+    tows_per_mm = tows_per_mm or next((t.tows / t.fabric_side_mm for t in made
+                                       if t.tows and t.fabric_side_mm), None)
     bundle = Bundle(name=name, material=material, tows_per_mm=tows_per_mm, tests=tuple(made),
                     path=Path(out_dir) if out_dir is not None else None)
     if out_dir is not None:

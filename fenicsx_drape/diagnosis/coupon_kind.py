@@ -1,4 +1,4 @@
-"""Coupon tests in ``compare`` and ``diagnose``: tensile and bias extension (section 3.2).
+"""Coupon tests in ``compare`` and ``diagnose``: tensile, bias extension, picture frame.
 
 A coupon test is compared row by row on its force (N): simulated by the unit-cell solutions
 (:func:`fenicsx_drape.calibration.coupons.simulate`), weighed with the same noise as in the
@@ -46,11 +46,18 @@ def coupon_strain(test: Test) -> tuple[str, np.ndarray]:
 
     Tension: the Green-Lagrange strain of the loaded tows, ``e + e²/2`` with
     ``e = displacement / gauge length`` (eq. 13). Bias extension: the diagonal strain of the
-    gauge region, eq. 21. Both follow from the measured displacement alone.
+    gauge region, eq. 21. Picture frame: the diagonal strain sin γ / 2 of the frame's shear
+    angle (:func:`fenicsx_drape.unitcell.picture_frame_shear_angle`). All follow from the
+    measured displacement alone.
     """
     if test.kind == "tensile":
         e = test.displacement_mm / test.gauge_length_mm
         return "tow_strain", e + 0.5 * e**2
+    if test.kind == "picture_frame":
+        from fenicsx_drape.unitcell import picture_frame_shear_angle
+
+        γ = np.radians(picture_frame_shear_angle(test.displacement_mm, test.frame_side_mm))
+        return "diagonal_strain", 0.5 * np.sin(γ)
     from fenicsx_drape.unitcell import bias_diagonal_strain
 
     return "diagonal_strain", np.asarray(
@@ -115,6 +122,8 @@ _STRAIN_REGIONS = {
     "bias_extension": (("initial tow bending", "friction plateau", "lock-up"),
                        "stiff-soft-stiff"),
     "tensile": (("decrimping", "tow stretching"), "soft-stiff"),
+    "picture_frame": (("initial tow bending", "friction plateau", "lock-up"),
+                      "stiff-soft-stiff"),
 }
 
 
@@ -181,3 +190,4 @@ COUPON = Kind(unit="N", measured=lambda test: test.force_N, noise=_coupon_noise,
               sd_column="force_sd_N", fit=_coupon_fit)
 register_kind("tensile", COUPON)
 register_kind("bias_extension", COUPON)
+register_kind("picture_frame", COUPON)

@@ -32,12 +32,13 @@ import numpy as np
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.provenance import atomic_write_text
 
-KINDS = ("tensile", "bias_extension", "forming")
+KINDS = ("tensile", "bias_extension", "picture_frame", "forming")
 
 # Required and optional CSV columns per test kind.
 COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "tensile": (("time_s", "displacement_mm", "force_N"), ("force_sd_N",)),
     "bias_extension": (("time_s", "displacement_mm", "force_N"), ("force_sd_N", "shear_deg")),
+    "picture_frame": (("time_s", "displacement_mm", "force_N"), ("force_sd_N", "shear_deg")),
     "forming": (
         ("i", "j", "x0_mm", "y0_mm", "x_mm", "y_mm", "z_mm"),
         ("position_sd_mm", "shear_deg", "wrinkle_strain"),
@@ -54,6 +55,8 @@ NOISE_KEYS = ("force_sd_N", "force_sd_rel")
 SETUP_KEYS: dict[str, tuple[str, ...]] = {
     "tensile": ("gauge_length_mm", "width_mm", "tows", "speed_mm_per_min", *NOISE_KEYS),
     "bias_extension": ("length_mm", "width_mm", "tows", "speed_mm_per_min", *NOISE_KEYS),
+    "picture_frame": ("frame_side_mm", "fabric_side_mm", "tows", "speed_mm_per_min",
+                      *NOISE_KEYS),
     "forming": (
         "punch_radius_mm", "fillet_radius_mm", "holder_opening_mm", "sheet_mm", "travel_mm",
         "duration_s", "holder_force_N", "grid_mm",
@@ -62,6 +65,7 @@ SETUP_KEYS: dict[str, tuple[str, ...]] = {
 REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
     "tensile": ("gauge_length_mm",),
     "bias_extension": ("length_mm", "width_mm"),
+    "picture_frame": ("frame_side_mm", "fabric_side_mm"),
     "forming": ("geometry", "sheet_mm", "travel_mm", "duration_s", "holder_force_N"),
 }
 # A forming test that names its case file needs nothing else: the case says the rest, and the
@@ -95,6 +99,7 @@ UNITS: dict[str, str] = {
     "grid": "mm", "punch_radius": "mm", "fillet_radius": "mm", "holder_opening": "mm",
     "holder_force": "N", "position_sd": "mm", "x": "mm", "y": "mm", "z": "mm", "x0": "mm",
     "y0": "mm", "shear": "deg", "temperature": "C", "speed": "mm_per_min",
+    "frame_side": "mm", "fabric_side": "mm",
 }
 _FOREIGN_UNITS = (
     "m", "cm", "um", "in", "inch", "ft", "kN", "mN", "lbf", "N", "mm", "s", "ms", "min", "h",
@@ -135,13 +140,15 @@ class Test:
     __test__ = False  # not a pytest test class
 
     id: str  # unique in the bundle
-    kind: str  # "tensile" | "bias_extension" | "forming"
+    kind: str  # "tensile" | "bias_extension" | "picture_frame" | "forming"
     file: str  # CSV table, relative to the bundle folder
     columns: Mapping[str, np.ndarray]  # the table by column name (all read-only float arrays)
     line: int = 0  # line of the [[test]] header in bundle.toml (for messages)
     gauge_length_mm: float | None = None  # tensile: gauge length
     length_mm: float | None = None  # bias extension: specimen length L0
     width_mm: float | None = None  # specimen width W0
+    frame_side_mm: float | None = None  # picture frame: side hinge to hinge, L_frame
+    fabric_side_mm: float | None = None  # picture frame: side of the sheared fabric, L_fabric
     tows: float | None = None  # tows sharing the force (per-tow force = force_N / tows)
     tows_derived: bool = False  # tows computed from tows_per_mm and the width
     speed_mm_per_min: float | None = None  # nominal crosshead speed (descriptive)
@@ -230,7 +237,8 @@ def derived_tows(kind: str, tows_per_mm: float, width_mm: float) -> float:
 
     A tensile specimen cut along the warp holds l_t·W tows; a bias specimen's tows cross its
     width at 45°, so l_t·W/√2 of each family reach a clamp (0.71 × 70/√2 = 35.1, the paper's
-    35.3).
+    35.3). A picture frame's fabric square of side W (``fabric_side_mm``) holds l_t·W tows
+    of each family.
     """
     tows = tows_per_mm * width_mm
     return tows / math.sqrt(2.0) if kind == "bias_extension" else tows
@@ -389,7 +397,7 @@ def load_bundle(path: str | Path) -> Bundle:
                           notes)
         if test is None:
             continue
-        if bundle_noise and test.kind in ("tensile", "bias_extension"):
+        if bundle_noise and test.kind in ("tensile", "bias_extension", "picture_frame"):
             test = declared_noise(test, bundle_noise, f"{fname} [bundle]")
         at = where("test", index, "id")
         if test.id in seen:
@@ -493,16 +501,20 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
             conditions[key] = float(value)
 
     tows, tows_derived = setup.pop("tows", None), False
-    if kind in ("tensile", "bias_extension"):
-        width = setup.get("width_mm")
+    if kind == "picture_frame":
+        _check_frame(setup, fname, where, index, label, problems)
+    if kind in ("tensile", "bias_extension", "picture_frame"):
+        width = setup.get("fabric_side_mm" if kind == "picture_frame" else "width_mm")
         derived = derived_tows(kind, tows_per_mm, width) if tows_per_mm and width else None
         if tows is None and derived is None:
-            problems.add(fname, line, f"{label}: needs tows (or width_mm together with "
+            side = "fabric_side_mm" if kind == "picture_frame" else "width_mm"
+            problems.add(fname, line, f"{label}: needs tows (or {side} together with "
                                       "[bundle] tows_per_mm to derive it)")
         elif tows is None:
             tows, tows_derived = derived, True
+            side = "fabric_side_mm" if kind == "picture_frame" else "width_mm"
             notes.append(f"{fname}:{line}: {label}: tows = {derived:.4g} derived from "
-                         f"tows_per_mm × width_mm{' / √2' if kind == 'bias_extension' else ''}")
+                         f"tows_per_mm × {side}{' / √2' if kind == 'bias_extension' else ''}")
         elif derived is not None and not (1 / _TOWS_TOLERANCE < tows / derived
                                           < _TOWS_TOLERANCE):
             problems.add(fname, where("test", index, "tows"),
@@ -524,6 +536,9 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
             problems.add(fname, where("test", index, "speed_mm_per_min"),
                          f"{label}: {problem} in {file}")
             return None
+    if kind == "picture_frame" and not _frame_table_ok(columns, setup, csv_path, fname, where,
+                                                       index, label, table[2], problems):
+        return None
     forming = {k: v for k, v in setup.items() if kind == "forming"}
     if "force_sd_N" in setup and "force_sd_rel" in setup:
         problems.add(fname, where("test", index, "force_sd_rel"),
@@ -535,12 +550,42 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
         id=test_id, kind=kind, file=file, columns=columns, line=line,
         gauge_length_mm=setup.get("gauge_length_mm"), length_mm=setup.get("length_mm"),
         width_mm=setup.get("width_mm"), tows=tows, tows_derived=tows_derived,
+        frame_side_mm=setup.get("frame_side_mm"), fabric_side_mm=setup.get("fabric_side_mm"),
         speed_mm_per_min=speed, geometry=geometry if kind == "forming" else None,
         forming=forming, conditions=conditions, notes=text_notes, case=case_file,
         case_path=case_path, case_keys=case_keys, forming_case=forming_case,
     )
     own = {k: setup[k] for k in NOISE_KEYS if k in setup}
     return declared_noise(test, own, f"{fname} [[test]] {test_id!r}") if own else test
+
+
+def _check_frame(setup, fname, where, index, label, problems) -> None:
+    """A picture frame's fabric must fit in its frame (spec version 3)."""
+    frame, fabric = setup.get("frame_side_mm"), setup.get("fabric_side_mm")
+    if frame is not None and fabric is not None and fabric > frame:
+        problems.add(fname, where("test", index, "fabric_side_mm"),
+                     f"{label}: fabric_side_mm = {fabric:g} is larger than frame_side_mm = "
+                     f"{frame:g}: the sheared fabric must fit inside the frame")
+
+
+def _frame_table_ok(columns, setup, csv_path, fname, where, index, label, header_line,
+                    problems) -> bool:
+    """False (problem added) when a displacement takes the frame to or past its lock."""
+    frame = setup.get("frame_side_mm")
+    if frame is None:
+        return True
+    lock = (2.0 - math.sqrt(2.0)) * frame  # γ = 90°: cos(π/4 − γ/2) = (√2 L + d)/(2 L) = 1
+    d = columns["displacement_mm"]
+    bad = np.flatnonzero((d >= lock) | (d <= -math.sqrt(2.0) * frame))
+    if bad.size:
+        problems.add(str(csv_path), header_line + 1 + int(bad[0]),  # blank lines aside
+                     f"{label}: data row {bad[0] + 1}: displacement_mm = {d[bad[0]]:g} is "
+                     "beyond the lock of the frame "
+                     f"(frame_side_mm = {frame:g} at {fname}:"
+                     f"{where('test', index, 'frame_side_mm')} locks at γ = 90°, d = "
+                     f"(2 − √2) L_frame = {lock:.4g} mm)")
+        return False
+    return True
 
 
 def declared_noise(test: Test, noise: Mapping[str, float], by: str) -> Test:
@@ -752,7 +797,8 @@ def write_bundle(bundle: Bundle, path: str | Path, *, comment: str = "") -> Path
             out.append(f"geometry = {_toml_value(test.geometry)}")
         if test.case is not None:
             out.append(f"case = {_toml_value(test.case)}")
-        keys = ("gauge_length_mm", "length_mm", "width_mm", "speed_mm_per_min")
+        keys = ("gauge_length_mm", "length_mm", "width_mm", "frame_side_mm", "fabric_side_mm",
+                "speed_mm_per_min")
         for key in keys:
             if (value := getattr(test, key)) is not None:
                 out.append(f"{key} = {_toml_value(value)}")
