@@ -1,6 +1,7 @@
 """``drape fit BUNDLE [--model MODEL.toml] --out DIR``: identify a model's parameters.
 
-The same in Python: ``write_fit(fit(load_bundle(BUNDLE), load_model(MODEL)), DIR)``.
+The same in Python: ``write_fit(fit(load_bundle(BUNDLE), load_model(MODEL)), DIR)``; with
+``--consistency``, also ``consistency(bundle, result)`` (calibration.consistency).
 """
 
 from __future__ import annotations
@@ -21,6 +22,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="skip the global stage (the starts from curve features, Table 2, "
                         "MODEL.toml and Sobol points searched before the local least squares)")
     parser.add_argument("--tests", nargs="+", metavar="ID", help="fit only these tests")
+    parser.add_argument("--consistency", nargs="*", metavar="BY",
+                        choices=("test", "lab", "size", "kind"),
+                        help="after the fit, leave out each test, lab, size or kind in turn, "
+                        "refit the rest and predict it (default all four; written to "
+                        "consistency.json): a lab offset or size effect against missing physics")
     parser.add_argument("--max-iterations", type=int, default=200,
                         help="cap on the optimiser's iterations per block (default 200)")
 
@@ -49,4 +55,12 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(result.sensitivity))
     out = write_fit(result, args.out)
     print(f"wrote {out}/model.toml, report.json, sensitivity.csv, fit_*.png")
+    if args.consistency is not None:
+        from fenicsx_drape.calibration.consistency import GROUPINGS, consistency
+        from fenicsx_drape.provenance import write_json
+
+        report = consistency(bundle, result, by=args.consistency or GROUPINGS, progress=print)
+        write_json(out / "consistency.json", report)
+        print(f"consistency: {report['verdict']}: {report['says']}")
+        print(f"wrote {out}/consistency.json")
     return 0
