@@ -163,9 +163,11 @@ def _verdict(joint: float, records: list[dict]) -> tuple[str, str]:
     explains = sorted((r for r in records if r["explains"]),
                       key=lambda r: (len(r["tests"]), r["rest_after"]))
     if not explains:
-        worst = max(records, key=lambda r: r["held_out"], default=None)
-        where = (f"; the worst held-out group is {worst['by']} {worst['group']!r} "
-                 f"({worst['held_out']:.3g})" if worst else "")
+        best = min(records, key=lambda r: r["rest_after"], default=None)
+        where = (f"; the largest disagreement is {best['by']} {best['group']!r}: without it "
+                 f"the rest fit at {best['rest_after']:.3g}, its held-out error is "
+                 f"{best['held_out']:.3g}, its forces {best['scale']:.3g} × the prediction"
+                 if best else "")
         return "missing_physics", (
             f"no single test, lab, size or kind explains the misfit (joint normalised "
             f"{joint:.3g}; leaving any one out leaves the rest above {ADEQUATE:g}){where}: "
