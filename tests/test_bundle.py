@@ -154,7 +154,7 @@ def expect(bundle_dir: Path, file: str, line: int | None, *phrases: str) -> Bund
 # Each malformation of bundle.toml: (replace this, by that, the message must contain). The
 # message points at the changed line, or at its table's header when a key is missing.
 TOML_CASES = [
-    ('kind = "bias_extension"', 'kind = "picture_frame"', "unknown test kind 'picture_frame'"),
+    ('kind = "bias_extension"', 'kind = "trellis"', "unknown test kind 'trellis'"),
     ('id = "hemisphere"', 'id = "bias-10"', "used twice"),
     ("length_mm = 210.0", "length_cm = 21.0", "length must be given in mm"),
     ("temperature_C = 20.0", "temperature_K = 293.0", "temperature must be given in C"),
