@@ -3,6 +3,7 @@
 import dataclasses
 
 import numpy as np
+import pytest
 
 from fenicsx_drape.calibration.consistency import consistency, groups
 from fenicsx_drape.calibration.fit import fit
@@ -91,3 +92,15 @@ def test_command_line(tmp_path):
                  "--out", str(tmp_path / "out"), "--consistency", "lab"]) == 0
     report = json.loads((tmp_path / "out" / "consistency.json").read_text())
     assert report["verdict"] == "lab_offset"
+
+
+@pytest.mark.slow
+def test_diagnosis_tells_a_lab_offset_from_missing_physics():
+    """diagnose runs the check when a bundle has several labs: lab C's offset is named in
+    the conclusion instead of a call for new physics (about 20 s)."""
+    from fenicsx_drape.diagnosis.diagnose import diagnose
+
+    report = diagnose(_bundle(offset=1.4), Model(DRY))
+    assert report["consistency"]["verdict"] == "lab_offset"
+    assert report["missing_effect"] is None
+    assert report["conclusion"].startswith("Not missing physics but a lab offset: lab 'C'")

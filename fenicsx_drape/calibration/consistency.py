@@ -74,6 +74,26 @@ def groups(tests: Sequence[Test], by: str) -> dict[str, list[str]]:
     return out
 
 
+def informative(tests: Sequence[Test]) -> tuple[str, ...]:
+    """The groupings that can tell something about these tests.
+
+    Several labs; several sizes of one kind; several kinds that identify one law (bias
+    extension and picture frame).
+    """
+    from fenicsx_drape.calibration.coupons import BLOCK_ROLE
+
+    by = []
+    if len(groups(tests, "lab")) > 1:
+        by.append("lab")
+    kinds = {t.kind for t in tests}
+    if any(len(groups([t for t in tests if t.kind == k], "size")) > 1 for k in kinds):
+        by.append("size")
+    roles = [BLOCK_ROLE[k] for k in kinds if k in BLOCK_ROLE]
+    if len(roles) > len(set(roles)):
+        by.append("kind")
+    return tuple(by)
+
+
 def _normalised(tests: Sequence[Test], model) -> tuple[float, float, dict[str, float]]:
     """Normalised error, least-squares force scale (measured/predicted), per-test errors."""
     per, num, den = {}, 0.0, 0.0

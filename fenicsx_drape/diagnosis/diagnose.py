@@ -41,6 +41,11 @@ The procedure follows the diagnosis contract of ``shared/spec/measurements.md``:
    ``heldout_normalised``; among those within :data:`PARSIMONY` (5 %) of the best, the one
    adding the fewest parameters ranks first. ``missing_effect`` is the first candidate if it
    is significant **and** its refit reaches ``normalised <= ADEQUATE`` (1.5), else null.
+7. **Groups.** When the coupon tests come from several labs (``lab = "..."``), several sizes
+   of one kind, or both shear tests (bias extension and picture frame), each such group is
+   left out of the baseline's coupon fit in turn and predicted by the rest
+   (:mod:`fenicsx_drape.calibration.consistency`): ``consistency`` in the report, and the
+   conclusion says a lab offset, size effect or kind mismatch beside the physics.
 """
 
 from __future__ import annotations
@@ -342,6 +347,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     base_ho = normalised_error(base_ho_cmp)
     say(f"  held-out normalised error {base_ho:.3g}")
 
+    groups = _consistency(details.get("coupons"), say)
     tried, untestable = [], []
     base_active = set(baseline.active_parameters())
     for name in candidate_names(model):
@@ -415,8 +421,10 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
                     "the best, the one adding the fewest parameters first"),
         "missing_rule": (f"the first candidate if significant and its refit reaches "
                          f"normalised <= {ADEQUATE}"),
-        "conclusion": _conclusion(missing, best, base, pattern, optimiser,
-                                  details.get("coupons")),
+        "conclusion": _groups_conclusion(groups, missing) or (
+            _conclusion(missing, best, base, pattern, optimiser, details.get("coupons"))
+            + _groups_sentence(groups)),
+        "consistency": groups,
         "metrics": {label: kind_metrics(data.tests, comparisons[label], models[label])
                     for label in models} if any(KINDS[t.kind].metrics for t in data.tests)
         else {},
@@ -557,6 +565,44 @@ def _noise_notes(coupons) -> dict[str, Any]:
     notes = {k: v["says"] for k, v in coupons.noise.items()}
     implausible = sorted(k for k, v in coupons.noise.items() if v["source"] == "relative_floor")
     return {"says": notes, "implausible": implausible}
+
+
+def _consistency(coupons, say: Progress) -> dict[str, Any] | None:
+    """Leave one lab, size or shear-test kind out of the coupons' fit, when there are several.
+
+    See :mod:`fenicsx_drape.calibration.consistency`; None when there is nothing to compare.
+    """
+    from fenicsx_drape.calibration.consistency import consistency, informative
+
+    if coupons is None:
+        return None
+    by = informative([t for t in coupons.bundle.tests if t.id in coupons.errors])
+    if not by:
+        return None
+    say(f"consistency: leaving out one {', one '.join(by)} at a time")
+    report = consistency(coupons.bundle, coupons, by=by)
+    say(f"  {report['verdict']}: {report['says']}")
+    return report
+
+
+def _groups_conclusion(groups: dict[str, Any] | None, missing) -> str:
+    """The conclusion when no effect is missing but one lab, size or kind explains the misfit.
+
+    The rest fit at the noise without it: that group, not the physics, is the suspect.
+    """
+    if missing or not groups or groups["verdict"] in ("consistent", "missing_physics"):
+        return ""
+    return (f"Not missing physics but a {groups['verdict'].replace('_', ' ')}: "
+            f"{groups['says']}. Check that group's set-up (load cell, normalisation, "
+            "specimen, conditioning) or leave it out, and diagnose again.")
+
+
+def _groups_sentence(groups: dict[str, Any] | None) -> str:
+    """A lab offset, size effect or kind mismatch, said beside the physics' conclusion."""
+    if not groups or groups["verdict"] in ("consistent", "missing_physics"):
+        return ""
+    return (f" Before physics, the tests' groups: {groups['verdict']}: {groups['says']} "
+            "(consistency).")
 
 
 def _conclusion(missing, best, base: list[Comparison], pattern: str,
