@@ -104,3 +104,23 @@ def test_diagnosis_tells_a_lab_offset_from_missing_physics():
     assert report["consistency"]["verdict"] == "lab_offset"
     assert report["missing_effect"] is None
     assert report["conclusion"].startswith("Not missing physics but a lab offset: lab 'C'")
+
+
+def test_size_effect_as_a_trend():
+    """Bias extension of three aspect ratios whose forces carry the share of the gauge region
+    that Harrison's three zones shear fully, (L − 1.25 W)/(L − W) (0.75, 0.83, 0.88), at
+    0.3 % noise: no single size explains the misfit (any two left differ beyond their noise),
+    but the held-out scales follow the shape. The sizes' strain rates differ (one crosshead
+    speed), which the verdict says."""
+    sizes = (200.0, 250.0, 300.0)
+    tests = [bias_test(f"un-100x{L:g}", 10.0, n_rows=30, length_mm=L, width_mm=100.0,
+                       max_displacement_mm=0.3 * (L - 100.0)) for L in sizes]
+    bundle = synthetic_bundle(Model(DRY, TRUTH), tests, noise_rel=0.003, seed=3)
+    made = tuple(dataclasses.replace(t, columns={**t.columns, "force_N": t.force_N * (
+        t.length_mm - 1.25 * t.width_mm) / (t.length_mm - t.width_mm)}) for t in bundle.tests)
+    bundle = dataclasses.replace(bundle, tests=made)
+    report = consistency(bundle, fit(bundle, Model(DRY), analyse=False), by=("size",))
+    assert report["verdict"] == "size_effect", report["says"]
+    assert not any(r["explains"] for r in report["groups"]) and "rate" in report["says"]
+    scales = [r["scale"] for r in sorted(report["groups"], key=lambda r: r["size_measure"])]
+    assert scales[0] < 1.0 < scales[-1]

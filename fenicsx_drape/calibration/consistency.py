@@ -26,8 +26,11 @@ its noise, among the smallest groups that explain the misfit, names it -- ``lab_
 ``size_effect`` (a specimen size), ``kind_mismatch`` (a test kind, e.g. a normalisation
 that differs between picture frame and bias extension), ``single_test``; with the same
 tests in a lab and a size group (each lab used its own frame) the verdict says both
-(``lab_or_size``). When no single group explains the misfit, the model itself lacks
-something all tests share: ``missing_physics`` (run ``diagnose`` for the candidates).
+(``lab_or_size``). When no single group explains it but the held-out force scales of three
+or more sizes of one kind change monotonically with the specimen's shape (L/W, fabric/frame)
+by more than twice their noise, it is a ``size_effect`` too (a trend; the report says when
+the sizes' strain rates differ, as a rate effect would look the same). Otherwise the
+model itself lacks something all tests share: ``missing_physics`` (see ``diagnose``).
 """
 
 from __future__ import annotations
@@ -61,6 +64,15 @@ def size_of(test: Test) -> str:
     if test.kind == "bias_extension":
         return f"{test.length_mm:g}x{test.width_mm:g}"
     return f"{test.gauge_length_mm:g}x{test.width_mm or 0:g}"
+
+
+def size_measure(test: Test) -> float:
+    """The shape that sets a coupon's kinematics: L/W, L_fabric/L_frame or gauge/width."""
+    if test.kind == "picture_frame":
+        return test.fabric_side_mm / test.frame_side_mm
+    if test.kind == "bias_extension":
+        return test.length_mm / test.width_mm
+    return test.gauge_length_mm / (test.width_mm or 1.0)
 
 
 def groups(tests: Sequence[Test], by: str) -> dict[str, list[str]]:
@@ -152,8 +164,12 @@ def consistency(bundle: Bundle, result=None, *, model=None, by: Sequence[str] = 
                                        / float(result.model.parameters[n])))
                      for n in refit.fitted if float(result.model.parameters[n]) > 0
                      and float(refit.model.parameters[n]) > 0}
+            noise_rel = float(np.median([test_noise(t)[1] / np.max(np.abs(t.force_N))
+                                         for t in left]))
             records.append({
-                "by": key, "group": label, "tests": list(ids), "in_joint_fit": in_joint,
+                "by": key, "group": label, "tests": list(ids), "kind": left[0].kind,
+                "size_measure": size_measure(left[0]), "rate_per_s": _rate(left[0]),
+                "noise_rel": noise_rel, "in_joint_fit": in_joint,
                 "held_out": held, "held_out_per_test": per, "rest_after": refit.normalised,
                 "scale": scale, "disagrees": held > DISAGREE,
                 "explains": held > DISAGREE and refit.normalised <= ADEQUATE < joint,
@@ -173,6 +189,38 @@ def consistency(bundle: Bundle, result=None, *, model=None, by: Sequence[str] = 
             "groups": records, "verdict": verdict, "says": says})
 
 
+def _rate(test: Test) -> float:
+    from fenicsx_drape.calibration.identifiability import strain_rate
+
+    return strain_rate(test) if test.kind != "tensile" else math.nan
+
+
+def _size_trend(records: list[dict]) -> str | None:
+    """A size effect as a trend, in words; None when there is none.
+
+    The held-out force scales of three or more sizes of one kind, ordered by the specimens'
+    shape, change monotonically and spread beyond twice their noise.
+    """
+    for kind in sorted({r["kind"] for r in records}):
+        sizes = sorted((r for r in records if r["by"] == "size" and r["kind"] == kind),
+                       key=lambda r: r["size_measure"])
+        if len(sizes) < 3:
+            continue
+        scales = np.array([r["scale"] for r in sizes])
+        steps = np.diff(scales)
+        spread = scales.max() / scales.min() - 1.0
+        if not (np.all(steps > 0) or np.all(steps < 0)) or not spread > 2.0 * max(
+                r["noise_rel"] for r in sizes):
+            continue
+        rates = [r["rate_per_s"] for r in sizes]
+        caveat = (f" (their strain rates differ too, {min(rates):.2g}-{max(rates):.2g} 1/s: "
+                  "a rate effect would look the same)" if max(rates) > 1.5 * min(rates) else "")
+        return (f"the {kind} sizes' forces against the others' prediction change steadily with "
+                f"the specimen's shape: " + ", ".join(f"{r['group']} {r['scale']:.3g}"
+                                                       for r in sizes) + caveat)
+    return None
+
+
 def _verdict(joint: float, records: list[dict]) -> tuple[str, str]:
     disagree = [r for r in records if r["disagrees"]]
     if joint <= ADEQUATE and not disagree:
@@ -182,6 +230,8 @@ def _verdict(joint: float, records: list[dict]) -> tuple[str, str]:
     # the smallest group that explains the misfit is the most specific explanation
     explains = sorted((r for r in records if r["explains"]),
                       key=lambda r: (len(r["tests"]), r["rest_after"]))
+    if not explains and (trend := _size_trend(records)):
+        return "size_effect", trend
     if not explains:
         best = min(records, key=lambda r: r["rest_after"], default=None)
         where = (f"; the largest disagreement is {best['by']} {best['group']!r}: without it "
