@@ -20,7 +20,8 @@ Residuals, variables and Jacobian are those of :mod:`fenicsx_drape.calibration.c
   call per test (the laws accept parameter arrays); as that call costs about the same as one
   parameter set, every residual evaluation brings its Jacobian along.
 - **blocks**: as in the paper, tow parameters are fitted to the tensile tests and shear
-  parameters to the bias tests when the laws are decoupled. Coupling is judged from the
+  parameters to the bias tests (and picture frames, which identify the shear law too) when
+  the laws are decoupled. Coupling is judged from the
   data, not assumed: at the start, each parameter's effect (a Jacobian column in noise units)
   on the other kind of test must stay below 20 % of its effect on its own kind (so fitting it
   to its own kind alone costs the other kind at most a fifth of its noise); otherwise all
