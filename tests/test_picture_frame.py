@@ -201,3 +201,20 @@ def test_dry_fabric_fit_says_what_is_undetermined():
     held = {u["parameter"] for u in result.undetermined}
     assert {"E_o", "E_inf", "eps_bar", "alpha"} <= held
     assert all(math.isfinite(float(result.model.parameters[n])) for n in result.fitted)
+
+
+def test_prepreg_model_on_one_speed_holds_the_viscosity():
+    """The paper's (viscous) model on frames at one speed: η_o cannot be told from the
+    rate-independent response; it is held at its start with the reason, and the fit runs."""
+    effects = ("strain_dependent_viscosity", "decrimping", "tow_buckling")
+    truth = Model(effects, {"sigma_o": 0.03, "E_p": 0.8, "s_o": 20.0, "s_inf": 2000.0,
+                            "alpha_v": 20.0, "eps_v_bar": 0.4})
+    tests = [picture_frame_test("pf-a", 10.0, n_rows=30),
+             picture_frame_test("pf-b", 10.0, n_rows=30, frame_side_mm=145.0,
+                                fabric_side_mm=120.0)]
+    bundle = synthetic_bundle(truth, tests, noise_rel=0.02, seed=9, name="dry-one-speed")
+    result = fit(bundle, default_model(), analyse=False)
+    held = {u["parameter"]: u["reason"] for u in result.undetermined}
+    assert "one strain rate" in held["eta_o"]
+    assert result.model.parameters["eta_o"] == default_model().parameters["eta_o"]
+    assert result.normalised < 2.0
