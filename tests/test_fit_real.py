@@ -191,6 +191,19 @@ def _costs(res, X):
 # 3 % of each value -- the fit is deterministic (seeded Sobol points), the margin covers
 # BLAS and platform differences in the last iterations.
 REAL_FITS = {
+    "cao2008-plain-frames": {  # picture frames and bias extension (issue 29)
+        "pf-hkust": (10.43, 84.61),
+        "pf-kul-1st": (7.149, 75.75),
+        "pf-kul-3rd": (4.162, 65.94),
+        "pf-lmsp": (18.1, 78.6),
+        "pf-uml": (10.82, 82.9),
+        "pf-ut": (1.059, 18.13),
+        "pf-un": (9.087, 78.94),
+        "be-insa-nu-115x230": (1.77, 36.99),
+        "be-insa-nu-150x300": (2.341, 45.65),
+        "be-insa-nu-150x450": (1.84, 33.68),
+        "be-hkust-115x230": (5.501, 65.04),
+    },
     "cao2008-plain-hkust": {
         "hkust-20C-10": (7.221, 87.84),
         "hkust-20C-500": (6.937, 84.4),
