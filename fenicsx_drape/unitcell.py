@@ -414,6 +414,57 @@ def picture_frame_shear_force(force_N, displacement_mm, frame_side_mm: float,
     return shear if fabric_side_mm is None else shear * frame_side_mm / fabric_side_mm**2
 
 
+def bias_extension_shear_force(force_N, displacement_mm, length_mm: float,
+                               width_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    r"""Shear angle (deg) and normalised shear force (N/mm) of a bias test, Harrison's way.
+
+    Not this module's model: the three-zone energy balance of Harrison et al. (2004) as Cao
+    et al. (2008) eq. 16 state it, with the gauge zone A (area W (L − 1.5 W)) at the shear
+    angle γ of the pin-jointed kinematics, cos(π/4 − γ/2) = (L − W + d)/(√2 (L − W)), and
+    the two zones B (area W²) at γ/2:
+
+        F_sh(γ) = [(L/W − 1) F (cos γ/2 − sin γ/2) − W F_sh(γ/2) cos γ/2] / ((2L − 3W) cos γ),
+
+    unrolled over γ/2, γ/4, ... (F interpolated in the measured curve, F_sh(0) = 0). It is
+    comparable with a picture frame's :func:`picture_frame_shear_force` with the fabric side
+    (both per unit length, Cao et al. Fig. 45). This module's bias model instead takes the
+    whole gauge region W (L − W) at γ (eq. 21): for the same shear law its force exceeds
+    Harrison's by up to (L − W)/(L − 1.5 W).
+
+    Args:
+        force_N: Crosshead force of each row (N).
+        displacement_mm: Crosshead displacement of each row (mm), increasing.
+        length_mm: Specimen length L (mm), more than 1.5 W.
+        width_mm: Specimen width W (mm).
+
+    Returns:
+        ``(shear_deg, F_sh)`` per row.
+    """
+    L, W = float(length_mm), float(width_mm)
+    if not (W > 0.0 and L > 1.5 * W):
+        raise DrapeInputError(f"bias extension (Harrison): need length_mm > 1.5 width_mm > 0, "
+                              f"got {L:g} and {W:g}")
+    d = np.asarray(displacement_mm, dtype=float)
+    c = np.clip((L - W + d) / (math.sqrt(2.0) * (L - W)), -1.0, 1.0)
+    γ = np.radians(90.0) - 2.0 * np.arccos(c)
+    F = np.asarray(force_N, dtype=float)
+
+    def first(g):  # the zone-A term, and the factor on F_sh(γ/2)
+        denominator = (2.0 * L - 3.0 * W) * np.cos(g)
+        a = (L / W - 1.0) * np.interp(g, γ, F) * (np.cos(g / 2) - np.sin(g / 2)) / denominator
+        return a, W * np.cos(g / 2) / denominator
+
+    shear, factor, g = np.zeros_like(γ), np.ones_like(γ), γ.copy()
+    for _ in range(60):  # F_sh(γ) = a(γ) − b(γ) F_sh(γ/2) − ...: γ/2⁶⁰ is 0 in practice
+        a, b = first(g)
+        shear += factor * a
+        factor *= -b
+        g = g / 2
+        if np.all(np.abs(factor * a) <= 1e-15 * (1.0 + np.abs(shear))):
+            break
+    return np.degrees(γ), shear
+
+
 def picture_frame(
     model: Model,
     time_s,

@@ -218,3 +218,21 @@ def test_prepreg_model_on_one_speed_holds_the_viscosity():
     assert "one strain rate" in held["eta_o"]
     assert result.model.parameters["eta_o"] == default_model().parameters["eta_o"]
     assert result.normalised < 2.0
+
+
+def test_harrison_bias_normalisation_inverts_its_energy_balance():
+    """Forces made from a shear-force curve by Harrison's three-zone balance (Cao et al.
+    eq. 16 solved for F) give that curve back (to the interpolation between rows)."""
+    L, W = 230.0, 115.0
+    g = np.radians(np.linspace(0.0, 55.0, 400))
+    f_sh = 0.01 * np.degrees(g) + 1e-6 * np.degrees(g) ** 3  # N/mm
+
+    def shear(x):
+        return np.interp(x, g, f_sh)
+
+    force = ((2 * L - 3 * W) * np.cos(g) * f_sh + W * shear(g / 2) * np.cos(g / 2)) / (
+        (L / W - 1) * (np.cos(g / 2) - np.sin(g / 2)))
+    d = math.sqrt(2) * (L - W) * np.cos(np.pi / 4 - g / 2) - (L - W)
+    γ, back = unitcell.bias_extension_shear_force(force, d, L, W)
+    np.testing.assert_allclose(γ, np.degrees(g), atol=1e-9)
+    np.testing.assert_allclose(back, f_sh, rtol=1e-3, atol=1e-6)
