@@ -13,7 +13,6 @@
 # ./drape fit demos/bundles/cao2008-plain-frames --model MODEL.toml --out DIR --consistency
 # ```
 
-# %%
 import dataclasses
 import json
 import sys
@@ -35,7 +34,6 @@ for test in bundle.tests:
     print(f"{test.id:20s} {test.kind:15s} lab {lab_of(test):8s} {size_of(test):22s} "
           f"{test.n_rows} rows")
 
-# %% [markdown]
 # ## The frame's kinematics and the normalisation
 #
 # A frame of side L_frame pulled by d along its diagonal shears the fabric by γ with
@@ -45,7 +43,6 @@ for test in bundle.tests:
 # hold the crosshead force of each lab's frame (without linkage); going back gives the
 # figure's normalised curves and shear angles again:
 
-# %%
 for test in bundle.of_kind("picture_frame"):
     γ = unitcell.picture_frame_shear_angle(test.displacement_mm, test.frame_side_mm)
     fn = unitcell.picture_frame_shear_force(test.force_N, test.displacement_mm,
@@ -53,11 +50,9 @@ for test in bundle.of_kind("picture_frame"):
     print(f"{test.id:12s} γ {γ[0]:.0f}-{γ[-1]:.0f}° (read {test.shear_deg[-1]:.0f}°), "
           f"normalised shear force {fn.min():.3f}-{fn.max():.3f} N/mm")
 
-# %% [markdown]
 # The bias tests reduce the same way with Harrison's three zones (Cao et al. eq. 16: the gauge
 # zone at γ, the two half-sheared zones at γ/2). At 30°, both kinds side by side:
 
-# %%
 at_30 = {}
 for test in bundle.tests:
     if test.kind == "picture_frame":
@@ -70,23 +65,19 @@ for test in bundle.tests:
     at_30[test.id] = float(np.interp(30.0, γ, fn))
     print(f"{test.id:20s} {at_30[test.id]:.4f} N/mm at 30°")
 
-# %% [markdown]
 # ## A dry fabric's model
 #
 # The fabric is dry (no resin at room temperature): no viscous branch. The shear diagonal is
 # the rate-independent law of the measurement spec: elastic-plastic plus the lock-up term of
 # eq. 8's shape (`strain_dependent_viscosity` without `rate_dependence`).
 
-# %%
 model = Model(("strain_dependent_viscosity", "decrimping", "tow_buckling"))
 
-# %% [markdown]
 # ## The six labs' picture frames, fitted jointly
 #
 # Each test is weighed by its declared noise (5 % of its peak force: the figure has no error
 # bars). The fit says what the data cannot determine: the tow law, without a tensile test.
 
-# %%
 frames = [t.id for t in bundle.of_kind("picture_frame")]
 pf = fit(bundle, model, tests=frames)
 print(f"picture frames: normalised error {pf.normalised:.3g}")
@@ -96,11 +87,9 @@ for flag in pf.flags:
     print(f"  flag: {flag}")
 write_fit(pf, out / "fit_frames")
 
-# %% [markdown]
 # Leave each lab (and each frame size) out in turn, refit the others, predict it. KUL and UT
 # share a frame size (250/180 mm), so a lab and a size can be told apart.
 
-# %%
 frames_check = consistency(bundle, pf, by=("lab", "size"))
 for g in frames_check["groups"]:
     print(f"  without {g['by']} {g['group']!r:24s}: held-out {g['held_out']:5.2f}, rest "
@@ -108,13 +97,11 @@ for g in frames_check["groups"]:
 print(f"verdict: {frames_check['verdict']}: {frames_check['says']}")
 write_json(out / "consistency_frames.json", frames_check)
 
-# %% [markdown]
 # ## Picture frame and bias extension together
 #
 # The same material in bias extension (INSA-NU at three sizes, HKUST at one). Leaving out a
 # test kind asks whether the two tests measure the same shear law.
 
-# %%
 joint = fit(bundle, model)
 print(f"all tests: normalised error {joint.normalised:.3g}")
 kinds_check = consistency(bundle, joint, by=("kind", "lab"))
@@ -125,7 +112,6 @@ print(f"verdict: {kinds_check['verdict']}: {kinds_check['says']}")
 write_json(out / "consistency_joint.json", kinds_check)
 write_fit(joint, out / "fit_joint")
 
-# %% [markdown]
 # ## The picture: normalised shear force of every lab, measured and fitted
 #
 # Left: the frames' fit, each lab's curve (dots) and the model in its frame (line), with the
@@ -133,7 +119,6 @@ write_fit(joint, out / "fit_joint")
 # every test of both kinds as a bias-equivalent force per tow (a frame's 2 L_frame/L_fabric
 # × F/tows) against the major diagonal's strain, with the joint fit (lines).
 
-# %%
 import matplotlib
 
 matplotlib.use("Agg")
