@@ -23,7 +23,7 @@ from fenicsx_drape.model import Model, default_parameters
 COUPON = ("rate_dependence", "strain_dependent_viscosity", "decrimping", "tow_buckling")
 PLUGIN = Path(__file__).parents[1] / "demos" / "user_laws" / "power_law_viscosity.py"
 
-# The contract's fields (measurements.md, "The diagnosis contract").
+# The contract's fields (docs/measurements.md, "The diagnosis contract").
 CONTRACT_FIELDS = {"contract", "baseline", "noise_floor", "where", "candidates", "untestable",
                    "missing_effect"}
 CANDIDATE_FIELDS = {"effect", "error_after", "heldout_normalised", "evidence", "significant",
