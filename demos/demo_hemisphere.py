@@ -40,7 +40,7 @@ out = Path(args[0]) if args else Path("results/hemisphere")
 #
 # The tools are exact surfaces built from their parameters. Eq. 1 shares the holding force
 # over the nodes under the holder; the paper does not say how its quarter model did, and the
-# case's `holder_force_share` chooses (README, "Eq. 1's force share and μ"). The material is
+# case's `holder_force_share` chooses (docs/paper.md, "Eq. 1's force share and μ"). The material is
 # the paper's model: its four coupon effects plus the blank-holder friction bars.
 
 tools = HemisphereTools()

@@ -5,7 +5,7 @@ second order, holder 4 mm) against the closed-form tools (case.toml).
 Forming tolerances: max shear within 0.5° and every node within 0.1 mm of the closed-form run
 (issue 13); the kinematic drape's max shear within 0.5° at the case's Δ = 10 mm (measured
 62.537° against 62.547°; at Δ = 20 mm the drape on the meshed punch leaves 76 of 169 nodes
-unplaced: README).
+unplaced: docs/cases.md).
 """
 
 from pathlib import Path

@@ -1,6 +1,6 @@
 """A forming case as a file: ``case.toml`` (tools, blank, holder, duration, model).
 
-The format is documented in ``docs/case-format.md`` and the README ("Forming cases"); a case
+The format is documented in ``docs/case-format.md`` and ``docs/cases.md``; a case
 is one folder in ``meshes/`` (``meshes/hemisphere/case.toml``) holding the case file and its
 tool geometry. :func:`load_case` reads and checks a case file and returns a
 :class:`FormingCase` (frozen dataclasses, units in the names); every problem is reported with
