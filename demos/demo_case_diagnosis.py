@@ -31,6 +31,9 @@
 # Pictures: `OUT/compare/residual_<test>.png` (the baseline's error map),
 # `OUT/diagnose/residual_<test>.png` (baseline and winner side by side, error by region),
 # `OUT/diagnose/candidates.png`, `OUT/after/residual_<test>.png` (the model with the effect).
+#
+# It takes one to two minutes on two cores: the docs show it without running it
+# (`tests/test_demos_diagnosis.py` runs it on a copy of the double dome with 20 mm cells).
 
 # +
 import sys

@@ -20,19 +20,24 @@
 # 4. The effect is added: the error map falls to the noise floor, and the paper's mean
 #    distance with it.
 #
-#     ./drape exec python3 demos/demo_forming_diagnosis.py [OUT]
+#     ./drape exec python3 demos/demo_forming_diagnosis.py [OUT] [CELL_MM]
+#
+# (CELL_MM: the unit cell of the measured part and of the forming runs, 10 mm by default;
+# its test runs it on 20 mm cells.)
 #
 # Pictures for a report: `OUT/compare/residual_hemisphere.png` (baseline error map),
 # `OUT/diagnose/residual_hemisphere.png` (baseline and winner side by side),
 # `OUT/diagnose/candidates.png`, `OUT/diagnose/where.png`.
 #
-# It takes about 4 minutes on two cores: the docs show it without running it.
+# It takes about 4 minutes on two cores: the docs show it without running it
+# (`tests/test_demos_diagnosis.py` runs it).
 
 # +
 import sys
 from pathlib import Path
 
 from fenicsx_drape.diagnosis import forming_kind as fc
+from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.compare import evaluate, write_compare
 from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
 from fenicsx_drape.measurements.bundle import Bundle, load_bundle, write_bundle
@@ -42,32 +47,37 @@ from fenicsx_drape.model import default_model
 SCRIPT = "__file__" in globals()
 args = sys.argv[1:] if SCRIPT else []
 out = Path(args[0] if args else "results/demo_forming_diagnosis")
+cell_mm = float(args[1]) if len(args) > 1 else 10.0  # the paper's Δ
 CANDIDATES = ["tow_buckling", "tool_friction", "shear_tension_coupling"]
 # -
 
-# ## The measured part and the baseline's error
+# ## The measured part, the baseline's error, and the diagnosis
+#
+# The forming runs of `compare` (`evaluate`) and `diagnose` use cells of `cell_mm`
+# (`--forming-cell-mm` on the command line). `diagnose` adds each candidate to the baseline,
+# refits the forming parameters and judges it by its prediction of grid nodes left out.
 
 # +
 truth, baseline = default_model(), default_model().without_effects("tow_buckling")
-test = fc.synthetic_forming_test(truth, cell_mm=10.0, grid_mm=10.0, sd_mm=0.3, seed=2007)
+test = fc.synthetic_forming_test(truth, cell_mm=cell_mm, grid_mm=10.0, sd_mm=0.3, seed=2007)
 write_bundle(Bundle(name="hemisphere-hidden-buckling", tests=(test,)), out / "bundle",
              comment="demo: formed with tow_buckling, 0.3 mm noise per coordinate")
 bundle = load_bundle(out / "bundle")
-result = evaluate(bundle, baseline)  # forming runs on 10 mm cells, the default
-write_compare(result, bundle, out / "compare")
+with runs.resolution(cell_mm):
+    result = evaluate(bundle, baseline)
+    write_compare(result, bundle, out / "compare")
+    report = diagnose(bundle, baseline, candidates=CANDIDATES,
+                      progress=lambda line: print(line, flush=True))
+    write_diagnosis(report, out / "diagnose" / "REPORT.json", out / "diagnose", bundle=bundle)
 m = result.metrics["hemisphere"]
 print(f"baseline without tow_buckling: mean distance {m['mean_distance_mm']:.2f} mm "
       f"({m['percent_of_displacement']:.1f} % of the mean displacement), "
       f"{result.normalised:.2f} × noise")
+print(summary(report))
 # -
 
-# ## Which effect is missing?
+# ## With the effect added
 
-# +
-report = diagnose(bundle, baseline, candidates=CANDIDATES,
-                  progress=lambda line: print(line, flush=True))
-write_diagnosis(report, out / "diagnose" / "REPORT.json", out / "diagnose", bundle=bundle)
-print(summary(report))
 errors = {"baseline": report["baseline"]["error"]}
 errors.update({c["effect"]: c["error_after"] for c in report["candidates"][:1]})
 for label, error in errors.items():
