@@ -123,6 +123,7 @@ def test_misfit_on_the_paper_itself_is_the_model_experiment_spread():
                                                              - math.log(51.4 / 50.2)) / 12)
 
 
+@pytest.mark.slow
 def test_coarse_duration_sweep_keeps_its_documented_trend():
     """Fig. 12a on 20 mm cells (quarter, 133 N, default reading): slower forming wrinkles less
     and shears more (docs/paper.md, "Studies"), the trend the paper reports."""
