@@ -6,13 +6,17 @@ DRAPE := ./drape
 PYTEST_ARGS := -q -o faulthandler_timeout=300
 LIMIT := timeout 1200
 
-.PHONY: test test-serial test-parallel lint demo
+.PHONY: test test-serial test-parallel test-fast lint demo docs
 
 # The whole suite: serially, the parallel tests again on 2 and 3 ranks, then the linter.
 test: test-serial test-parallel lint
 
 test-serial:
 	$(DRAPE) exec $(LIMIT) python3 -m pytest $(PYTEST_ARGS)
+
+# The suite without the tests marked slow, serially: a few minutes, for every change.
+test-fast:
+	$(DRAPE) exec $(LIMIT) python3 -m pytest $(PYTEST_ARGS) -m "not slow"
 
 # pytest exits with 5 when no test is marked parallel: that is not a failure.
 test-parallel:
@@ -31,3 +35,8 @@ lint:
 demo:
 	$(DRAPE) form hemisphere --out results/hemisphere
 	@echo "pictures, fields and provenance.json: results/hemisphere/"
+
+# The documentation as a website (docs/_build/html): the docs/ pages, the demos run as pages,
+# the API reference from the docstrings. Warnings are errors.
+docs:
+	$(DRAPE) exec sphinx-build -W --keep-going -b html docs docs/_build/html

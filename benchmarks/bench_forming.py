@@ -9,7 +9,7 @@
 
 A JIT warm-up run (30 mm cells) comes first. ``--before`` runs the solver as issue 17 found it
 (backtracking line search, exact geometric stiffness, penetrating nodes projected onto the
-tool surface) for the table of the README. Every line: nodes, unknowns, ranks, wall time,
+tool surface) for the tables of docs/solver-notes.md. Every line: nodes, unknowns, ranks, wall time,
 accepted steps, cut-backs, Newton iterations (per step), factorisations, GMRES iterations on
 reused factors, residual evaluations, maximum shear; the machine's load average before the run.
 """

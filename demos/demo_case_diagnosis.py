@@ -1,3 +1,13 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:light
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # # Which physics is a formed double dome missing? Diagnosis on any forming case
 #
 # A part is formed, its drawn grid is measured, and the model that should predict it misses:
@@ -21,6 +31,9 @@
 # Pictures: `OUT/compare/residual_<test>.png` (the baseline's error map),
 # `OUT/diagnose/residual_<test>.png` (baseline and winner side by side, error by region),
 # `OUT/diagnose/candidates.png`, `OUT/after/residual_<test>.png` (the model with the effect).
+#
+# It takes one to two minutes on two cores: the docs show it without running it
+# (`tests/test_demos_diagnosis.py` runs it on a copy of the double dome with 20 mm cells).
 
 # +
 import sys
@@ -35,9 +48,12 @@ from fenicsx_drape.forming.case import load_case
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import default_model
 
-ROOT = Path(__file__).resolve().parents[1]
-out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("results/demo_case_diagnosis")
-case_file = Path(sys.argv[2]) if len(sys.argv) > 2 else ROOT / "meshes/double_dome/case.toml"
+# As a page of the docs the demo is a notebook run in demos/, without arguments.
+SCRIPT = "__file__" in globals()
+args = sys.argv[1:] if SCRIPT else []
+ROOT = (Path(__file__).resolve().parent if SCRIPT else Path.cwd()).parent
+out = Path(args[0]) if args else Path("results/demo_case_diagnosis")
+case_file = Path(args[1]) if len(args) > 1 else ROOT / "meshes/double_dome/case.toml"
 HIDDEN = "tow_buckling"
 CANDIDATES = ["tow_buckling", "tool_friction", "shear_tension_coupling"]
 SD_MM = 0.3  # measurement noise per coordinate (mm)

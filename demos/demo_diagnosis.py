@@ -1,3 +1,13 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:light
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # # Finding the missing physics: compare, diagnose, add, compare again
 #
 # A model of a woven prepreg is only as good as the physics it includes. This walkthrough
@@ -17,8 +27,11 @@
 # ./drape diagnose BUNDLE --model MODEL.toml --json REPORT.json --out DIR
 # ./drape history DIR1 DIR2 ... --out DIR
 # ```
+#
+# It takes about 2 minutes on two cores: the docs show it without running it
+# (`tests/test_demos_diagnosis.py` runs it).
 
-# %%
+# +
 import sys
 from pathlib import Path
 
@@ -28,11 +41,14 @@ from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
 from fenicsx_drape.diagnosis.ledger import history, table
 from fenicsx_drape.model import Model, default_parameters
 
-here = Path(__file__).resolve().parent
-out = Path(sys.argv[1]) if len(sys.argv) > 1 else here.parent / "results" / "demo_diagnosis"
+# As a page of the docs the demo is a notebook run in demos/, without arguments.
+SCRIPT = "__file__" in globals()
+args = sys.argv[1:] if SCRIPT else []
+here = Path(__file__).resolve().parent if SCRIPT else Path.cwd()
+out = Path(args[0]) if args else here.parent / "results" / "demo_diagnosis"
 law_file = here / "user_laws" / "power_law_viscosity.py"
+# -
 
-# %% [markdown]
 # ## The measurements
 #
 # Two bundles from the same (synthetic) material. The first is the paper's programme: a
@@ -40,7 +56,6 @@ law_file = here / "user_laws" / "power_law_viscosity.py"
 # second comes later, from a better load cell (0.5 % noise) over three decades of crosshead
 # speed, 1 to 1000 mm/min. Both are written as ordinary bundles (`bundle.toml` + CSV).
 
-# %%
 truth = Model(("power_law_viscosity", "decrimping", "tow_buckling"),
               default_parameters() | {"n_power": 0.5}, plugins=(law_file,))
 coupons = [tensile_test("tensile", n_rows=40)]
@@ -52,7 +67,6 @@ wide = synthetic_bundle(
                                                                        1000.0)],
     noise_rel=0.005, seed=2, out_dir=out / "bundle-wide", name="wide-rates")
 
-# %% [markdown]
 # ## Version 1: how far, and where?
 #
 # The user starts from the paper's shear law (rate dependence, strain-dependent viscosity)
@@ -60,7 +74,6 @@ wide = synthetic_bundle(
 # N and %, the noise floor estimated from the data (`force_sd_N` here) and the error's
 # *location*: its share in each physically meaningful region.
 
-# %%
 v1 = Model(("rate_dependence", "strain_dependent_viscosity", "tow_buckling"),
            default_parameters())
 result = compare(paper, v1)
@@ -72,7 +85,6 @@ print(f"normalised error {result.normalised:.2f} (1 = noise floor)")
 for e in result.where()[:3]:
     print(f"{100 * e['share_of_error']:5.1f} % of the error: {e['test']}, {e['says']}")
 
-# %% [markdown]
 # The tensile test carries the error, in its low-strain (crimp) region. The residual plots
 # `v1/residual_<test>.png` show it, region by region; `v1/where.png` sums it up.
 #
@@ -83,31 +95,26 @@ for e in result.where()[:3]:
 # and the refit reaches the noise floor (normalised <= 1.5). Effects that these tests cannot
 # exercise (the forming-only frictions) are listed as untestable.
 
-# %%
 report = diagnose(paper, v1)
 write_diagnosis(report, out / "diagnose-v1" / "REPORT.json", out / "diagnose-v1",
                 bundle=paper)
 print(summary(report))
 
-# %% [markdown]
 # ## Version 2: add it, compare again
 #
 # Adding the named effect is one call (or one more name in `effects` of MODEL.toml).
 
-# %%
 v2 = v1.with_effects(*report["add_effects"])
 result = compare(paper, v2)
 write_compare(result, paper, out / "v2")
 print(f"v2 ({', '.join(v2.effects)}): normalised error {result.normalised:.2f}")
 
-# %% [markdown]
 # ## New data, and physics the catalogue does not have
 #
 # The wide-rate bundle arrives. Version 2, refitted to it, misses again -- and no effect of
 # the catalogue explains why: `missing_effect` is null, while `where` still says where the
 # residual sits.
 
-# %%
 result = compare(wide, v2)
 write_compare(result, wide, out / "v2-wide")
 print(f"v2 on the wide-rate bundle: normalised error {result.normalised:.2f}")
@@ -116,36 +123,30 @@ write_diagnosis(report, out / "diagnose-v2-wide" / "REPORT.json", out / "diagnos
                 bundle=wide)
 print(summary(report))
 
-# %% [markdown]
 # The user suspects the resin: its viscosity may thin with the rate. They write that
 # physics as a law of their own, `power_law_viscosity.py` (a dataclass with named parameters
 # and a vectorised update, registered by name; read it), list the file as a plugin of the
 # model, and diagnose again: the law is now a candidate like any catalogued effect.
 
-# %%
 v2_plugin = Model(v2.effects, v2.parameters, plugins=(law_file,))
 report = diagnose(wide, v2_plugin)
 write_diagnosis(report, out / "diagnose-v2-plugin" / "REPORT.json",
                 out / "diagnose-v2-plugin", bundle=wide)
 print(summary(report))
 
-# %% [markdown]
 # ## Version 3: the user law in the model
 #
 # The named law replaces the built-in law of its role (shear) everywhere.
 
-# %%
 v3 = v2_plugin.with_effects(*report["add_effects"])
 result = compare(wide, v3)
 write_compare(result, wide, out / "v3-wide")
 print(f"v3 ({', '.join(v3.effects)}): normalised error {result.normalised:.2f}")
 
-# %% [markdown]
 # ## The history of the model
 #
 # Every `compare` recorded its version in a ledger; `history` lists them and plots the
 # normalised error version by version against the noise floor (`history/history.png`).
 
-# %%
 versions = history([out / d for d in ("v1", "v2", "v2-wide", "v3-wide")], out / "history")
 print(table(versions))

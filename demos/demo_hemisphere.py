@@ -1,3 +1,13 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:light
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # # Forming a woven prepreg hemisphere (the paper's section 4)
 #
 # This demo forms the paper's hemisphere with the truss model: a 240 mm square sheet of the
@@ -20,14 +30,17 @@ from fenicsx_drape.forming.hemisphere import HemisphereCase
 from fenicsx_drape.forming.outputs import form_hemisphere
 from fenicsx_drape.model import default_model
 
-out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("results/hemisphere")
+# As a page of the docs the demo is a notebook run in demos/, without arguments.
+SCRIPT = "__file__" in globals()
+args = sys.argv[1:] if SCRIPT else []
+out = Path(args[0]) if args else Path("results/hemisphere")
 # -
 
 # ## The case
 #
 # The tools are exact surfaces built from their parameters. Eq. 1 shares the holding force
 # over the nodes under the holder; the paper does not say how its quarter model did, and the
-# case's `holder_force_share` chooses (README, "Eq. 1's force share and μ"). The material is
+# case's `holder_force_share` chooses (docs/paper.md, "Eq. 1's force share and μ"). The material is
 # the paper's model: its four coupon effects plus the blank-holder friction bars.
 
 tools = HemisphereTools()

@@ -1,3 +1,13 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:light
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # # The paper's material laws and the unit-cell tests
 #
 # This demo walks through the material side of fenicsx_drape (no DOLFINx needed): the model
@@ -16,7 +26,10 @@ from fenicsx_drape import default_model, unitcell
 from fenicsx_drape.commands.curves import write_curves
 from fenicsx_drape.model import Model, parameter_info
 
-out = Path(sys.argv[1] if len(sys.argv) > 1 else "results/demo_material_laws")
+# As a page of the docs the demo is a notebook run in demos/, without arguments.
+SCRIPT = "__file__" in globals()
+args = sys.argv[1:] if SCRIPT else []
+out = Path(args[0] if args else "results/demo_material_laws")
 model = default_model()
 print("effects:", ", ".join(model.effects))
 for name in model.active_parameters(("tensile", "bias_extension")):
@@ -76,7 +89,8 @@ for speed in (10.0, 160.0):
 # Naming it among the effects (and the file among the plugins) replaces the paper's shear law.
 
 # +
-plugin = Path(__file__).resolve().parent / "user_laws" / "power_law_viscosity.py"
+here = Path(__file__).resolve().parent if SCRIPT else Path.cwd()
+plugin = here / "user_laws" / "power_law_viscosity.py"
 user = Model(("power_law_viscosity", "decrimping", "tow_buckling"),
              {**model.parameters, "n_power": 0.5}, plugins=(plugin,))
 print("shear law of the user model:", type(user.laws()["shear"]).__name__)

@@ -1,3 +1,13 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:light
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # # Stretching a woven patch in the bias direction at three speeds
 #
 # A scripted study through the FE API: a 60 × 60 mm patch of 10 mm unit cells, turned by 45°
@@ -23,7 +33,10 @@ from fenicsx_drape.provenance import atomic_write_text, save_figure, write_prove
 from fenicsx_drape.unitcell import bias_extension
 
 comm = MPI.COMM_WORLD
-out = Path(sys.argv[1] if len(sys.argv) > 1 else "results/demo_truss_stretch")
+# As a page of the docs the demo is a notebook run in demos/, without arguments.
+SCRIPT = "__file__" in globals()
+args = sys.argv[1:] if SCRIPT else []
+out = Path(args[0] if args else "results/demo_truss_stretch")
 model = default_model()
 
 # ## The patch and its loading

@@ -14,6 +14,7 @@ import argparse
 import importlib
 import sys
 import traceback
+from types import ModuleType
 
 from fenicsx_drape import __version__
 from fenicsx_drape.errors import DrapeInputError
@@ -45,6 +46,14 @@ def _top_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def command_parser(name: str) -> tuple[ModuleType, argparse.ArgumentParser]:
+    """The module of command ``name`` (one of :data:`COMMANDS`) and its argument parser."""
+    module = importlib.import_module(f"fenicsx_drape.commands.{name}")
+    parser = argparse.ArgumentParser(prog=f"drape {name}", description=COMMANDS[name])
+    module.configure(parser)
+    return module, parser
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -61,9 +70,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"drape: error: unknown command {name!r} (choose from {', '.join(COMMANDS)})",
               file=sys.stderr)
         return 2
-    module = importlib.import_module(f"fenicsx_drape.commands.{name}")
-    parser = argparse.ArgumentParser(prog=f"drape {name}", description=COMMANDS[name])
-    module.configure(parser)
+    module, parser = command_parser(name)
     args = parser.parse_args(rest)  # exits 2 on bad options
     try:
         return int(module.run(args) or 0)

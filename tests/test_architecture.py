@@ -7,7 +7,7 @@ statement names (``from pkg import name`` names ``pkg.name`` when that is a modu
 ``pkg``); the implicit import of parent packages is not an edge, since a package's
 ``__init__`` importing its own modules is how a package is built.
 
-The layers, lowest first (README, Layout)::
+The layers, lowest first (docs/development.md, Layout)::
 
     base (errors, compat, the package root) < provenance < materials < model (effects, model,
     unitcell, nodal) < fe | measurements < forming < calibration < diagnosis < command line

@@ -130,6 +130,7 @@ def test_trend_says_the_error_grows_with_speed():
     assert trends(flat)[0]["says"] == ""
 
 
+@pytest.mark.slow
 def test_compare_command_writes_every_output(tmp_path, capsys):
     model = Model(("rate_dependence", "strain_dependent_viscosity", "decrimping",
                    "tow_buckling"), default_parameters())

@@ -23,7 +23,7 @@ from fenicsx_drape.model import Model, default_parameters
 COUPON = ("rate_dependence", "strain_dependent_viscosity", "decrimping", "tow_buckling")
 PLUGIN = Path(__file__).parents[1] / "demos" / "user_laws" / "power_law_viscosity.py"
 
-# The contract's fields (measurements.md, "The diagnosis contract").
+# The contract's fields (docs/measurements.md, "The diagnosis contract").
 CONTRACT_FIELDS = {"contract", "baseline", "noise_floor", "where", "candidates", "untestable",
                    "missing_effect"}
 CANDIDATE_FIELDS = {"effect", "error_after", "heldout_normalised", "evidence", "significant",
@@ -98,6 +98,7 @@ def null_case():
     return bundle, model, diagnose(bundle, model)
 
 
+@pytest.mark.slow
 def test_null_bundle_gives_no_missing_effect(null_case):
     _, _, report = null_case
     assert set(report) >= CONTRACT_FIELDS
@@ -147,6 +148,7 @@ def test_diagnose_command_bad_input_exits_2(tmp_path, capsys):
     assert not (tmp_path / "r.json").exists()
 
 
+@pytest.mark.slow
 def test_diagnose_command_writes_the_report(tmp_path, capsys):
     model = Model((*COUPON, "holder_friction"), default_parameters())
     tests = [tensile_test("tensile", n_rows=30), bias_test("bias-40", 40.0, n_rows=40)]

@@ -53,6 +53,7 @@ CASES = [
     ("effect", "material", "seed"),
     [pytest.param(e, m, s, marks=[pytest.mark.slow] if slow else [], id=f"{e}-{m}-{s}")
      for e, m, s, slow in CASES])
+@pytest.mark.slow
 def test_diagnose_names_the_hidden_effect(effect, material, seed):
     parameters = default_parameters() | MATERIALS[material]
     if effect == "temperature_dependence":

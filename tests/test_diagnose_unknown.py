@@ -34,6 +34,7 @@ def without_plugin(bundle):
     return diagnose(bundle, Model(COUPON, default_parameters()))
 
 
+@pytest.mark.slow
 def test_unknown_physics_gives_null_and_locates_the_residual(without_plugin):
     report = without_plugin
     assert report["baseline"]["error"]["normalised"] > 2 * ADEQUATE

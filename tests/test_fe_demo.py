@@ -13,6 +13,7 @@ import numpy as np
 DEMO = Path(__file__).parents[1] / "demos" / "demo_truss_stretch.py"
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_demo_truss_stretch(tmp_path):
     subprocess.run([sys.executable, str(DEMO), str(tmp_path)], check=True, timeout=600)

@@ -96,3 +96,19 @@ def test_read_rejects_a_non_truss(tmp_path):
         read_grid(path)
     with pytest.raises(DrapeInputError, match="no such"):
         read_grid(tmp_path / "missing.msh")
+
+
+def test_mesh_command_writes_the_papers_quarter(tmp_path):
+    """``drape mesh --cell-mm 10 --quarter --out DIR`` gives the 169-node quarter of meshes/."""
+    from pathlib import Path
+
+    from fenicsx_drape.cli import main
+
+    assert main(["mesh", "--cell-mm", "10", "--quarter", "--out", str(tmp_path)]) == 0
+    stored = read_grid(Path(__file__).parents[1] / "meshes" / "quarter_10mm" / "sheet.msh")
+    for suffix in (".msh", ".xdmf"):
+        grid = read_grid(tmp_path / f"sheet{suffix}")
+        assert len(grid.nodes) == 169 and grid.quarter
+        np.testing.assert_allclose(grid.nodes, stored.nodes)
+    assert (tmp_path / "provenance.json").exists()
+    assert main(["mesh", "--cell-mm", "-1", "--out", str(tmp_path / "bad")]) == 2

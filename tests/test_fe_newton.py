@@ -98,6 +98,7 @@ def test_a_reused_factorisation_gives_the_same_iterations_and_sheet():
     np.testing.assert_allclose(reused.grid.x, plain.grid.x, atol=1e-6)  # ... to the same end
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_a_single_precision_factor_with_gmres_gives_the_same_iterations_and_sheet():
     """GMRES to 1e-3 on a single-precision factor: the Newton iterates of the double factor."""

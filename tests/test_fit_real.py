@@ -3,7 +3,7 @@
 One speed and no tensile test; a start outside a law's range; MODEL.toml starts reaching the
 optimiser; a declared noise and an implausible one; a law outside the catalogue with a sharp
 lock-up, checked against a brute-force search; every real bundle of ``demos/bundles/``
-against the table of errors the README quotes.
+against the table of errors docs/calibration.md quotes.
 """
 
 import dataclasses
@@ -187,7 +187,7 @@ def _costs(res, X):
 
 
 # The paper's model (Table 2's effects) fitted to each real bundle of demos/bundles/: per
-# test the mean |error| in N and in % of the mean |force| (the README's table). Tolerance:
+# test the mean |error| in N and in % of the mean |force| (docs/calibration.md's table). Tolerance:
 # 3 % of each value -- the fit is deterministic (seeded Sobol points), the margin covers
 # BLAS and platform differences in the last iterations.
 REAL_FITS = {

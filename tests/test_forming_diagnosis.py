@@ -159,7 +159,7 @@ def test_diagnose_names_hidden_tool_friction_in_a_forming_bundle(dolfinx):
     A larger holder μ mimics most of the tool friction (both raise the drawing tension), so
     the diagnosis must find what is left: the draw-in of the free sheet between die and
     holder against that of the flange. At μ_tool = 0.3 a refitted holder μ absorbs it to
-    below the noise (README, forming diagnosis).
+    below the noise (docs/diagnosis.md, forming tests).
     """
     from fenicsx_drape.model import default_model
 

@@ -235,7 +235,7 @@ def test_hemisphere_force_share_option():
     from fenicsx_drape.errors import ParameterError
     from fenicsx_drape.forming.hemisphere import HemisphereCase
 
-    # The reading the README's table chose (issue 15): the paper's numbers are reproduced best
+    # The reading docs/paper.md's table chose (issue 15): the paper's numbers are reproduced best
     # when the quarter's own nodes share the whole 133 N.
     assert HemisphereCase().holder_force_share == "model"
     assert HemisphereCase().part_force_N == 133.0

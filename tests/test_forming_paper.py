@@ -123,9 +123,10 @@ def test_misfit_on_the_paper_itself_is_the_model_experiment_spread():
                                                              - math.log(51.4 / 50.2)) / 12)
 
 
+@pytest.mark.slow
 def test_coarse_duration_sweep_keeps_its_documented_trend():
     """Fig. 12a on 20 mm cells (quarter, 133 N, default reading): slower forming wrinkles less
-    and shears more (README, "Studies"), the trend the paper reports."""
+    and shears more (docs/paper.md, "Studies"), the trend the paper reports."""
     pytest.importorskip("dolfinx")
     from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
 

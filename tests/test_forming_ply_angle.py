@@ -350,6 +350,7 @@ def test_cli_refuses_a_ply_angle_on_the_quarter(tmp_path, capsys):
     assert "quarter" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_cli_forms_a_turned_ply(tmp_path):
     pytest.importorskip("dolfinx")

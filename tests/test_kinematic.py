@@ -77,7 +77,7 @@ def test_maximum_shear_is_near_the_papers_kinematic_61_degrees(net):
 
 @pytest.mark.parametrize("cell_mm", [10.0, 5.0, 2.5])
 def test_todays_hemisphere_numbers_are_kept(cell_mm, composite):
-    """62.5° at 10 mm and 63.8° at 2.5 mm (README), on the closed-form part and on the
+    """62.5° at 10 mm and 63.8° at 2.5 mm (docs/forming.md), on the closed-form part and on the
     punch at its final position united with the holder plane: the same net to 1e-8 mm."""
     a = kinematic_drape(TOOLS, cell_mm)
     b = kinematic_drape(composite, cell_mm, outline=rectangle((240.0, 240.0)))

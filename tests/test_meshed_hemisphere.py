@@ -5,7 +5,7 @@ second order, holder 4 mm) against the closed-form tools (case.toml).
 Forming tolerances: max shear within 0.5° and every node within 0.1 mm of the closed-form run
 (issue 13); the kinematic drape's max shear within 0.5° at the case's Δ = 10 mm (measured
 62.537° against 62.547°; at Δ = 20 mm the drape on the meshed punch leaves 76 of 169 nodes
-unplaced: README).
+unplaced: docs/cases.md).
 """
 
 from pathlib import Path
@@ -62,6 +62,7 @@ def test_meshed_punch_follows_the_closed_form(punch):
     assert punch.surface.bounds[1][2] == pytest.approx(0.0, abs=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_meshed_die_and_holder_follow_the_closed_form():
     die = MeshedTool("die", load_surface(FOLDER / "die.geo", mesh_size_mm=4.0, order=2,
@@ -106,6 +107,7 @@ def runs():
     return exact, meshed
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_the_meshed_case_uses_meshed_tools_with_a_flat_holder(runs):
     _, meshed = runs
@@ -114,6 +116,7 @@ def test_the_meshed_case_uses_meshed_tools_with_a_flat_holder(runs):
     assert meshed.tools["punch"].field.h == pytest.approx(1.0, rel=0.1)
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_meshed_hemisphere_reaches_full_travel_and_agrees_with_the_closed_form(runs):
     exact, meshed = runs
@@ -128,6 +131,7 @@ def test_meshed_hemisphere_reaches_full_travel_and_agrees_with_the_closed_form(r
     assert abs(meshed.max_penetration_mm - exact.max_penetration_mm) < 0.05
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_kinematic_drape_on_the_meshed_tools_agrees_with_the_closed_form():
     nets = [drape_case(load_case(FOLDER / name)) for name in ("case.toml", "case_meshed.toml")]

@@ -28,7 +28,7 @@ CASES = ("hemisphere",)
 def configure(parser: argparse.ArgumentParser) -> None:
     """Options of ``drape form``."""
     parser.add_argument("case", metavar="CASE",
-                        help="a case file (case.toml, see the README's 'Forming cases') or "
+                        help="a case file (case.toml, see docs/case-format.md) or "
                         "'hemisphere' (the paper's, with the options below)")
     parser.add_argument("--out", required=True, type=Path, help="output folder")
     parser.add_argument("--cell-mm", type=float, default=None,
@@ -43,7 +43,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="eq. 1's reading: a symmetric model carries its share of the "
                         "force, symmetry-plane nodes counting ½ (symmetric_part, a case file's "
                         "default), or the whole force over the model's own nodes (model, the "
-                        "hemisphere's default: README, issue 15)")
+                        "hemisphere's default: docs/paper.md, issue 15)")
     parser.add_argument("--mu", type=float, default=None,
                         help="textile-tool friction coefficient of eq. 1 (default: the case's "
                         "holder mu, else the model's)")

@@ -1,4 +1,4 @@
-"""``drape history DIR... [--out DIR]``: the ledger of model versions and their errors."""
+"""``drape history DIR [DIR ...] [--out DIR]``: the ledger of model versions and their errors."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """How far, and where, a model misses a measurement bundle (``drape compare``).
 
-The definitions are those of the diagnosis contract (``shared/spec/measurements.md``):
+The definitions are those of the diagnosis contract (``docs/measurements.md``):
 
 - the **noise** of a test is the RMS of its ``force_sd_N`` column, or else a model-free
   estimate from second differences of its rows (:mod:`fenicsx_drape.measurements.noise`);

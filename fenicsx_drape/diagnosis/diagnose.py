@@ -1,6 +1,6 @@
 """Which physical effect is a model missing? (``drape diagnose``, contract 2).
 
-The procedure follows the diagnosis contract of ``shared/spec/measurements.md``:
+The procedure follows the diagnosis contract of ``docs/measurements.md``:
 
 1. **Baseline.** The model is fitted to the bundle (:func:`fenicsx_drape.calibration.fit.fit`)
    and compared with every test (:mod:`fenicsx_drape.diagnosis.compare`): per-test RMSE, the

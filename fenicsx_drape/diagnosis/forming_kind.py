@@ -1,6 +1,6 @@
 """Forming tests in ``compare`` and ``diagnose``: a simulated sheet against a measured grid.
 
-A forming test (``kind = "forming"``, ``shared/spec/measurements.md``) gives the formed
+A forming test (``kind = "forming"``, ``docs/measurements.md``) gives the formed
 positions of the nodes of a grid drawn on the flat sheet. It plugs into
 :mod:`fenicsx_drape.diagnosis.compare` through the registry of test kinds
 (:func:`~fenicsx_drape.diagnosis.kinds.register_kind`; compare never imports it):

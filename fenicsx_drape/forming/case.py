@@ -1,6 +1,6 @@
 """A forming case as a file: ``case.toml`` (tools, blank, holder, duration, model).
 
-The format is documented in ``docs/case-format.md`` and the README ("Forming cases"); a case
+The format is documented in ``docs/case-format.md`` and ``docs/cases.md``; a case
 is one folder in ``meshes/`` (``meshes/hemisphere/case.toml``) holding the case file and its
 tool geometry. :func:`load_case` reads and checks a case file and returns a
 :class:`FormingCase` (frozen dataclasses, units in the names); every problem is reported with
@@ -8,7 +8,7 @@ the file and the key (``case.toml: [[tool]] 2 'geometry': no such file 'punch.st
 problems of a file at once. Paths in the file are relative to the case file.
 
 Keyword *overrides* change a loaded case the way a measured forming test's keys override the
-case it names (``shared/spec/measurements.md``, "forming tests on any part"):
+case it names (``docs/measurements.md``, "forming tests on any part"):
 ``load_case(path, duration_s=8.0, holder_force_N=500.0)``; :data:`OVERRIDES` lists the names.
 
 This module is plain NumPy (Gmsh only to sample an outline curve); the tools are built from

@@ -28,7 +28,7 @@
 - ``fields.xdmf`` (+ ``.h5``): displacement, bar strain and stress, wrinkling strain and
   shear angle every 5 mm of travel, for ParaView; ``tools/*.vtk``: the tools at full travel;
 - ``bundle/``: the formed sheet as a forming bundle (``bundle.toml`` and the node positions on
-  the 10 mm drawn grid, ``shared/spec/measurements.md``), to compare with a measured part;
+  the 10 mm drawn grid, ``docs/measurements.md``), to compare with a measured part;
   for a ply at an angle θ the drawn grid follows the tows (``i, j`` in the tow frame, turned
   by θ; :meth:`~fenicsx_drape.forming.post.FormedGrid.drawn_grid`);
 - ``shear.png``, ``wrinkling.png``, ``paths.png``: the formed sheet coloured by shear angle,

@@ -1,6 +1,6 @@
 """Rigid forming tools as exact surfaces of revolution: signed gap, normal and curvature.
 
-Frame (``shared/spec/measurements.md``): origin on the punch axis, z along the punch travel,
+Frame (``docs/measurements.md``): origin on the punch axis, z along the punch travel,
 z = 0 the plane of the undeformed sheet, the punch moving towards +z; x is the warp, y the weft.
 
 A tool is a *profile* in the meridian half-plane (r, h), r = √(x² + y²) the distance from the

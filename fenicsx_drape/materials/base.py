@@ -72,7 +72,7 @@ def fields_of(cls_or_law: Any, kind: str) -> list[dataclasses.Field]:
 
 @dataclasses.dataclass
 class MaterialLaw:
-    """Base of every law (built-in or user). Subclasses are ``@dataclass``es.
+    """Base of every law (built-in or user). Subclasses are dataclasses (``@dataclass``).
 
     Subclasses set ``role`` (one of :data:`ROLES`) and ``state_names``, and implement
     :meth:`_update`. The base checks parameters on construction and the inputs and outputs

@@ -1,4 +1,4 @@
-"""Measurement bundles: ``bundle.toml`` plus one CSV table per test (spec: measurements.md).
+"""Measurement bundles: ``bundle.toml`` plus one CSV table per test (spec: docs/measurements.md).
 
 :func:`load_bundle` reads a bundle into typed, validated objects. Every problem is reported
 as ``file:line: problem``; all problems of a bundle are collected and raised together in one

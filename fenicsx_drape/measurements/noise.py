@@ -1,6 +1,6 @@
 """The measurement noise of a test, from its data alone (the noise floor of a comparison).
 
-The diagnosis contract (``shared/spec/measurements.md``) defines the noise of a test as the
+The diagnosis contract (``docs/measurements.md``) defines the noise of a test as the
 RMS of its ``force_sd_N`` column when given, otherwise a model-free estimate from the data
 alone -- never from a model's residuals, so that a model cannot lower its own bar.
 

@@ -2,7 +2,7 @@
 
 Two domes on a flat base, joined by a saddle: the shape of the international woven-composite
 forming benchmark's double dome (Khan, Boisse et al. 2010; Boisse et al. 2011). Its published
-drawings are not open; the numbers here are chosen (README, "The double dome"). The surface
+drawings are not open; the numbers here are chosen (docs/cases.md, "The double dome"). The surface
 is a height field above the base plane,
 
     F(x, y) = (p(r₁)⁴ + p(r₂)⁴)^¼,  p(r) = H (1 + cos(π r / R_b)) / 2 for r < R_b, else 0,

@@ -2,7 +2,7 @@
 
 A square punch with rounded vertical edges (corner radius r_c) and a rounded bottom edge
 (fillet r_b), standing on a flat base plane that covers the whole blank, with a foot radius
-r_f where wall and base meet: the shape of the deep-drawn square box (README, "The square
+r_f where wall and base meet: the shape of the deep-drawn square box (docs/cases.md, "The square
 box"; dimensions chosen there). OpenCASCADE builds it as a solid (a plate and the box fused,
 then filleted); the surface kept is the box's top, walls and fillets and the plate's top.
 

@@ -1,0 +1,94 @@
+"""Sphinx configuration of the fenicsx_drape documentation (``make docs``).
+
+The pages are Markdown (MyST); the demos are the jupytext "light" scripts of ``demos/``
+(``docs/demos`` links to them), executed by MyST-NB and rendered as pages; the API reference
+is generated from the docstrings (autodoc, napoleon for Google style, autosummary).
+"""
+
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the working tree's package, as ./drape runs it
+
+import fenicsx_drape  # noqa: E402
+
+project = "fenicsx_drape"
+author = "the fenicsx_drape authors"
+copyright = "2026, the fenicsx_drape authors"
+version = release = fenicsx_drape.__version__
+
+extensions = [
+    "myst_nb",
+    "sphinx.ext.autodoc",
+    "sphinx.ext.autosummary",
+    "sphinx.ext.napoleon",
+    "sphinx.ext.mathjax",
+]
+
+# Sources: Markdown pages and the demos; the rest of demos/ (studies, bundles, user laws,
+# outputs) is not a page.
+exclude_patterns = [
+    "_build",
+    "conf.py",
+    "**/__pycache__",
+    "demos/study_*.py",
+    "demos/make_demo_bundle.py",
+    "demos/user_laws",
+    "demos/bundles",
+    "demos/results",
+]
+nb_custom_formats = {".py": ["jupytext.reads", {"fmt": "py:light"}]}
+
+# Every demo runs at each build, except those too long for it: they are shown without their
+# output (the page says so) and run by their tests. The build stops on a demo's error.
+nb_execution_mode = "force"
+nb_execution_excludepatterns = ["demos/demo_forming_diagnosis.py", "demos/demo_diagnosis.py",
+                                "demos/demo_case_diagnosis.py"]
+nb_execution_timeout = 600
+nb_execution_raise_on_error = True
+nb_execution_show_tb = True
+myst_enable_extensions = ["dollarmath"]
+myst_heading_anchors = 3
+
+# The API reference: one page per module, the members from their docstrings (Google style).
+# A package's page lists its modules only (what it re-exports is documented where it lives).
+templates_path = ["_templates"]
+autosummary_generate = True
+autodoc_member_order = "bysource"
+autodoc_typehints = "description"
+napoleon_google_docstring = True
+napoleon_numpy_docstring = False
+
+html_theme = "sphinx_book_theme"
+html_title = "fenicsx_drape"
+html_theme_options = {"show_toc_level": 2}
+
+
+def escape_bars(lines):
+    """Escape the ``|`` of plain-text magnitudes (``|ε|``) outside literals, in place.
+
+    Docstrings write a magnitude as in the paper, ``|x|``, which reStructuredText reads as a
+    substitution reference. Literal blocks (after ``::``) and inline literals are kept.
+    """
+    literal_indent = None  # the indentation of the paragraph that opened a literal block
+    previous = ""
+    for i, line in enumerate(lines):
+        indent = len(line) - len(line.lstrip())
+        if literal_indent is not None and line.strip() and indent <= literal_indent:
+            literal_indent = None
+        if literal_indent is None and previous.rstrip().endswith("::"):
+            literal_indent = len(previous) - len(previous.lstrip())
+        if line.strip():
+            previous = line
+        if literal_indent is not None or "|" not in line:
+            continue
+        parts = line.split("``")
+        parts[::2] = [part.replace("|", "\\|") for part in parts[::2]]
+        lines[i] = "``".join(parts)
+
+
+def setup(app):
+    """Run :func:`escape_bars` after napoleon has turned the docstrings into reST."""
+    app.connect("autodoc-process-docstring",
+                lambda app, what, name, obj, options, lines: escape_bars(lines), priority=900)
