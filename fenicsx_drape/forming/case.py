@@ -22,6 +22,7 @@ import itertools
 import math
 import os
 import tomllib
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -252,6 +253,9 @@ class FormingCase:
     penalty_factor: float = 0.3  # contact (and clamping) stiffness in units of l_t E_o
     stabilisation_N_per_mm: float = 1.25  # out-of-plane spring to the extrapolated motion
     path: Path | None = None  # the case file it was read from
+    # Where the case came from when that is data (a measurement bundle): its Python geometry
+    # and its model's plugins then run only with --trust (fenicsx_drape.trust).
+    origin: str | None = None
 
     def __post_init__(self) -> None:
         problems = _case_problems(self)
@@ -525,6 +529,7 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
         case.blank.grid()
     except DrapeInputError as err:
         raise CaseError([f"{fname}: [blank]: {err}"]) from None
+    check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
     return with_overrides(case, **overrides) if overrides else case
 
 
@@ -726,12 +731,25 @@ def sample_outline(path: str | os.PathLike, spacing_mm: float) -> tuple[tuple[fl
     curves at z = 0; its curves are meshed with segments of ``spacing_mm`` (a mesh in the file
     is used as it is) and the segments chained into one loop.
 
+    A ``.geo`` script is checked (:func:`~fenicsx_drape.trust.check_geo`) and runs in a
+    child process with a time limit (:func:`~fenicsx_drape.limits.run_script`).
+
     Raises:
         DrapeInputError: no curve, not one closed loop, or not in the plane z = 0.
     """
+    path = Path(path)
+    if path.suffix.lower() in (".geo", ".geo_unrolled") and path.is_file():
+        from fenicsx_drape.limits import run_script
+        from fenicsx_drape.trust import check_geo
+
+        check_geo(path)
+        return run_script(_sample_outline, (path, spacing_mm), path)
+    return _sample_outline(path, spacing_mm)
+
+
+def _sample_outline(path: Path, spacing_mm: float) -> tuple[tuple[float, float], ...]:
     import gmsh
 
-    path = Path(path)
     initialised = gmsh.isInitialized()
     if not initialised:
         gmsh.initialize(interruptible=False)
@@ -880,6 +898,7 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
         new_case = dataclasses.replace(case, blank=blank, tools=tuple(tools), holder=holder,
                                        **changes)
         new_case.blank.grid()
+        check_tool_sizes(new_case, warn=False)
         for t in new_case.tools:
             if t.builtin:
                 _builtin_tools(t)
@@ -962,6 +981,7 @@ def case_for_test(path: str | os.PathLike, keys: Mapping[str, Any]
             changes[key] = value
     if problems:
         raise CaseError(problems)
+    case = dataclasses.replace(case, origin=f"the case {path} of a measurement bundle")
     return (with_overrides(case, **changes) if changes else case), used
 
 
@@ -978,6 +998,7 @@ def build_tools(case: FormingCase, skip: tuple[str, ...] = ()) -> dict[str, obje
     """
     from fenicsx_drape.forming.holder import FlatHolder
 
+    check_tool_sizes(case, skip)
     out: dict[str, object] = {}
     for spec in case.tools:
         if spec.name in skip:
@@ -998,16 +1019,112 @@ def build_tools(case: FormingCase, skip: tuple[str, ...] = ()) -> dict[str, obje
     return out
 
 
+# A tool mesh finer than the sheet's cell by this factor costs memory and time for nothing.
+FINE_MESH_FACTOR = 20.0
+# A tool mesh whose triangles miss the curved geometry by more than this share of the
+# sheet's cell changes the formed part (the chord h·θ/8 of an edge bending by θ).
+COARSE_CHORD_OF_CELL = 0.25
+# Edges bending more than this are taken as the geometry's own creases, not its curvature.
+CREASE_DEG = 60.0
+
+
+def tool_triangles(case: FormingCase, spec: ToolSpec) -> float | None:
+    """About how many triangles a tool's mesh will have, from the case alone (None: unknown).
+
+    A source Gmsh meshes at ``mesh_mm`` covers about the blank's box widened by the case's
+    travel on every side; an STL or ``.msh`` file about its size over 50 bytes a triangle.
+    """
+    if spec.builtin or spec.path is None:
+        return 0.0
+    from fenicsx_drape.limits import triangles_for
+
+    if spec.path.suffix.lower() in (".stl", ".msh"):
+        try:
+            return spec.path.stat().st_size / 50.0
+        except OSError:
+            return None
+    if spec.mesh_mm is None:
+        return None
+    w, h = np.ptp(case.blank.polygon(), axis=0)
+    travel = case.total_travel_mm
+    return triangles_for((w + 2 * travel) * (h + 2 * travel), spec.mesh_mm, spec.order or 1)
+
+
+def check_tool_sizes(case: FormingCase, skip: tuple[str, ...] = (), warn: bool = True) -> None:
+    """Refuse tool meshes beyond the memory limit, warn of ones much finer than the sheet.
+
+    Raises:
+        DrapeInputError: with the estimate and the limit (:mod:`fenicsx_drape.limits`).
+    """
+    from fenicsx_drape.limits import check_triangles
+
+    where = str(case.path or case.name)
+    total, named = 0.0, []
+    for spec in case.tools:
+        n = None if spec.name in skip else tool_triangles(case, spec)
+        if n:
+            total += n
+            named.append(f"{spec.name} {n:.3g}")
+        Δ = case.blank.cell_mm
+        if warn and spec.mesh_mm is not None and spec.mesh_mm * FINE_MESH_FACTOR < Δ:
+            warnings.warn(f"{where}: tool {spec.name!r}: mesh_mm = {spec.mesh_mm:g} is "
+                          f"{Δ / spec.mesh_mm:.3g} times finer than the sheet's cell "
+                          f"{Δ:g} mm (about {n or 0:.3g} triangles): time and memory for no "
+                          "accuracy", stacklevel=3)
+    if total:
+        check_triangles(total, f"{where}: tools ({', '.join(named)})")
+
+
+def coarse_mesh_problem(surface, cell_mm: float) -> str | None:
+    """A message when a tool's triangles miss its curved geometry by much (None if not).
+
+    Over the edges between two triangles that bend by θ below :data:`CREASE_DEG` (curvature,
+    not a crease), the chord h·θ/8 of an edge of length h is how far the flat triangles sit
+    from the arc they stand for; beyond :data:`COARSE_CHORD_OF_CELL` of the sheet's cell the
+    formed part changes.
+    """
+    n = surface.face_normals
+    nbr = surface.neighbours
+    tri = np.repeat(np.arange(len(n)), 3)
+    other = nbr.ravel()
+    ok = other > tri  # each inner edge once
+    tri, other = tri[ok], other[ok]
+    θ = np.arccos(np.clip(np.einsum("ij,ij->i", n[tri], n[other]), -1.0, 1.0))
+    p, t = surface.points, surface.triangles
+    side = np.flatnonzero(ok) % 3
+    a = p[t[tri, side]]
+    b = p[t[tri, (side + 1) % 3]]
+    h = np.linalg.norm(b - a, axis=1)
+    curved = θ < np.radians(CREASE_DEG)
+    if not curved.any():
+        return None
+    chord = h[curved] * θ[curved] / 8.0
+    worst = int(np.argmax(chord))
+    if chord[worst] <= COARSE_CHORD_OF_CELL * cell_mm:
+        return None
+    return (f"the tool mesh is coarse for its curved geometry: its flat triangles miss the "
+            f"surface by up to about {chord[worst]:.3g} mm (an edge of {h[curved][worst]:.3g} "
+            f"mm bending by {np.degrees(θ[curved][worst]):.3g}°), more than "
+            f"{COARSE_CHORD_OF_CELL:g} of the sheet's cell {cell_mm:g} mm; give a smaller "
+            "mesh_mm (or order = 2)")
+
+
 def _meshed_tool(case: FormingCase, spec: ToolSpec):
     """A tool from a geometry file: its surface meshed once by Gmsh, moved rigidly."""
     from fenicsx_drape.forming.motion import RigidMotion
     from fenicsx_drape.forming.surfaces import load_surface
     from fenicsx_drape.forming.tools import MeshedTool
+    from fenicsx_drape.trust import require_trust
 
     k = case.tools.index(spec) + 1
     where = f"{case.path or case.name}: [[tool]] {k} ({spec.name!r})"
+    if spec.path.suffix.lower() == ".py":
+        require_trust(spec.path, "the Python geometry of tool " + repr(spec.name), case.origin)
     surface = load_surface(spec.path, spec.params or None, spec.mesh_mm, spec.order or 1,
                            sheet_side=spec.side)
+    coarse = coarse_mesh_problem(surface, case.blank.cell_mm)
+    if coarse:
+        warnings.warn(f"{where}: {coarse}", stacklevel=3)
     m = spec.motion
     motion = None if m is None else RigidMotion(
         time_s=m.time_s, x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm, rotation_deg=m.rotation_deg,

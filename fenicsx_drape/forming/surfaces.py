@@ -51,9 +51,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
-import importlib.util
 import os
-import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -656,6 +654,29 @@ def load_surface(path: str | os.PathLike, parameters: Mapping[str, float] | None
 
 def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
           physical) -> TriangleSurface:
+    """Check the source, then read it: scripts in a child process with a time limit."""
+    suffix = path.suffix.lower()
+    if suffix == ".geo" and path.is_file():
+        from fenicsx_drape.trust import check_geo, geo_defines
+
+        check_geo(path)
+        unknown = [k for k in (parameters or {}) if not geo_defines(path, k)]
+        if unknown:
+            raise DrapeInputError(f"{path}: parameter(s) {', '.join(map(repr, unknown))} "
+                                  "not used by the script (a misspelt name would be ignored)")
+    if suffix in (".geo", ".py") and path.is_file():
+        from fenicsx_drape.limits import run_script
+
+        points, triangles = run_script(_read_raw, (path, parameters, mesh_size_mm, order,
+                                                   sheet_side, physical), path)
+        return TriangleSurface(points, triangles, sheet_side=sheet_side, source=str(path))
+    points, triangles = _read_raw(path, parameters, mesh_size_mm, order, sheet_side, physical)
+    return TriangleSurface(points, triangles, sheet_side=sheet_side, source=str(path))
+
+
+def _read_raw(path: Path, parameters, mesh_size_mm, order, sheet_side,
+              physical) -> tuple[np.ndarray, np.ndarray]:
+    """The points and triangles of a source as Gmsh gives them (in this process)."""
     where = str(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
@@ -732,7 +753,7 @@ def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
             _restore_options(gmsh, saved)
         else:
             gmsh.finalize()
-    return TriangleSurface(points, triangles, sheet_side=sheet_side, source=where)
+    return points, triangles
 
 
 # Options this module or the project's scripts set: put back for a caller's Gmsh session.
@@ -757,16 +778,17 @@ def _restore_options(gmsh, saved) -> None:
 
 def _run_build(gmsh, path: Path, parameters: dict) -> None:
     """Run ``build(gmsh, **parameters)`` of a Python geometry file."""
+    import types
+
     name = f"_fenicsx_drape_geometry_{abs(hash(str(path.resolve())))}"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
+    module = types.ModuleType(name)
+    module.__file__ = str(path)
     try:
-        spec.loader.exec_module(module)
+        # Compiled from its text: no __pycache__ written next to the input.
+        exec(compile(path.read_text(encoding="utf-8"), str(path), "exec"), module.__dict__)
     except Exception as error:
         raise DrapeInputError(f"{path}: could not run it: {type(error).__name__}: "
                               f"{error}") from None
-    finally:
-        sys.modules.pop(name, None)
     build = getattr(module, "build", None)
     if not callable(build):
         raise DrapeInputError(f"{path}: defines no function build(gmsh, **parameters)")
