@@ -146,6 +146,8 @@ def geo_problems(path: str | os.PathLike, _seen: set[Path] | None = None) -> lis
     for m in _WORD.finditer(code):
         word = m.group(0)
         line = code.count("\n", 0, m.start()) + 1
+        if word == "Printf" and not re.match(r"[^;]*\)\s*>", code[m.end():]):
+            continue  # a message, not a file: Printf("...") > "file" writes one
         if word in GEO_DENIED:
             problems.append(f"{path}:{line}: the command {word!r} runs a program or writes "
                             "files: no geometry needs it")

@@ -529,7 +529,10 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
         case.blank.grid()
     except DrapeInputError as err:
         raise CaseError([f"{fname}: [blank]: {err}"]) from None
-    check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
+    try:
+        check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
+    except DrapeInputError as err:
+        raise CaseError([str(err)]) from None
     return with_overrides(case, **overrides) if overrides else case
 
 
@@ -647,10 +650,25 @@ def _read_tools(r: _Reader, raw: Mapping, folder: Path, duration: float) -> list
                                           f"{', '.join(GEOMETRY_SUFFIXES)}, or {BUILTIN!r})")
             elif not path.is_file():
                 r.add(f"{at} 'geometry'", f"no such file {geometry!r}")
+            elif path.suffix.lower() == ".geo":
+                _check_geo_tool(r, at, path, params)
         tools.append(ToolSpec(name=name, role=role, geometry=geometry, path=path,
                               parameters=tuple(params.items()), mesh_mm=mesh, order=order,
                               sheet_side=side, motion=motion))
     return tools
+
+
+def _check_geo_tool(r: _Reader, at: str, path: Path, params: Mapping[str, float]) -> None:
+    """A Gmsh script tool: nothing beyond geometry (unless trusted), every parameter used."""
+    from fenicsx_drape.trust import geo_defines, geo_problems, trusted
+
+    if not trusted():
+        for problem in geo_problems(path):
+            r.add(f"{at} 'geometry'", f"{problem} (pass --trust to run it anyway)")
+    for key in params:
+        if not geo_defines(path, key):
+            r.add(f"{at} 'parameters' '{key}'", f"not used by {path.name} (a misspelt name "
+                                                "would be silently ignored)")
 
 
 def _check_builtin(r: _Reader, at: str, role, params, mesh, order, side, motion) -> None:
@@ -1022,8 +1040,8 @@ def build_tools(case: FormingCase, skip: tuple[str, ...] = ()) -> dict[str, obje
 # A tool mesh finer than the sheet's cell by this factor costs memory and time for nothing.
 FINE_MESH_FACTOR = 20.0
 # A tool mesh whose triangles miss the curved geometry by more than this share of the
-# sheet's cell changes the formed part (the chord h·θ/8 of an edge bending by θ).
-COARSE_CHORD_OF_CELL = 0.25
+# sheet's cell changes the formed part (the sag h·θ/6 of triangles whose edge bends by θ).
+COARSE_CHORD_OF_CELL = 0.1
 # Edges bending more than this are taken as the geometry's own creases, not its curvature.
 CREASE_DEG = 60.0
 
@@ -1079,9 +1097,10 @@ def coarse_mesh_problem(surface, cell_mm: float) -> str | None:
     """A message when a tool's triangles miss its curved geometry by much (None if not).
 
     Over the edges between two triangles that bend by θ below :data:`CREASE_DEG` (curvature,
-    not a crease), the chord h·θ/8 of an edge of length h is how far the flat triangles sit
-    from the arc they stand for; beyond :data:`COARSE_CHORD_OF_CELL` of the sheet's cell the
-    formed part changes.
+    not a crease), h·θ/6 for an edge of length h is how far the middle of a flat triangle
+    sits from the sphere through its corners (radius ρ = h/θ: the sag r²/(2ρ) at the centre
+    of an equilateral triangle, r = h/√3 its corners' distance); beyond
+    :data:`COARSE_CHORD_OF_CELL` of the sheet's cell the formed part changes.
     """
     n = surface.face_normals
     nbr = surface.neighbours
@@ -1098,7 +1117,7 @@ def coarse_mesh_problem(surface, cell_mm: float) -> str | None:
     curved = θ < np.radians(CREASE_DEG)
     if not curved.any():
         return None
-    chord = h[curved] * θ[curved] / 8.0
+    chord = h[curved] * θ[curved] / 6.0
     worst = int(np.argmax(chord))
     if chord[worst] <= COARSE_CHORD_OF_CELL * cell_mm:
         return None

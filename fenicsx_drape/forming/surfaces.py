@@ -738,7 +738,7 @@ def _read_raw(path: Path, parameters, mesh_size_mm, order, sheet_side,
                 gmsh.option.setNumber("Mesh.SecondOrderLinear", 0)
                 gmsh.model.mesh.setOrder(2)
             points, triangles = _triangles(gmsh, physical, where)
-        except DrapeInputError:
+        except (DrapeInputError, MemoryError):
             raise
         except Exception as error:  # Gmsh reports its errors as plain exceptions
             raise DrapeInputError(f"{where}: Gmsh: {error}") from None
@@ -794,6 +794,8 @@ def _run_build(gmsh, path: Path, parameters: dict) -> None:
         raise DrapeInputError(f"{path}: defines no function build(gmsh, **parameters)")
     try:
         build(gmsh, **parameters)
+    except MemoryError:
+        raise  # the memory limit's message (fenicsx_drape.limits)
     except TypeError as error:
         raise DrapeInputError(f"{path}: build(gmsh, **parameters) with parameters "
                               f"{sorted(parameters)}: {error}") from None

@@ -68,7 +68,8 @@ class Reach:
         """Distance (mm) of points (n, 3) from the box (0 inside)."""
         p = np.asarray(points_mm, dtype=float).reshape(-1, 3)
         lo, hi = np.asarray(self.lo_mm), np.asarray(self.hi_mm)
-        return np.linalg.norm(np.maximum(np.maximum(lo - p, p - hi), 0.0), axis=1)
+        with np.errstate(over="ignore"):  # 1e300 mm away is infinitely far
+            return np.linalg.norm(np.maximum(np.maximum(lo - p, p - hi), 0.0), axis=1)
 
     def far(self, points_mm: np.ndarray) -> np.ndarray:
         """Which points (n, 3) are farther than the blank's size from the box."""
