@@ -33,7 +33,7 @@ from typing import Any
 from fenicsx_drape.errors import DrapeInputError
 
 BYTES_PER_NODE = 40_000  # peak memory per sheet node of a forming run (DOLFINx, MUMPS)
-BYTES_PER_TRIANGLE = 4_000  # peak memory per tool triangle (Gmsh meshing, contact search)
+BYTES_PER_TRIANGLE = 5_000  # peak memory per tool triangle (Gmsh meshing, distance field)
 SCRIPT_TIMEOUT_S = 300.0  # a geometry script that runs longer is stopped
 # Triangles per mm² of surface per 1/h² (equilateral triangles of side h: area √3/4 h²).
 _TRIANGLES_PER_AREA = 4.0 / math.sqrt(3.0)

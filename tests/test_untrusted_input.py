@@ -253,7 +253,7 @@ def test_a_tool_mesh_beyond_the_memory_is_refused_before_gmsh_runs(tmp_path, mon
     expected = 4 / math.sqrt(3) * 140.0**2 / 1e-12
     n = re.escape(f"{expected:.3g}")
     with pytest.raises(CaseError, match=rf"punch {n}.*about {n} triangles, more than the "
-                                        r"limit of 2e\+06"):
+                                        r"limit of 1.6e\+06"):
         load_case(write_case(tmp_path, mesh_mm=1e-6))
     assert not (tmp_path / "case" / "punch_ran").exists()
 
