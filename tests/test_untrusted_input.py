@@ -143,7 +143,12 @@ grid_mm = 10.0"""
 def test_a_bundles_python_geometry_runs_only_with_trust(tmp_path):
     write_case(tmp_path)
     write_bundle(tmp_path, flat_grid(), test_keys='case = "case/case.toml"\ngrid_mm = 10.0')
-    case = load_bundle(tmp_path).tests[0].forming_case
+    with pytest.raises(BundleError, match=r"bundle\.toml:8: test 't': case 'case/case.toml': "
+                                          r".*case\.toml: \[\[tool\]\] 1 'geometry': 'punch\.py' "
+                                          r"is Python code .* --trust"):
+        load_bundle(tmp_path)
+    with trusting():
+        case = load_bundle(tmp_path).tests[0].forming_case
     with pytest.raises(UntrustedCodeError, match=r"punch\.py: the Python geometry of tool "
                                                  r"'punch' .* --trust"):
         build_tools(case)
@@ -171,7 +176,11 @@ def test_the_plugins_of_a_bundles_model_run_only_with_trust(tmp_path):
     (tmp_path / "case" / "MODEL.toml").write_text('plugins = ["plugin.py"]\n')
     write_case(tmp_path, model='model = "MODEL.toml"')
     write_bundle(tmp_path, flat_grid(), test_keys='case = "case/case.toml"')
-    case = load_bundle(tmp_path).tests[0].forming_case
+    with pytest.raises(BundleError, match=r"\[case\] 'model': MODEL\.toml has plugins "
+                                          r"\['plugin\.py'\] \(Python code\)"):
+        load_bundle(tmp_path)
+    with trusting():
+        case = load_bundle(tmp_path).tests[0].forming_case
     with pytest.raises(UntrustedCodeError, match=r"plugin\.py: a plugin of the model .*"
                                                  r"MODEL\.toml that comes with the case"):
         case_model(case)
@@ -220,7 +229,7 @@ def test_trust_is_one_option_of_every_command(tmp_path, capsys):
     write_bundle(tmp_path, flat_grid(), test_keys='case = "case/case.toml"\ngrid_mm = 10.0')
     assert main(["compare", str(tmp_path), "--out", str(tmp_path / "out"),
                  "--forming-cell-mm", "50"]) == 2
-    assert "punch.py: the Python geometry" in capsys.readouterr().err
+    assert "'punch.py' is Python code that would run" in capsys.readouterr().err
     for command in ("compare", "diagnose", "fit", "form", "drape", "curves", "mesh",
                     "history"):
         with pytest.raises(SystemExit):

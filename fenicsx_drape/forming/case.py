@@ -997,10 +997,37 @@ def case_for_test(path: str | os.PathLike, keys: Mapping[str, Any]
                 else math.isclose(float(own), float(value), rel_tol=1e-9, abs_tol=1e-12))
         if not same:
             changes[key] = value
+    problems += _untrusted_code(case, path)
     if problems:
         raise CaseError(problems)
     case = dataclasses.replace(case, origin=f"the case {path} of a measurement bundle")
     return (with_overrides(case, **changes) if changes else case), used
+
+
+def _untrusted_code(case: FormingCase, path) -> list[str]:
+    """The code a bundle's case would run (its .py tools, its model's plugins), untrusted.
+
+    Reported when the bundle is read, at once; the runs check again
+    (:func:`fenicsx_drape.trust.require_trust`).
+    """
+    from fenicsx_drape.trust import trusted
+
+    if trusted():
+        return []
+    out = [f"{path}: [[tool]] {k} 'geometry': {t.geometry!r} is Python code that would run: "
+           "a case a measurement bundle brings is data; pass --trust if you trust it"
+           for k, t in enumerate(case.tools, start=1)
+           if t.path is not None and t.path.suffix.lower() == ".py"]
+    if case.model is not None:
+        try:
+            plugins = tomllib.loads(case.model.read_text(encoding="utf-8")).get("plugins")
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            plugins = None  # reported when the model is read
+        if plugins:
+            out.append(f"{path}: [case] 'model': {case.model.name} has plugins {plugins} "
+                       "(Python code) that would run: a case a measurement bundle brings is "
+                       "data; pass --trust if you trust it")
+    return out
 
 
 # --------------------------------------------------------------------------------------------
