@@ -124,8 +124,10 @@ def script_timeout_s() -> float:
 def run_script(function: Callable[..., Any], args: tuple, path: str | os.PathLike) -> Any:
     """``function(*args)`` in a child process, with the time and memory limits.
 
-    ``function`` must be a module-level function (pickled by name), its arguments and result
-    picklable. A :class:`DrapeInputError` in the child is raised here with its message.
+    ``function`` must be a module-level function of the package (the child imports its module
+    alone, without the ``__init__`` of its subpackage: no DOLFINx, no MPI), its arguments
+    and result picklable. A :class:`DrapeInputError` in the child is raised here with its
+    message.
 
     Raises:
         DrapeInputError: the script's own error, or it ran past the time limit, or the child
@@ -133,12 +135,14 @@ def run_script(function: Callable[..., Any], args: tuple, path: str | os.PathLik
     """
     timeout = script_timeout_s()
     package_root = str(Path(__file__).resolve().parents[1])
-    env = dict(os.environ)
+    # Not a rank of the caller's MPI job (as the forming workers: diagnosis.forming_runs).
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
     env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH")) if p)
     env["PYTHONDONTWRITEBYTECODE"] = "1"
     with tempfile.TemporaryDirectory(prefix="drape_script_") as tmp:
         job, out = Path(tmp) / "job.pickle", Path(tmp) / "result.pickle"
-        job.write_bytes(pickle.dumps((function, args, memory_bytes())))
+        job.write_bytes(pickle.dumps(((function.__module__, function.__qualname__), args,
+                                      memory_bytes())))
         try:
             done = subprocess.run(
                 [sys.executable, "-c", "import sys; from fenicsx_drape.limits import _child; "
@@ -164,9 +168,23 @@ def run_script(function: Callable[..., Any], args: tuple, path: str | os.PathLik
 
 def _child(job: str, out: str) -> None:
     """The child of :func:`run_script`: limit the address space, run, pickle the result."""
+    import importlib
     import resource
+    import types
 
-    function, args, memory = pickle.loads(Path(job).read_bytes())
+    (module_name, name), args, memory = pickle.loads(Path(job).read_bytes())
+    # The module alone: its subpackages as bare namespaces, their __init__ not run.
+    import fenicsx_drape  # noqa: F401  (the top package is light)
+
+    parts = module_name.split(".")
+    for k in range(2, len(parts)):
+        package = ".".join(parts[:k])
+        if package not in sys.modules:
+            bare = types.ModuleType(package)
+            bare.__path__ = [os.path.join(sys.modules[".".join(parts[:k - 1])].__path__[0],
+                                          parts[k - 1])]
+            sys.modules[package] = bare
+    function = getattr(importlib.import_module(module_name), name)
     limit = int(memory)
     _, hard = resource.getrlimit(resource.RLIMIT_AS)
     if hard != resource.RLIM_INFINITY:

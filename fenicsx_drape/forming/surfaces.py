@@ -856,3 +856,78 @@ def _triangles(gmsh, physical: str | None, where: str) -> tuple[np.ndarray, np.n
 
 def _nodes_of(etype: int) -> int:
     return {2: 3, 9: 6, 3: 4, 10: 9}[etype]
+
+
+# --------------------------------------------------------------------------------------------
+# Outline curves
+
+
+def sample_curve_loop(path: Path, spacing_mm: float) -> tuple[tuple[float, float], ...]:
+    """The closed curve loop of a Gmsh file as a polygon, in this process.
+
+    See :func:`~fenicsx_drape.forming.case.sample_outline` (which checks a script first and
+    runs this in a child process).
+    """
+    import gmsh
+
+    initialised = gmsh.isInitialized()
+    if not initialised:
+        gmsh.initialize(interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    try:
+        gmsh.model.add("outline")
+        try:
+            gmsh.open(str(path))
+        except Exception as err:  # Gmsh raises plain Exceptions with its message
+            raise DrapeInputError(f"Gmsh cannot read {path.name} ({err})") from err
+        if not gmsh.model.getEntities(1):
+            raise DrapeInputError(f"{path.name} holds no curve")
+        if not len(gmsh.model.mesh.getElements(1)[0]):
+            gmsh.option.setNumber("Mesh.MeshSizeMax", spacing_mm)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
+            gmsh.model.mesh.generate(1)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        xyz = dict(zip(tags.tolist(), np.asarray(coords).reshape(-1, 3)))
+        edges = []
+        for etype, _, nodes in zip(*gmsh.model.mesh.getElements(1)):
+            n = gmsh.model.mesh.getElementProperties(etype)[3]
+            edges.append(np.asarray(nodes).reshape(-1, n)[:, :2])  # the end nodes
+    finally:
+        gmsh.model.remove()
+        if not initialised:
+            gmsh.finalize()
+    edges = np.concatenate(edges) if edges else np.zeros((0, 2), int)
+    edges = edges[edges[:, 0] != edges[:, 1]]
+    loop = _chain(edges, path.name)
+    P = np.array([xyz[k] for k in loop])
+    size = max(np.ptp(P[:, :2], axis=0).max(), 1e-300)
+    if np.abs(P[:, 2]).max() > 1e-6 * size:
+        raise DrapeInputError(f"{path.name}: the curve loop is not in the sheet plane z = 0 "
+                              f"(|z| up to {np.abs(P[:, 2]).max():g} mm)")
+    return tuple((float(x), float(y)) for x, y in P[:, :2])
+
+
+def _chain(edges: np.ndarray, name: str) -> list[int]:
+    """The nodes of one closed loop of line segments, in order."""
+    if not len(edges):
+        raise DrapeInputError(f"{name}: no curve segment")
+    neighbours: dict[int, list[int]] = {}
+    for a, b in edges.tolist():
+        neighbours.setdefault(a, []).append(b)
+        neighbours.setdefault(b, []).append(a)
+    if any(len(v) != 2 for v in neighbours.values()):
+        raise DrapeInputError(f"{name}: the curves are not one closed loop (a curve end meets "
+                              "no other curve, or three curves meet)")
+    start = edges[0, 0]
+    loop, previous, node = [start], None, start
+    while True:
+        a, b = neighbours[node]
+        nxt = b if a == previous else a
+        if nxt == start:
+            break
+        loop.append(nxt)
+        previous, node = node, nxt
+    if len(loop) != len(neighbours):
+        raise DrapeInputError(f"{name}: the curves form {len(neighbours) - len(loop)} more "
+                              "node(s) than one loop: the outline must be one closed curve loop")
+    return loop

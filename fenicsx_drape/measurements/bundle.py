@@ -512,8 +512,10 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
         return None
     csv_path = folder / file
     check = None
-    if kind == "forming":  # every number plausible (measurements.plausible)
-        check = _forming_check(setup, forming_case, fname, where("test", index, "grid_mm"))
+    if kind == "forming":  # every number plausible
+        from fenicsx_drape.measurements.plausible import grid_table_check
+
+        check = grid_table_check(setup, forming_case, fname, where("test", index, "grid_mm"))
     table = _read_table(csv_path, kind, label, problems, check)
     if table is None:
         return None
@@ -594,36 +596,6 @@ def _read_case(folder, fname, raw, index, where, label, known, problems):
             problems.add(fname, at, f"{label}: case {written!r}: {problem}")
         return written, path, {}, None
     return written, path, dict(used), case
-
-
-def _forming_check(setup: Mapping[str, float], case: Any, fname: str, grid_mm_line: int):
-    """The plausibility check of a forming grid table: ``check(columns, lines)``.
-
-    Its indices against its flat positions and ``grid_mm``; its positions against the reach
-    of the tools (the case's, else the hemisphere's keys). Returns ``(file, line, problem)``.
-    """
-    from fenicsx_drape.measurements.plausible import (
-        far_problems,
-        grid_problems,
-        reach_of_case,
-        reach_of_hemisphere,
-    )
-
-    reach = reach_of_case(case) if case is not None else reach_of_hemisphere(setup)
-
-    def check(path: Path, columns: Mapping[str, np.ndarray], lines: list[int]):
-        c = columns
-        found = grid_problems(c["i"], c["j"], c["x0_mm"], c["y0_mm"], lines,
-                              setup.get("grid_mm"))
-        if reach is not None:
-            flat = np.column_stack([c["x0_mm"], c["y0_mm"], np.zeros(len(lines))])
-            formed = np.column_stack([c["x_mm"], c["y_mm"], c["z_mm"]])
-            found += far_problems(flat, lines, reach, "flat position (x0, y0, 0)")
-            found += far_problems(formed, lines, reach, "formed position (x, y, z)")
-        return [(str(path), line, text) if line is not None else (fname, grid_mm_line, text)
-                for line, text in found]
-
-    return check
 
 
 def _read_table(path: Path, kind: str, label: str, problems: _Problems, check=None):

@@ -12,7 +12,8 @@ curves) can use them:
   region the tools sweep over the blank (:func:`reach_of_case`, :func:`reach_of_hemisphere`);
 - :func:`grid_problems`: a drawn grid whose indices ``i, j`` do not match its flat positions
   ``x0_mm, y0_mm`` (a node off its grid, swapped columns, a grid from another part), or whose
-  spacing disagrees with ``grid_mm``.
+  spacing disagrees with ``grid_mm``;
+- :func:`grid_table_check`: all of these for a forming grid table (the bundle loader's).
 """
 
 from __future__ import annotations
@@ -173,3 +174,28 @@ def grid_problems(i: np.ndarray, j: np.ndarray, x0_mm: np.ndarray, y0_mm: np.nda
         out.append((None, f"grid_mm = {grid_mm:g} disagrees with the flat positions "
                                   f"x0_mm, y0_mm: one index step is {g:.4g} mm"))
     return out
+
+
+def grid_table_check(keys: Mapping[str, Any], case: Any, toml_file: str, grid_mm_line: int):
+    """The check of a forming grid table, for a table reader: ``check(path, columns, lines)``.
+
+    Indices against the flat positions and ``grid_mm`` (:func:`grid_problems`), flat and
+    formed positions against the tools' reach (:func:`far_problems`: the case's, else the
+    hemisphere test's ``keys``). The check returns ``(file, line, problem)``: the table's
+    file, or ``toml_file`` at ``grid_mm_line`` for ``grid_mm``.
+    """
+    reach = reach_of_case(case) if case is not None else reach_of_hemisphere(keys)
+
+    def check(path, columns: Mapping[str, np.ndarray], lines: Sequence[int]):
+        c = columns
+        found = grid_problems(c["i"], c["j"], c["x0_mm"], c["y0_mm"], lines,
+                              keys.get("grid_mm"))
+        if reach is not None:
+            flat = np.column_stack([c["x0_mm"], c["y0_mm"], np.zeros(len(lines))])
+            formed = np.column_stack([c["x_mm"], c["y_mm"], c["z_mm"]])
+            found += far_problems(flat, lines, reach, "flat position (x0, y0, 0)")
+            found += far_problems(formed, lines, reach, "formed position (x, y, z)")
+        return [(str(path), line, text) if line is not None else (toml_file, grid_mm_line, text)
+                for line, text in found]
+
+    return check
