@@ -381,6 +381,16 @@ def test_a_grid_mm_that_disagrees_names_the_key_in_bundle_toml(tmp_path):
         load_bundle(tmp_path)
 
 
+def test_a_grid_without_noise_asks_for_position_sd_instead_of_dividing_by_zero(tmp_path):
+    from fenicsx_drape.diagnosis import forming_kind
+
+    write_bundle(tmp_path, flat_grid(n=6, z=lambda i, j: 0.5 * i * j), test_keys=HEMISPHERE_KEYS)
+    (test,) = load_bundle(tmp_path).tests
+    with pytest.raises(DrapeInputError, match=r"test 't': the grid's positions show no noise"
+                                              r".*give position_sd_mm"):
+        forming_kind.noise(test)
+
+
 def test_every_json_written_is_valid_json(tmp_path):
     report = {"rmse": float("nan"), "per_test": {"a": np.inf, "b": np.float64(-np.inf)},
               "values": np.array([1.0, np.nan]), "n": np.int64(3), "ok": 1.5}
