@@ -18,6 +18,7 @@ from types import ModuleType
 
 from fenicsx_drape import __version__
 from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.trust import add_trust_option, apply_trust_option
 
 COMMANDS: dict[str, str] = {
     "curves": "tensile and bias-extension curves of a model (the paper's Figs. 2b and 6)",
@@ -51,6 +52,7 @@ def command_parser(name: str) -> tuple[ModuleType, argparse.ArgumentParser]:
     module = importlib.import_module(f"fenicsx_drape.commands.{name}")
     parser = argparse.ArgumentParser(prog=f"drape {name}", description=COMMANDS[name])
     module.configure(parser)
+    add_trust_option(parser)  # the same rule in every command (fenicsx_drape.trust)
     return module, parser
 
 
@@ -72,6 +74,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     module, parser = command_parser(name)
     args = parser.parse_args(rest)  # exits 2 on bad options
+    apply_trust_option(args)
     try:
         return int(module.run(args) or 0)
     except DrapeInputError as err:
@@ -84,3 +87,30 @@ def main(argv: list[str] | None = None) -> int:
         traceback.print_exc()
         print(f"drape {name}: internal error (see the traceback above)", file=sys.stderr)
         return 1
+
+
+def positive_float(text: str) -> float:
+    """An ``argparse`` type: a positive, finite number (refused up front, exit status 2)."""
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
+    return value
+
+
+def load_bundle_reported(path):
+    """Load a measurement bundle and print what it kept beyond the spec (unknown keys).
+
+    The spec's rule: unknown keys are kept and reported, never silently dropped; every
+    command that reads a bundle reads it through here.
+    """
+    from fenicsx_drape.measurements.bundle import load_bundle
+
+    bundle = load_bundle(path)
+    for line in bundle.report().splitlines():
+        print(f"note: {line}", file=sys.stderr)
+    return bundle

@@ -24,10 +24,10 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
-import importlib.util
 import re
 import sys
 import tomllib
+import types
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -52,6 +52,7 @@ from fenicsx_drape.materials import (
     get_law,
     registered_laws,
 )
+from fenicsx_drape.trust import require_trust
 
 PAPER_EFFECTS = ("rate_dependence", "strain_dependent_viscosity", "decrimping", "tow_buckling",
                  "holder_friction")
@@ -115,11 +116,12 @@ def load_plugin(path: str | Path) -> Any:
     digest = hashlib.sha1(str(path).encode()).hexdigest()[:10]
     stem = re.sub(r"\W", "_", path.stem)
     name = f"fenicsx_drape_plugin_{stem}_{digest}"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
+    module = types.ModuleType(name)
+    module.__file__ = str(path)
     sys.modules[name] = module
     try:
-        spec.loader.exec_module(module)
+        # Compiled from its text: no __pycache__ written into the input's folder.
+        exec(compile(path.read_text(encoding="utf-8"), str(path), "exec"), module.__dict__)
     except Exception as err:
         del sys.modules[name]
         raise DrapeInputError(f"plugin {path} failed to load: {type(err).__name__}: {err}") \
@@ -342,8 +344,11 @@ def default_model() -> Model:
     return Model(effects=PAPER_EFFECTS, parameters=default_parameters())
 
 
-def load_model(path: str | Path) -> Model:
+def load_model(path: str | Path, origin: str | None = None) -> Model:
     """Read a MODEL.toml (measurement spec). Plugins are relative to the file.
+
+    A model the user names runs its plugins; one that comes with data (``origin``, e.g. the
+    case of a measurement bundle) runs them only when trusted (:mod:`fenicsx_drape.trust`).
 
     Raises:
         DrapeInputError: naming the file (and line) for a missing file, bad TOML, an unknown
@@ -390,6 +395,7 @@ def load_model(path: str | Path) -> Model:
         if not full.is_file():
             raise fail(given, f"plugin {given!r} not found (looked for {full.resolve()})")
     for path_ in plugin_paths:
+        require_trust(path_, f"a plugin of the model {path}", origin)
         try:
             load_plugin(path_)
         except DrapeInputError as err:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import math
 import os
 import platform
 import sys
@@ -45,9 +46,18 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     return atomic_write_bytes(path, text.encode())
 
 
+def json_text(obj: Any, *, indent: int | None = 2, sort_keys: bool = False) -> str:
+    """``obj`` as valid JSON: NaN and ±infinity (no JSON value) become ``null``.
+
+    The one place the project turns results into JSON: NumPy scalars and arrays, paths and
+    sets are allowed; a missing value is ``null``, never ``NaN`` or ``Infinity``.
+    """
+    return json.dumps(_plain(obj), indent=indent, sort_keys=sort_keys, allow_nan=False)
+
+
 def write_json(path: str | os.PathLike, obj: Any) -> Path:
-    """Write ``obj`` as indented JSON atomically (NumPy scalars and arrays allowed)."""
-    return atomic_write_text(path, json.dumps(obj, indent=2, default=_to_json) + "\n")
+    """Write ``obj`` as indented, valid JSON atomically (:func:`json_text`)."""
+    return atomic_write_text(path, json_text(obj) + "\n")
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 150) -> Path:
@@ -62,13 +72,22 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 150) -> Path:
     return atomic_write_bytes(path, buf.getvalue())
 
 
-def _to_json(obj: Any) -> Any:
+def _plain(obj: Any) -> Any:
+    """Plain JSON values: non-finite floats as None, NumPy values as Python ones."""
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
     if hasattr(obj, "tolist"):
-        return obj.tolist()
+        return _plain(obj.tolist())
     if isinstance(obj, Path):
         return str(obj)
     if isinstance(obj, (set, frozenset)):
-        return sorted(obj)
+        return [_plain(v) for v in sorted(obj)]
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 

@@ -47,6 +47,8 @@ LAYER_OF = (
     ("fenicsx_drape.nodal", "model"),
     ("fenicsx_drape.provenance", "provenance"),
     ("fenicsx_drape.errors", "base"),
+    ("fenicsx_drape.trust", "base"),
+    ("fenicsx_drape.limits", "base"),
     ("fenicsx_drape.compat", "base"),
     ("fenicsx_drape", "base"),
 )

@@ -24,12 +24,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Fit, compare, write the outputs and print the summary; returns the exit status."""
+    from fenicsx_drape.cli import load_bundle_reported
     from fenicsx_drape.diagnosis.compare import compare, write_compare
     from fenicsx_drape.diagnosis.forming_runs import resolution
-    from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
 
-    bundle = load_bundle(args.bundle)
+    bundle = load_bundle_reported(args.bundle)
     model = load_model(args.model) if args.model else default_model()
     if args.forming_cell_mm is not None and not args.forming_cell_mm > 0:
         raise DrapeInputError(f"--forming-cell-mm {args.forming_cell_mm} must be > 0 (mm)")

@@ -31,18 +31,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose, write the report and print its summary; returns the exit status."""
+    from fenicsx_drape.cli import load_bundle_reported
     from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
     from fenicsx_drape.diagnosis.forming_kind import confirm
     from fenicsx_drape.diagnosis.forming_runs import resolution
     from fenicsx_drape.errors import DrapeInputError
-    from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
 
     if ((args.forming_cell_mm is not None and not args.forming_cell_mm > 0)
             or not args.confirm_cell_mm >= 0):
         raise DrapeInputError(f"--forming-cell-mm {args.forming_cell_mm} must be > 0 and "
                               f"--confirm-cell-mm {args.confirm_cell_mm} >= 0 (mm)")
-    bundle = load_bundle(args.bundle)
+    bundle = load_bundle_reported(args.bundle)
     model = load_model(args.model) if args.model else default_model()
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
     with resolution(args.forming_cell_mm):

@@ -24,6 +24,7 @@ import argparse
 import dataclasses
 from pathlib import Path
 
+from fenicsx_drape.cli import positive_float
 from fenicsx_drape.errors import DrapeInputError
 
 CASES = ("hemisphere",)
@@ -52,7 +53,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--locking-angle-deg", type=float, default=None, metavar="GAMMA",
                         help="cells sheared beyond GAMMA lock: their last node is left out "
                         "(default: no limit)")
-    parser.add_argument("--grid-mm", type=float, default=10.0,
+    parser.add_argument("--grid-mm", type=positive_float, default=10.0,
                         help="spacing of the drawn grid written to the bundle (mm)")
     parser.add_argument("--no-pictures", action="store_true", help="skip shear.png")
 

@@ -35,12 +35,10 @@ def run(args: argparse.Namespace) -> int:
     """Fit, print progress and the errors, write the outputs."""
     from fenicsx_drape.calibration.fit import fit, write_fit
     from fenicsx_drape.calibration.sensitivity import format_table
-    from fenicsx_drape.measurements.bundle import load_bundle
+    from fenicsx_drape.cli import load_bundle_reported
     from fenicsx_drape.model import default_model, load_model
 
-    bundle = load_bundle(args.bundle)
-    for line in bundle.report().splitlines():
-        print(f"note: {line}")
+    bundle = load_bundle_reported(args.bundle)
     model = load_model(args.model) if args.model else default_model()
     result = fit(bundle, model, progress=print, initial_guess_from_features=not args.warm_start,
                  tests=args.tests, max_iterations=args.max_iterations,

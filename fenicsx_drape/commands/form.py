@@ -20,6 +20,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from fenicsx_drape.cli import positive_float
 from fenicsx_drape.errors import DrapeInputError, SolverError
 
 CASES = ("hemisphere",)
@@ -67,7 +68,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="out-of-plane stabilisation stiffness (default 1.25 N/mm)")
     parser.add_argument("--step-mm", type=float, default=None,
                         help="travel of the fastest tool per load step (mm; default 1)")
-    parser.add_argument("--grid-mm", type=float, default=10.0,
+    parser.add_argument("--grid-mm", type=positive_float, default=10.0,
                         help="spacing of the drawn grid written to the bundle (mm)")
     parser.add_argument("--no-fields", action="store_true",
                         help="skip the XDMF fields and tool meshes")

@@ -309,7 +309,12 @@ def grid_noise(test: Test) -> float:
     if not d4:
         raise DrapeInputError(f"test {test.id!r}: too few grid nodes to estimate the noise "
                               "(give position_sd_mm)")
-    return float(np.median(np.abs(np.concatenate(d4))) / 0.6745 / math.sqrt(70.0))
+    σ = float(np.median(np.abs(np.concatenate(d4))) / 0.6745 / math.sqrt(70.0))
+    if not σ > 0:  # a noiseless grid (synthetic, rounded): no error can be normalised by it
+        raise DrapeInputError(f"test {test.id!r}: the grid's positions show no noise (their "
+                              "fourth differences along the grid lines are zero): give "
+                              "position_sd_mm (mm, one standard deviation per coordinate)")
+    return σ
 
 
 def noise(test: Test) -> tuple[float, str]:

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case import FormingCase, case_dict
+from fenicsx_drape.trust import set_trusted, trusted
 
 if TYPE_CHECKING:
     from fenicsx_drape.forming.post import FormedGrid
@@ -143,7 +144,7 @@ def _in_workers(jobs: list[tuple[Any, Model]]) -> list[tuple]:
         batch, pending = pending[:WORKERS], pending[WORKERS:]
         workers = _pool(len(batch))
         for (_, job), proc in zip(batch, workers):
-            pickle.dump(job, proc.stdin)
+            pickle.dump((*job, trusted()), proc.stdin)  # the trust of now, not of the start
             proc.stdin.flush()
         for (i, _), proc in zip(batch, workers):
             try:
@@ -192,9 +193,10 @@ def _worker() -> None:
     os.dup2(2, 1)  # whatever the solver prints goes to stderr, not into the pickles
     while True:
         try:
-            case, model = pickle.load(jobs)
+            case, model, trust = pickle.load(jobs)
         except EOFError:
             return
+        set_trusted(trust)
         try:
             reply = ("ok", _form(case, model))
         except DrapeInputError as error:  # its subclasses may not unpickle: send the message

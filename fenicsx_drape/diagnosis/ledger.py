@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.provenance import json_text
 
 if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle
@@ -57,13 +58,14 @@ def record(out_dir: str | Path, result: Compared, *, bundle: Bundle,
         "per_test": record["error"]["per_test"],
         "noise_per_test": record["noise_floor"]["per_test"],
     }
-    entry["id"] = hashlib.sha1(json.dumps(entry, sort_keys=True).encode()).hexdigest()[:12]
+    entry["id"] = hashlib.sha1(json_text(entry, indent=None, sort_keys=True).encode()
+                               ).hexdigest()[:12]
     path = Path(out_dir) / LEDGER
     path.parent.mkdir(parents=True, exist_ok=True)
     # One short line appended in one write: concurrent appenders do not interleave.
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     try:
-        os.write(fd, (json.dumps(entry, sort_keys=True) + "\n").encode())
+        os.write(fd, (json_text(entry, indent=None, sort_keys=True) + "\n").encode())
     finally:
         os.close(fd)
     return entry

@@ -82,6 +82,12 @@ class TrussGrid:
     # None: both if ``quarter``, else none.
     symmetry: tuple[str, ...] | None = None
 
+    def __post_init__(self) -> None:
+        # Sizes before memory: a net beyond the machine is refused before any array exists.
+        from fenicsx_drape.limits import check_nodes
+
+        check_nodes((self.nx + 1) * (self.ny + 1), f"cell_mm = {self.cell_mm:g}")
+
     @property
     def planes(self) -> tuple[str, ...]:
         """The symmetry planes of the model: ``"x"`` (x = 0, edge i = 0), ``"y"`` (y = 0)."""

@@ -22,6 +22,7 @@ import itertools
 import math
 import os
 import tomllib
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -31,6 +32,7 @@ import numpy as np
 from fenicsx_drape.errors import DrapeInputError, ParameterError
 from fenicsx_drape.fe.grid import TrussGrid, outline_grid, polygon_area
 from fenicsx_drape.forming.holder import FORCE_SHARES
+from fenicsx_drape.forming.surfaces import sample_curve_loop
 
 ROLES = ("punch", "die", "holder", "surface")
 BUILTIN = "builtin:hemisphere"
@@ -252,6 +254,9 @@ class FormingCase:
     penalty_factor: float = 0.3  # contact (and clamping) stiffness in units of l_t E_o
     stabilisation_N_per_mm: float = 1.25  # out-of-plane spring to the extrapolated motion
     path: Path | None = None  # the case file it was read from
+    # Where the case came from when that is data (a measurement bundle): its Python geometry
+    # and its model's plugins then run only with --trust (fenicsx_drape.trust).
+    origin: str | None = None
 
     def __post_init__(self) -> None:
         problems = _case_problems(self)
@@ -525,6 +530,10 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
         case.blank.grid()
     except DrapeInputError as err:
         raise CaseError([f"{fname}: [blank]: {err}"]) from None
+    try:
+        check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
+    except DrapeInputError as err:
+        raise CaseError([str(err)]) from None
     return with_overrides(case, **overrides) if overrides else case
 
 
@@ -642,10 +651,25 @@ def _read_tools(r: _Reader, raw: Mapping, folder: Path, duration: float) -> list
                                           f"{', '.join(GEOMETRY_SUFFIXES)}, or {BUILTIN!r})")
             elif not path.is_file():
                 r.add(f"{at} 'geometry'", f"no such file {geometry!r}")
+            elif path.suffix.lower() == ".geo":
+                _check_geo_tool(r, at, path, params)
         tools.append(ToolSpec(name=name, role=role, geometry=geometry, path=path,
                               parameters=tuple(params.items()), mesh_mm=mesh, order=order,
                               sheet_side=side, motion=motion))
     return tools
+
+
+def _check_geo_tool(r: _Reader, at: str, path: Path, params: Mapping[str, float]) -> None:
+    """A Gmsh script tool: nothing beyond geometry (unless trusted), every parameter used."""
+    from fenicsx_drape.trust import geo_defines, geo_problems, trusted
+
+    if not trusted():
+        for problem in geo_problems(path):
+            r.add(f"{at} 'geometry'", f"{problem} (pass --trust to run it anyway)")
+    for key in params:
+        if not geo_defines(path, key):
+            r.add(f"{at} 'parameters' '{key}'", f"not used by {path.name} (a misspelt name "
+                                                "would be silently ignored)")
 
 
 def _check_builtin(r: _Reader, at: str, role, params, mesh, order, side, motion) -> None:
@@ -726,73 +750,20 @@ def sample_outline(path: str | os.PathLike, spacing_mm: float) -> tuple[tuple[fl
     curves at z = 0; its curves are meshed with segments of ``spacing_mm`` (a mesh in the file
     is used as it is) and the segments chained into one loop.
 
+    A ``.geo`` script is checked (:func:`~fenicsx_drape.trust.check_geo`) and runs in a
+    child process with a time limit (:func:`~fenicsx_drape.limits.run_script`).
+
     Raises:
         DrapeInputError: no curve, not one closed loop, or not in the plane z = 0.
     """
-    import gmsh
-
     path = Path(path)
-    initialised = gmsh.isInitialized()
-    if not initialised:
-        gmsh.initialize(interruptible=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    try:
-        gmsh.model.add("outline")
-        try:
-            gmsh.open(str(path))
-        except Exception as err:  # Gmsh raises plain Exceptions with its message
-            raise DrapeInputError(f"Gmsh cannot read {path.name} ({err})") from err
-        if not gmsh.model.getEntities(1):
-            raise DrapeInputError(f"{path.name} holds no curve")
-        if not len(gmsh.model.mesh.getElements(1)[0]):
-            gmsh.option.setNumber("Mesh.MeshSizeMax", spacing_mm)
-            gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
-            gmsh.model.mesh.generate(1)
-        tags, coords, _ = gmsh.model.mesh.getNodes()
-        xyz = dict(zip(tags.tolist(), np.asarray(coords).reshape(-1, 3)))
-        edges = []
-        for etype, _, nodes in zip(*gmsh.model.mesh.getElements(1)):
-            n = gmsh.model.mesh.getElementProperties(etype)[3]
-            edges.append(np.asarray(nodes).reshape(-1, n)[:, :2])  # the end nodes
-    finally:
-        gmsh.model.remove()
-        if not initialised:
-            gmsh.finalize()
-    edges = np.concatenate(edges) if edges else np.zeros((0, 2), int)
-    edges = edges[edges[:, 0] != edges[:, 1]]
-    loop = _chain(edges, path.name)
-    P = np.array([xyz[k] for k in loop])
-    size = max(np.ptp(P[:, :2], axis=0).max(), 1e-300)
-    if np.abs(P[:, 2]).max() > 1e-6 * size:
-        raise DrapeInputError(f"{path.name}: the curve loop is not in the sheet plane z = 0 "
-                              f"(|z| up to {np.abs(P[:, 2]).max():g} mm)")
-    return tuple((float(x), float(y)) for x, y in P[:, :2])
+    if path.suffix.lower() in (".geo", ".geo_unrolled") and path.is_file():
+        from fenicsx_drape.limits import run_script
+        from fenicsx_drape.trust import check_geo
 
-
-def _chain(edges: np.ndarray, name: str) -> list[int]:
-    """The nodes of one closed loop of line segments, in order."""
-    if not len(edges):
-        raise DrapeInputError(f"{name}: no curve segment")
-    neighbours: dict[int, list[int]] = {}
-    for a, b in edges.tolist():
-        neighbours.setdefault(a, []).append(b)
-        neighbours.setdefault(b, []).append(a)
-    if any(len(v) != 2 for v in neighbours.values()):
-        raise DrapeInputError(f"{name}: the curves are not one closed loop (a curve end meets "
-                              "no other curve, or three curves meet)")
-    start = edges[0, 0]
-    loop, previous, node = [start], None, start
-    while True:
-        a, b = neighbours[node]
-        nxt = b if a == previous else a
-        if nxt == start:
-            break
-        loop.append(nxt)
-        previous, node = node, nxt
-    if len(loop) != len(neighbours):
-        raise DrapeInputError(f"{name}: the curves form {len(neighbours) - len(loop)} more "
-                              "node(s) than one loop: the outline must be one closed curve loop")
-    return loop
+        check_geo(path)
+        return run_script(sample_curve_loop, (path, spacing_mm), path)
+    return sample_curve_loop(path, spacing_mm)
 
 
 # --------------------------------------------------------------------------------------------
@@ -880,6 +851,7 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
         new_case = dataclasses.replace(case, blank=blank, tools=tuple(tools), holder=holder,
                                        **changes)
         new_case.blank.grid()
+        check_tool_sizes(new_case, warn=False)
         for t in new_case.tools:
             if t.builtin:
                 _builtin_tools(t)
@@ -960,9 +932,37 @@ def case_for_test(path: str | os.PathLike, keys: Mapping[str, Any]
                 else math.isclose(float(own), float(value), rel_tol=1e-9, abs_tol=1e-12))
         if not same:
             changes[key] = value
+    problems += _untrusted_code(case, path)
     if problems:
         raise CaseError(problems)
+    case = dataclasses.replace(case, origin=f"the case {path} of a measurement bundle")
     return (with_overrides(case, **changes) if changes else case), used
+
+
+def _untrusted_code(case: FormingCase, path) -> list[str]:
+    """The code a bundle's case would run (its .py tools, its model's plugins), untrusted.
+
+    Reported when the bundle is read, at once; the runs check again
+    (:func:`fenicsx_drape.trust.require_trust`).
+    """
+    from fenicsx_drape.trust import trusted
+
+    if trusted():
+        return []
+    out = [f"{path}: [[tool]] {k} 'geometry': {t.geometry!r} is Python code that would run: "
+           "a case a measurement bundle brings is data; pass --trust if you trust it"
+           for k, t in enumerate(case.tools, start=1)
+           if t.path is not None and t.path.suffix.lower() == ".py"]
+    if case.model is not None:
+        try:
+            plugins = tomllib.loads(case.model.read_text(encoding="utf-8")).get("plugins")
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            plugins = None  # reported when the model is read
+        if plugins:
+            out.append(f"{path}: [case] 'model': {case.model.name} has plugins {plugins} "
+                       "(Python code) that would run: a case a measurement bundle brings is "
+                       "data; pass --trust if you trust it")
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -978,6 +978,7 @@ def build_tools(case: FormingCase, skip: tuple[str, ...] = ()) -> dict[str, obje
     """
     from fenicsx_drape.forming.holder import FlatHolder
 
+    check_tool_sizes(case, skip)
     out: dict[str, object] = {}
     for spec in case.tools:
         if spec.name in skip:
@@ -998,16 +999,113 @@ def build_tools(case: FormingCase, skip: tuple[str, ...] = ()) -> dict[str, obje
     return out
 
 
+# A tool mesh finer than the sheet's cell by this factor costs memory and time for nothing.
+FINE_MESH_FACTOR = 20.0
+# A tool mesh whose triangles miss the curved geometry by more than this share of the
+# sheet's cell changes the formed part (the sag h·θ/6 of triangles whose edge bends by θ).
+COARSE_CHORD_OF_CELL = 0.1
+# Edges bending more than this are taken as the geometry's own creases, not its curvature.
+CREASE_DEG = 60.0
+
+
+def tool_triangles(case: FormingCase, spec: ToolSpec) -> float | None:
+    """About how many triangles a tool's mesh will have, from the case alone (None: unknown).
+
+    A source Gmsh meshes at ``mesh_mm`` covers about the blank's box widened by the case's
+    travel on every side; an STL or ``.msh`` file about its size over 50 bytes a triangle.
+    """
+    if spec.builtin or spec.path is None:
+        return 0.0
+    from fenicsx_drape.limits import triangles_for
+
+    if spec.path.suffix.lower() in (".stl", ".msh"):
+        try:
+            return spec.path.stat().st_size / 50.0
+        except OSError:
+            return None
+    if spec.mesh_mm is None:
+        return None
+    w, h = np.ptp(case.blank.polygon(), axis=0)
+    travel = case.total_travel_mm
+    return triangles_for((w + 2 * travel) * (h + 2 * travel), spec.mesh_mm, spec.order or 1)
+
+
+def check_tool_sizes(case: FormingCase, skip: tuple[str, ...] = (), warn: bool = True) -> None:
+    """Refuse tool meshes beyond the memory limit, warn of ones much finer than the sheet.
+
+    Raises:
+        DrapeInputError: with the estimate and the limit (:mod:`fenicsx_drape.limits`).
+    """
+    from fenicsx_drape.limits import check_triangles
+
+    where = str(case.path or case.name)
+    total, named = 0.0, []
+    for spec in case.tools:
+        n = None if spec.name in skip else tool_triangles(case, spec)
+        if n:
+            total += n
+            named.append(f"{spec.name} {n:.3g}")
+        Δ = case.blank.cell_mm
+        if warn and spec.mesh_mm is not None and spec.mesh_mm * FINE_MESH_FACTOR < Δ:
+            warnings.warn(f"{where}: tool {spec.name!r}: mesh_mm = {spec.mesh_mm:g} is "
+                          f"{Δ / spec.mesh_mm:.3g} times finer than the sheet's cell "
+                          f"{Δ:g} mm (about {n or 0:.3g} triangles): time and memory for no "
+                          "accuracy", stacklevel=3)
+    if total:
+        check_triangles(total, f"{where}: tools ({', '.join(named)})")
+
+
+def coarse_mesh_problem(surface, cell_mm: float) -> str | None:
+    """A message when a tool's triangles miss its curved geometry by much (None if not).
+
+    Over the edges between two triangles that bend by θ below :data:`CREASE_DEG` (curvature,
+    not a crease), h·θ/6 for an edge of length h is how far the middle of a flat triangle
+    sits from the sphere through its corners (radius ρ = h/θ: the sag r²/(2ρ) at the centre
+    of an equilateral triangle, r = h/√3 its corners' distance); beyond
+    :data:`COARSE_CHORD_OF_CELL` of the sheet's cell the formed part changes.
+    """
+    n = surface.face_normals
+    nbr = surface.neighbours
+    tri = np.repeat(np.arange(len(n)), 3)
+    other = nbr.ravel()
+    ok = other > tri  # each inner edge once
+    tri, other = tri[ok], other[ok]
+    θ = np.arccos(np.clip(np.einsum("ij,ij->i", n[tri], n[other]), -1.0, 1.0))
+    p, t = surface.points, surface.triangles
+    side = np.flatnonzero(ok) % 3
+    a = p[t[tri, side]]
+    b = p[t[tri, (side + 1) % 3]]
+    h = np.linalg.norm(b - a, axis=1)
+    curved = θ < np.radians(CREASE_DEG)
+    if not curved.any():
+        return None
+    chord = h[curved] * θ[curved] / 6.0
+    worst = int(np.argmax(chord))
+    if chord[worst] <= COARSE_CHORD_OF_CELL * cell_mm:
+        return None
+    return (f"the tool mesh is coarse for its curved geometry: its flat triangles miss the "
+            f"surface by up to about {chord[worst]:.3g} mm (an edge of {h[curved][worst]:.3g} "
+            f"mm bending by {np.degrees(θ[curved][worst]):.3g}°), more than "
+            f"{COARSE_CHORD_OF_CELL:g} of the sheet's cell {cell_mm:g} mm; give a smaller "
+            "mesh_mm (or order = 2)")
+
+
 def _meshed_tool(case: FormingCase, spec: ToolSpec):
     """A tool from a geometry file: its surface meshed once by Gmsh, moved rigidly."""
     from fenicsx_drape.forming.motion import RigidMotion
     from fenicsx_drape.forming.surfaces import load_surface
     from fenicsx_drape.forming.tools import MeshedTool
+    from fenicsx_drape.trust import require_trust
 
     k = case.tools.index(spec) + 1
     where = f"{case.path or case.name}: [[tool]] {k} ({spec.name!r})"
+    if spec.path.suffix.lower() == ".py":
+        require_trust(spec.path, "the Python geometry of tool " + repr(spec.name), case.origin)
     surface = load_surface(spec.path, spec.params or None, spec.mesh_mm, spec.order or 1,
                            sheet_side=spec.side)
+    coarse = coarse_mesh_problem(surface, case.blank.cell_mm)
+    if coarse:
+        warnings.warn(f"{where}: {coarse}", stacklevel=3)
     m = spec.motion
     motion = None if m is None else RigidMotion(
         time_s=m.time_s, x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm, rotation_deg=m.rotation_deg,

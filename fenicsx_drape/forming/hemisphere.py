@@ -138,7 +138,7 @@ class HemisphereRun(FormingRun):
 def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None, *,
                    progress: Callable[[str], None] | None = None,
                    on_step: Callable[[object], None] | None = None, comm=None,
-                   allow_incomplete: bool = False) -> HemisphereRun:
+                   allow_incomplete: bool = False, failure_dir=None) -> HemisphereRun:
     """Form the hemisphere: build the sheet, tools and terms, then step to full travel.
 
     The run is :func:`~fenicsx_drape.forming.run.run_case` of :meth:`HemisphereCase.to_case`.
@@ -152,6 +152,7 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
         comm: MPI communicator (default ``COMM_WORLD``).
         allow_incomplete: When a step fails at the smallest step, return the sheet at the
             last converged step (``stopped`` says why) instead of raising ``SolverError``.
+        failure_dir: Where the last converged state is saved when a step fails.
 
     Returns:
         The formed sheet and the run's statistics.
@@ -161,7 +162,8 @@ def run_hemisphere(case: HemisphereCase | None = None, model=None, options=None,
     case = case or HemisphereCase()
     forming = case.to_case()
     run = run_case(forming, model or default_model(), options, progress=progress,
-                   on_step=on_step, comm=comm, allow_incomplete=allow_incomplete)
+                   on_step=on_step, comm=comm, allow_incomplete=allow_incomplete,
+                   failure_dir=failure_dir)
     fields = {f.name: getattr(run, f.name) for f in dataclasses.fields(FormingRun)}
     fields["case"] = case
     return HemisphereRun(**fields, forming_case=forming)

@@ -163,7 +163,7 @@ def form_hemisphere(out_dir: str | os.PathLike, case: HemisphereCase | None = No
 
     try:
         run = run_hemisphere(case, model, options, progress=progress,
-                             on_step=frame if fields else None, comm=comm)
+                             on_step=frame if fields else None, comm=comm, failure_dir=out)
     finally:
         if "file" in writer:
             writer["file"].close()
@@ -307,7 +307,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
 
     try:
         run = run_case(case, model, options, tools=tools, progress=progress,
-                       on_step=frame if fields else None, comm=comm)
+                       on_step=frame if fields else None, comm=comm, failure_dir=out)
     finally:
         if "file" in writer:
             writer["file"].close()

@@ -85,7 +85,9 @@ def case_model(case: FormingCase):
     """The case's material model: its MODEL.toml, else the paper's (Table 2)."""
     from fenicsx_drape.model import default_model, load_model
 
-    return load_model(case.model) if case.model is not None else default_model()
+    if case.model is None:
+        return default_model()
+    return load_model(case.model, origin=case.origin)
 
 
 def tool_friction(model) -> float:
@@ -115,7 +117,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
              tools: Mapping[str, object] | None = None,
              progress: Callable[[str], None] | None = None,
              on_step: Callable[[object], None] | None = None, comm=None,
-             allow_incomplete: bool = False) -> FormingRun:
+             allow_incomplete: bool = False, failure_dir=None) -> FormingRun:
     """Form a case: build the blank's truss, tools and terms, then step to the end.
 
     Args:
@@ -131,6 +133,8 @@ def run_case(case: FormingCase, model=None, options=None, *,
         comm: MPI communicator (default ``COMM_WORLD``).
         allow_incomplete: When a step fails at the smallest step, return the sheet at the
             last converged step (``stopped`` says why) instead of raising ``SolverError``.
+        failure_dir: Where the last converged state is saved when a step fails (default: a
+            new temporary folder); the commands give their ``--out``.
 
     Returns:
         The formed sheet and the run's statistics.
@@ -202,7 +206,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
     stopped = None
     try:
         problem.run(case.duration_s, dt, dt_max_s=dt, easy_iterations=15, progress=report,
-                    on_step=after_step)
+                    on_step=after_step, failure_dir=failure_dir)
     except SolverError as error:
         if not allow_incomplete:
             raise

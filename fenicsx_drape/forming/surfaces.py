@@ -51,9 +51,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
-import importlib.util
 import os
-import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -656,6 +654,29 @@ def load_surface(path: str | os.PathLike, parameters: Mapping[str, float] | None
 
 def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
           physical) -> TriangleSurface:
+    """Check the source, then read it: scripts in a child process with a time limit."""
+    suffix = path.suffix.lower()
+    if suffix == ".geo" and path.is_file():
+        from fenicsx_drape.trust import check_geo, geo_defines
+
+        check_geo(path)
+        unknown = [k for k in (parameters or {}) if not geo_defines(path, k)]
+        if unknown:
+            raise DrapeInputError(f"{path}: parameter(s) {', '.join(map(repr, unknown))} "
+                                  "not used by the script (a misspelt name would be ignored)")
+    if suffix in (".geo", ".py") and path.is_file():
+        from fenicsx_drape.limits import run_script
+
+        points, triangles = run_script(_read_raw, (path, parameters, mesh_size_mm, order,
+                                                   sheet_side, physical), path)
+        return TriangleSurface(points, triangles, sheet_side=sheet_side, source=str(path))
+    points, triangles = _read_raw(path, parameters, mesh_size_mm, order, sheet_side, physical)
+    return TriangleSurface(points, triangles, sheet_side=sheet_side, source=str(path))
+
+
+def _read_raw(path: Path, parameters, mesh_size_mm, order, sheet_side,
+              physical) -> tuple[np.ndarray, np.ndarray]:
+    """The points and triangles of a source as Gmsh gives them (in this process)."""
     where = str(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
@@ -717,7 +738,7 @@ def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
                 gmsh.option.setNumber("Mesh.SecondOrderLinear", 0)
                 gmsh.model.mesh.setOrder(2)
             points, triangles = _triangles(gmsh, physical, where)
-        except DrapeInputError:
+        except (DrapeInputError, MemoryError):
             raise
         except Exception as error:  # Gmsh reports its errors as plain exceptions
             raise DrapeInputError(f"{where}: Gmsh: {error}") from None
@@ -732,7 +753,7 @@ def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
             _restore_options(gmsh, saved)
         else:
             gmsh.finalize()
-    return TriangleSurface(points, triangles, sheet_side=sheet_side, source=where)
+    return points, triangles
 
 
 # Options this module or the project's scripts set: put back for a caller's Gmsh session.
@@ -757,21 +778,24 @@ def _restore_options(gmsh, saved) -> None:
 
 def _run_build(gmsh, path: Path, parameters: dict) -> None:
     """Run ``build(gmsh, **parameters)`` of a Python geometry file."""
+    import types
+
     name = f"_fenicsx_drape_geometry_{abs(hash(str(path.resolve())))}"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
+    module = types.ModuleType(name)
+    module.__file__ = str(path)
     try:
-        spec.loader.exec_module(module)
+        # Compiled from its text: no __pycache__ written next to the input.
+        exec(compile(path.read_text(encoding="utf-8"), str(path), "exec"), module.__dict__)
     except Exception as error:
         raise DrapeInputError(f"{path}: could not run it: {type(error).__name__}: "
                               f"{error}") from None
-    finally:
-        sys.modules.pop(name, None)
     build = getattr(module, "build", None)
     if not callable(build):
         raise DrapeInputError(f"{path}: defines no function build(gmsh, **parameters)")
     try:
         build(gmsh, **parameters)
+    except MemoryError:
+        raise  # the memory limit's message (fenicsx_drape.limits)
     except TypeError as error:
         raise DrapeInputError(f"{path}: build(gmsh, **parameters) with parameters "
                               f"{sorted(parameters)}: {error}") from None
@@ -832,3 +856,78 @@ def _triangles(gmsh, physical: str | None, where: str) -> tuple[np.ndarray, np.n
 
 def _nodes_of(etype: int) -> int:
     return {2: 3, 9: 6, 3: 4, 10: 9}[etype]
+
+
+# --------------------------------------------------------------------------------------------
+# Outline curves
+
+
+def sample_curve_loop(path: Path, spacing_mm: float) -> tuple[tuple[float, float], ...]:
+    """The closed curve loop of a Gmsh file as a polygon, in this process.
+
+    See :func:`~fenicsx_drape.forming.case.sample_outline` (which checks a script first and
+    runs this in a child process).
+    """
+    import gmsh
+
+    initialised = gmsh.isInitialized()
+    if not initialised:
+        gmsh.initialize(interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    try:
+        gmsh.model.add("outline")
+        try:
+            gmsh.open(str(path))
+        except Exception as err:  # Gmsh raises plain Exceptions with its message
+            raise DrapeInputError(f"Gmsh cannot read {path.name} ({err})") from err
+        if not gmsh.model.getEntities(1):
+            raise DrapeInputError(f"{path.name} holds no curve")
+        if not len(gmsh.model.mesh.getElements(1)[0]):
+            gmsh.option.setNumber("Mesh.MeshSizeMax", spacing_mm)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
+            gmsh.model.mesh.generate(1)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        xyz = dict(zip(tags.tolist(), np.asarray(coords).reshape(-1, 3)))
+        edges = []
+        for etype, _, nodes in zip(*gmsh.model.mesh.getElements(1)):
+            n = gmsh.model.mesh.getElementProperties(etype)[3]
+            edges.append(np.asarray(nodes).reshape(-1, n)[:, :2])  # the end nodes
+    finally:
+        gmsh.model.remove()
+        if not initialised:
+            gmsh.finalize()
+    edges = np.concatenate(edges) if edges else np.zeros((0, 2), int)
+    edges = edges[edges[:, 0] != edges[:, 1]]
+    loop = _chain(edges, path.name)
+    P = np.array([xyz[k] for k in loop])
+    size = max(np.ptp(P[:, :2], axis=0).max(), 1e-300)
+    if np.abs(P[:, 2]).max() > 1e-6 * size:
+        raise DrapeInputError(f"{path.name}: the curve loop is not in the sheet plane z = 0 "
+                              f"(|z| up to {np.abs(P[:, 2]).max():g} mm)")
+    return tuple((float(x), float(y)) for x, y in P[:, :2])
+
+
+def _chain(edges: np.ndarray, name: str) -> list[int]:
+    """The nodes of one closed loop of line segments, in order."""
+    if not len(edges):
+        raise DrapeInputError(f"{name}: no curve segment")
+    neighbours: dict[int, list[int]] = {}
+    for a, b in edges.tolist():
+        neighbours.setdefault(a, []).append(b)
+        neighbours.setdefault(b, []).append(a)
+    if any(len(v) != 2 for v in neighbours.values()):
+        raise DrapeInputError(f"{name}: the curves are not one closed loop (a curve end meets "
+                              "no other curve, or three curves meet)")
+    start = edges[0, 0]
+    loop, previous, node = [start], None, start
+    while True:
+        a, b = neighbours[node]
+        nxt = b if a == previous else a
+        if nxt == start:
+            break
+        loop.append(nxt)
+        previous, node = node, nxt
+    if len(loop) != len(neighbours):
+        raise DrapeInputError(f"{name}: the curves form {len(neighbours) - len(loop)} more "
+                              "node(s) than one loop: the outline must be one closed curve loop")
+    return loop

@@ -523,7 +523,12 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
     if len(problems.items) > before or not isinstance(file, str):
         return None
     csv_path = folder / file
-    table = _read_table(csv_path, kind, label, problems)
+    check = None
+    if kind == "forming":  # every number plausible
+        from fenicsx_drape.measurements.plausible import grid_table_check
+
+        check = grid_table_check(setup, forming_case, fname, where("test", index, "grid_mm"))
+    table = _read_table(csv_path, kind, label, problems, check)
     if table is None:
         return None
     columns, extra_columns, header_line = table
@@ -638,8 +643,11 @@ def _read_case(folder, fname, raw, index, where, label, known, problems):
     return written, path, dict(used), case
 
 
-def _read_table(path: Path, kind: str, label: str, problems: _Problems):
-    """The CSV table of a test as read-only float columns, or None (problems added)."""
+def _read_table(path: Path, kind: str, label: str, problems: _Problems, check=None):
+    """The CSV table of a test as read-only float columns, or None (problems added).
+
+    ``check(path, columns, lines)``, if given, returns more ``(file, line, problem)``.
+    """
     fname = str(path)
     if not path.is_file():
         problems.add(fname, 0, f"{label}: the table file does not exist")
@@ -728,6 +736,9 @@ def _read_table(path: Path, kind: str, label: str, problems: _Problems):
             dup = [i for i in range(len(ij)) if (ij[i] == ij[r]).all()][1]
             problems.add(fname, numbers[dup], f"{label}: grid node (i, j) = "
                                               f"({ij[r, 0]:g}, {ij[r, 1]:g}) appears twice")
+    if check is not None and len(problems.items) == before:
+        for file, line, problem in check(path, columns, numbers):
+            problems.add(file, line, f"{label}: {problem}")
     if len(problems.items) > before:
         return None
     for array in columns.values():

@@ -1,0 +1,200 @@
+"""Sizes before memory, and a time limit on geometry scripts.
+
+A run's memory is decided by two numbers known before anything is built: the nodes of the
+sheet's net (the blank's area over Δ²) and the triangles of the meshed tools (their area
+over the triangle's, from ``mesh_mm``). Both are estimated from the case and refused at once,
+with the estimate and the limit, when they are beyond what the machine's memory can hold:
+
+- the memory planned for is ``DRAPE_MEMORY_GB`` (GB) when set, else half the machine's
+  physical memory (the other half for the system and other runs);
+- a sheet node costs :data:`BYTES_PER_NODE` and a tool triangle :data:`BYTES_PER_TRIANGLE`
+  (peak resident memory of runs measured on this project's image, rounded up; see
+  ``docs/untrusted-input.md``); ``DRAPE_MAX_NODES`` and ``DRAPE_MAX_TRIANGLES`` set the limits
+  directly.
+
+Geometry scripts (``.geo``, ``.py``) run in a child process (:func:`run_script`) with a time
+limit of ``DRAPE_SCRIPT_TIMEOUT_S`` seconds (default :data:`SCRIPT_TIMEOUT_S`) and an address
+space of the planned memory, so that a script that never returns, or a mesh that grows
+without end, ends in a clear error instead of a hung or swapped machine.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import pickle
+import subprocess
+import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from fenicsx_drape.errors import DrapeInputError
+
+BYTES_PER_NODE = 40_000  # peak memory per sheet node of a forming run (DOLFINx, MUMPS)
+BYTES_PER_TRIANGLE = 5_000  # peak memory per tool triangle (Gmsh meshing, distance field)
+SCRIPT_TIMEOUT_S = 300.0  # a geometry script that runs longer is stopped
+# Triangles per mm² of surface per 1/h² (equilateral triangles of side h: area √3/4 h²).
+_TRIANGLES_PER_AREA = 4.0 / math.sqrt(3.0)
+
+
+def memory_bytes() -> float:
+    """The memory a run may plan for (bytes): ``DRAPE_MEMORY_GB``, else half the machine's."""
+    given = os.environ.get("DRAPE_MEMORY_GB")
+    if given:
+        try:
+            value = float(given)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise DrapeInputError(f"DRAPE_MEMORY_GB = {given!r} must be a positive number (GB)")
+        return value * 1e9
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        total = 8e9  # unknown: assume a small machine
+    return 0.5 * float(total)
+
+
+def _env_limit(name: str) -> float | None:
+    given = os.environ.get(name)
+    if not given:
+        return None
+    try:
+        value = float(given)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise DrapeInputError(f"{name} = {given!r} must be a positive number")
+    return value
+
+
+def max_nodes() -> float:
+    """The largest sheet net allowed (nodes): ``DRAPE_MAX_NODES``, else from the memory."""
+    return _env_limit("DRAPE_MAX_NODES") or memory_bytes() / BYTES_PER_NODE
+
+
+def max_triangles() -> float:
+    """The most tool triangles allowed (all tools): ``DRAPE_MAX_TRIANGLES``, else from memory."""
+    return _env_limit("DRAPE_MAX_TRIANGLES") or memory_bytes() / BYTES_PER_TRIANGLE
+
+
+def _how(name: str, each: int) -> str:
+    if os.environ.get(f"DRAPE_{name}"):
+        return f"DRAPE_{name}"
+    source = "DRAPE_MEMORY_GB" if os.environ.get("DRAPE_MEMORY_GB") else "half this machine's"
+    return (f"{memory_bytes() / 1e9:.3g} GB of memory ({source}) at {each} bytes each; set "
+            f"DRAPE_MEMORY_GB or DRAPE_{name} to change it")
+
+
+def check_nodes(nodes: float, where: str) -> None:
+    """Refuse a sheet net of ``nodes`` nodes beyond :func:`max_nodes`, before it is built."""
+    limit = max_nodes()
+    if not nodes <= limit:
+        raise DrapeInputError(f"{where}: the sheet's net would have about {nodes:.3g} nodes, "
+                              f"more than the limit of {limit:.3g} "
+                              f"({_how('MAX_NODES', BYTES_PER_NODE)}); give a larger cell_mm")
+
+
+def check_triangles(triangles: float, where: str) -> None:
+    """Refuse tool meshes of ``triangles`` triangles beyond :func:`max_triangles`."""
+    limit = max_triangles()
+    if not triangles <= limit:
+        raise DrapeInputError(f"{where}: the tool mesh would have about {triangles:.3g} "
+                              f"triangles, more than the limit of {limit:.3g} "
+                              f"({_how('MAX_TRIANGLES', BYTES_PER_TRIANGLE)}); give a larger "
+                              "mesh_mm")
+
+
+def triangles_for(area_mm2: float, mesh_mm: float, order: int = 1) -> float:
+    """Triangles of a surface of ``area_mm2`` meshed with size ``mesh_mm`` (×4 for order 2)."""
+    return _TRIANGLES_PER_AREA * area_mm2 / mesh_mm**2 * (4 if order == 2 else 1)
+
+
+# --------------------------------------------------------------------------------------------
+# Geometry scripts in a child process
+
+
+def script_timeout_s() -> float:
+    """The time limit of a geometry script (s): ``DRAPE_SCRIPT_TIMEOUT_S``, else the default."""
+    return _env_limit("DRAPE_SCRIPT_TIMEOUT_S") or SCRIPT_TIMEOUT_S
+
+
+def run_script(function: Callable[..., Any], args: tuple, path: str | os.PathLike) -> Any:
+    """``function(*args)`` in a child process, with the time and memory limits.
+
+    ``function`` must be a module-level function of the package (the child imports its module
+    alone, without the ``__init__`` of its subpackage: no DOLFINx, no MPI), its arguments
+    and result picklable. A :class:`DrapeInputError` in the child is raised here with its
+    message.
+
+    Raises:
+        DrapeInputError: the script's own error, or it ran past the time limit, or the child
+            ended without a result (e.g. out of the memory limit).
+    """
+    timeout = script_timeout_s()
+    package_root = str(Path(__file__).resolve().parents[1])
+    # Not a rank of the caller's MPI job (as the forming workers: diagnosis.forming_runs).
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH")) if p)
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    with tempfile.TemporaryDirectory(prefix="drape_script_") as tmp:
+        job, out = Path(tmp) / "job.pickle", Path(tmp) / "result.pickle"
+        job.write_bytes(pickle.dumps(((function.__module__, function.__qualname__), args,
+                                      memory_bytes())))
+        try:
+            done = subprocess.run(
+                [sys.executable, "-c", "import sys; from fenicsx_drape.limits import _child; "
+                 "_child(sys.argv[1], sys.argv[2])", str(job), str(out)],
+                env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE, timeout=timeout, cwd=tmp)
+        except subprocess.TimeoutExpired:
+            raise DrapeInputError(
+                f"{path}: the geometry script did not finish in {timeout:g} s and was stopped "
+                "(DRAPE_SCRIPT_TIMEOUT_S sets the limit)") from None
+        if not out.is_file():
+            tail = done.stderr.decode(errors="replace").strip().splitlines()[-3:]
+            raise DrapeInputError(
+                f"{path}: the geometry script ended without a result (exit status "
+                f"{done.returncode}; a mesh beyond the memory limit of "
+                f"{memory_bytes() / 1e9:.3g} GB ends so)" + (": " + " / ".join(tail)
+                                                               if tail else ""))
+        status, value = pickle.loads(out.read_bytes())
+    if status == "error":
+        raise DrapeInputError(value)
+    return value
+
+
+def _child(job: str, out: str) -> None:
+    """The child of :func:`run_script`: limit the address space, run, pickle the result."""
+    import importlib
+    import resource
+    import types
+
+    (module_name, name), args, memory = pickle.loads(Path(job).read_bytes())
+    # The module alone: its subpackages as bare namespaces, their __init__ not run.
+    import fenicsx_drape  # noqa: F401  (the top package is light)
+
+    parts = module_name.split(".")
+    for k in range(2, len(parts)):
+        package = ".".join(parts[:k])
+        if package not in sys.modules:
+            bare = types.ModuleType(package)
+            bare.__path__ = [os.path.join(sys.modules[".".join(parts[:k - 1])].__path__[0],
+                                          parts[k - 1])]
+            sys.modules[package] = bare
+    function = getattr(importlib.import_module(module_name), name)
+    limit = int(memory)
+    _, hard = resource.getrlimit(resource.RLIMIT_AS)
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+    try:
+        result = ("ok", function(*args))
+    except DrapeInputError as err:
+        result = ("error", str(err))
+    except MemoryError:
+        result = ("error", f"{args[0]}: out of the memory limit of {memory / 1e9:.3g} GB "
+                           "(DRAPE_MEMORY_GB)")
+    Path(out).write_bytes(pickle.dumps(result))
