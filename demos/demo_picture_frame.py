@@ -27,8 +27,11 @@ from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import Model
 from fenicsx_drape.provenance import save_figure, write_json
 
-here = Path(__file__).resolve().parent
-out = Path(sys.argv[1] if len(sys.argv) > 1 else "results/demo_picture_frame")
+# As a page of the docs the demo is a notebook run in demos/, without arguments.
+SCRIPT = "__file__" in globals()
+args = sys.argv[1:] if SCRIPT else []
+here = Path(__file__).resolve().parent if SCRIPT else Path.cwd()
+out = Path(args[0]) if args else here.parent / "results" / "demo_picture_frame"
 bundle = load_bundle(here / "bundles" / "cao2008-plain-frames")
 for test in bundle.tests:
     print(f"{test.id:20s} {test.kind:15s} lab {lab_of(test):8s} {size_of(test):22s} "
