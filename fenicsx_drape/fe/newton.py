@@ -122,7 +122,7 @@ class NewtonResult:
     converged: bool
     reason: str  # SNES's reason, e.g. CONVERGED_FNORM_ABS, DIVERGED_MAX_IT
     iterations: int  # SNES iterations (Newton: linear solves and updates)
-    factorisations: int = 0
+    jacobians: int = 0  # each factorised, unless -snes_lag_preconditioner keeps a factor
     krylov_iterations: int = 0
     residual_evaluations: int = 0
 
@@ -169,6 +169,8 @@ class Newton:
                                                        or settings["snes_type"] == "newtonls"):
             settings["snes_linesearch_type"] = ("basic" if line_search == "full-l2"
                                                 else line_search)
+        for key in user:  # PETSc would call them unused at exit: they were read here
+            db.getString(key)
         self._keys = [prefix + key for key in settings]
         for key, value in settings.items():
             db[prefix + key] = value
@@ -198,12 +200,11 @@ class Newton:
 
     def _reset(self) -> None:
         self.evaluations = 0  # residuals evaluated in this solve
-        self.factorisations = 0
+        self.jacobians = 0  # Jacobians assembled (by a nonlinear preconditioner too)
         self._since = 0  # evaluations since the last iterate
         self._its, self._f0, self._fnorm = 0, math.inf, math.inf
         self._λ = 0.0  # step of the last full-l2 search (NaN: another line search)
         self._failed = self._fast = self._local = self._node = False
-        self._factor_state = None
 
     # -- SNES callbacks ---------------------------------------------------------------------
 
@@ -228,6 +229,7 @@ class Newton:
         # Newton converges fast from the first full step that cut ‖F‖ tenfold, or after
         # _GLOBAL_ITERATIONS: from then on the Jacobian is exact (TrussProblem._jacobian).
         self._local = self._local or self._fast or self._its >= _GLOBAL_ITERATIONS
+        self.jacobians += 1
         self.jacobian(x, self._local)
 
     def _converged(self, snes, its: int, norms: tuple[float, float, float]) -> int:
@@ -236,7 +238,6 @@ class Newton:
         if its == 0:
             self._f0 = fnorm
         else:
-            self._count_factorisation()
             λ = self._λ if self.full_l2 else 1.0  # other searches: the step is not known
             self._fast = λ == 1.0 and fnorm <= _REUSE_REDUCTION * self._fnorm
         self._its, self._fnorm = its, fnorm
@@ -254,16 +255,6 @@ class Newton:
         if its >= self.max_it:
             return R.DIVERGED_MAX_IT
         return R.CONVERGED_ITERATING
-
-    def _count_factorisation(self) -> None:
-        """Count the factorisation of this iteration, if the factor is new (lagged: old)."""
-        try:
-            state = self.snes.getKSP().getPC().getFactorMatrix().stateGet()
-        except PETSc.Error:  # not a factorisation
-            return
-        if state != self._factor_state:
-            self.factorisations += 1
-            self._factor_state = state
 
     def _monitor(self, snes, its: int, fnorm: float) -> None:
         if self.monitor is not None:
@@ -336,5 +327,5 @@ class Newton:
         krylov = 0 if ksp.getType() == "preonly" else self.snes.getLinearSolveIterations()
         name = "CONVERGED_FNORM_NODE" if self._node and reason > 0 else _REASONS[reason]
         return NewtonResult(reason > 0, name, self.snes.getIterationNumber(),
-                            factorisations=self.factorisations, krylov_iterations=krylov,
+                            jacobians=self.jacobians, krylov_iterations=krylov,
                             residual_evaluations=self.evaluations)

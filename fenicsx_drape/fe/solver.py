@@ -488,7 +488,7 @@ class TrussProblem:
         else:
             self.revert()
         report = StepReport(t, dt, converged, result.iterations, result.reason,
-                            factorisations=result.factorisations,
+                            factorisations=result.jacobians,
                             krylov_iterations=result.krylov_iterations,
                             residual_evaluations=result.residual_evaluations)
         self.steps.append(report)

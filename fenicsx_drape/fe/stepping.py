@@ -30,7 +30,8 @@ class StepReport:
     converged: bool
     iterations: int  # Newton iterations (linear solves)
     reason: str  # SNES's converged/diverged reason (fe/newton.py)
-    factorisations: int = 0  # Jacobians factorised
+    # Jacobians assembled: each factorised, unless -snes_lag_preconditioner keeps a factor.
+    factorisations: int = 0
     krylov_iterations: int = 0  # Krylov iterations (0: a factorisation alone)
     residual_evaluations: int = 0  # residuals assembled (line searches included)
 
