@@ -76,7 +76,7 @@ cases = [] if args.only_full else [HemisphereCase(cell_mm=c) for c in args.cells
 if args.full or args.only_full:
     cases.append(HemisphereCase(cell_mm=2.5, quarter=False))
 run_hemisphere(HemisphereCase(cell_mm=30.0, duration_s=8.0),
-               options=SolverOptions(**options))  # JIT warm-up
+               options=SolverOptions(**options), allow_incomplete=True)  # JIT warm-up
 rows = []
 for case in cases:
     load = os.getloadavg()[0]
