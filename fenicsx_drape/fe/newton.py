@@ -5,13 +5,13 @@ objects; SNES drives the iteration (``newtonls`` with a direct factorisation by 
 :class:`Newton` only sets it up, with SNES's own hooks:
 
 - **The line search** ``full-l2`` (default) is SNES's ``basic`` line search with a pre-check
-  that picks the step: the full Newton step when it lowers ‖F‖ (one residual evaluation, most
+  that takes the step: the full Newton step when it lowers ‖F‖ (one residual evaluation, most
   iterations), else the step to the minimum of the parabola through ‖F(x + λd)‖² at λ = 0, ½
   and 1, whatever ‖F‖ is there (PETSc's ``l2``, one secant iteration). Backtracking (``bt``)
   crawls at λ = 0.1 for tens of iterations where the Newton step straightens a buckled tow
   (eq. 4) or drives a node into a tool: the residual of such a step is large but cheap to
   correct at the next iteration (issue 17; on the full 2.5 mm sheet ``bt`` cut fifteen steps
-  back, ``full-l2`` two). The residual at the chosen point is handed to the line search, not
+  back, ``full-l2`` two). The residual at the point taken is handed to the line search, not
   evaluated twice. Any PETSc line search can be chosen instead (``line_search``, or
   ``-snes_linesearch_type``).
 - **The convergence test** (``setConvergenceTest``) is SNES's ``‖F‖ ≤ atol`` or
@@ -267,17 +267,24 @@ class Newton:
     # -- the full-l2 line search ------------------------------------------------------------
 
     def _precheck(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
-        """Scale the Newton step ``y`` (SNES takes x − y) to the step of ``full-l2``."""
+        """Take the step of ``full-l2`` along the Newton step ``y`` (SNES would take x − y).
+
+        The point found, x − λy, becomes ``x`` and ``y`` zero, so that SNES's basic line
+        search keeps it as computed (with its residual, evaluated once) rather than
+        recomputing x − λy in other arithmetic.
+        """
         λ, _ = self._search(x, y, self._fnorm)
         self._λ = λ
         self._failed = λ == 0.0
-        if λ != 1.0:
-            y.scale(λ)
-        self._trial = λ != 0.0
+        if λ:
+            self._w.copy(x)
+            self._trial = True
+        y.set(0.0)
 
     def _norm_at(self, x: PETSc.Vec, y: PETSc.Vec, λ: float) -> float:
         """‖F(x − λy)‖ (inf outside the domain); leaves x − λy in ``_w``, F there in ``_G``."""
-        self._w.waxpy(-λ, y, x)
+        x.copy(self._w)
+        self._w.axpy(-λ, y)
         return self._evaluate(self._w, self._G)
 
     def _search(self, x: PETSc.Vec, y: PETSc.Vec, f0: float) -> tuple[float, float]:
