@@ -25,7 +25,7 @@ objects; SNES drives the iteration (``newtonls`` with a direct factorisation by 
   (``PETSC_OPTIONS``, ``--petsc-option`` on the command line, :func:`set_petsc_options`), each
   overriding the last: ``-snes_type newtontr``, ``-snes_type qn -npc_snes_type newtonls``,
   factor reuse (``-snes_lag_preconditioner 2 -ksp_type gmres``), profiling (``-log_view``).
-  ``docs/solver.md`` measures them.
+  ``docs/solver.md`` measures them: none beats the default on the hemisphere.
 
 A residual that cannot be evaluated (a bar collapsed, a law failed) is a vector of NaN for SNES
 (petsc4py has no domain-error call): the pre-check halves the step until it is finite, and at
@@ -203,7 +203,7 @@ class Newton:
         self.jacobians = 0  # Jacobians assembled (by a nonlinear preconditioner too)
         self._since = 0  # evaluations since the last iterate
         self._its, self._f0, self._fnorm = 0, math.inf, math.inf
-        self._λ = 0.0  # step of the last full-l2 search (NaN: another line search)
+        self._λ = 0.0  # step of the last full-l2 search
         self._failed = self._fast = self._local = self._node = False
 
     # -- SNES callbacks ---------------------------------------------------------------------
