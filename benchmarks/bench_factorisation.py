@@ -5,6 +5,7 @@
     ./drape exec python3 benchmarks/bench_factorisation.py --cell-mm 5 --icntl-4 2
     ./drape exec python3 benchmarks/bench_factorisation.py --no-bending    # the truss pattern
     ./drape exec python3 benchmarks/bench_factorisation.py --travel-share 0.6 --structure
+    ./drape exec python3 benchmarks/bench_factorisation.py --only CHOLMOD "PORD" "AMF"
 
 The Jacobian is the full sheet's after one half step of punch travel (the contact and the
 holder active), or after ``--travel-share`` of the travel (a curved sheet with buckled tows).
@@ -63,7 +64,17 @@ ORDERINGS = {  # name: MUMPS options (ICNTL(7) sequential, ICNTL(28)/(29) parall
     "PETSc rcm": {"pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "rcm"},
     "PETSc LU nd": {"pc_type": "lu", "pc_factor_mat_solver_type": "petsc",
                     "pc_factor_mat_ordering_type": "nd"},
+    # SuiteSparse in Debian's PETSc (one rank only): CHOLMOD's Cholesky LLᵀ (supernodal or
+    # simplicial, its choice by default), UMFPACK's and KLU's LU (with --lu).
+    "CHOLMOD": {"pc_factor_mat_solver_type": "cholmod"},
+    "CHOLMOD supernodal": {"pc_factor_mat_solver_type": "cholmod",
+                           "mat_cholmod_factor": "supernodal"},
+    "CHOLMOD simplicial": {"pc_factor_mat_solver_type": "cholmod",
+                           "mat_cholmod_factor": "simplicial"},
+    "UMFPACK": {"pc_type": "lu", "pc_factor_mat_solver_type": "umfpack"},
+    "KLU": {"pc_type": "lu", "pc_factor_mat_solver_type": "klu"},
 }
+SEQUENTIAL = ("petsc", "cholmod", "umfpack", "klu")
 _BLOCKS = {f"fieldsplit_{k}_{key}": value for k in (0, 1) for key, value in
            {"ksp_type": "preonly", "pc_type": "cholesky",
             "pc_factor_mat_solver_type": "mumps"}.items()}
@@ -89,6 +100,8 @@ parser.add_argument("--travel-share", type=float, default=0.0,
                     help="the Jacobian after this share of the punch travel (0: half a step)")
 parser.add_argument("--structure", action="store_true",
                     help="also field-split and multigrid Krylov solvers")
+parser.add_argument("--only", nargs="*", default=None, metavar="NAME",
+                    help="only these rows of ORDERINGS (default: all)")
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
 
@@ -100,8 +113,10 @@ def study(problem) -> None:
     b.set(1.0)
     y = b.duplicate()
     for k, (name, options) in enumerate(ORDERINGS.items()):
-        if options.get("pc_factor_mat_solver_type") == "petsc" and comm.size > 1:
-            continue  # PETSc's own factorisations are sequential
+        if args.only is not None and name not in args.only:
+            continue
+        if options.get("pc_factor_mat_solver_type") in SEQUENTIAL and comm.size > 1:
+            continue  # PETSc's own factorisations and SuiteSparse's are sequential
         prefix = f"bench_factor_{k}_"
         db = PETSc.Options()
         settings = {"ksp_type": "preonly", "pc_type": "lu" if args.lu else "cholesky",
@@ -150,9 +165,12 @@ def study(problem) -> None:
         r.axpy(-1.0, b)
         error = r.norm() / b.norm()  # relative residual of the direct solve
         if comm.rank == 0:
-            what = (f"used ordering {F.getMumpsInfog(7)}, {F.getMumpsRinfog(3):.3g} flops, "
-                    f"{F.getMumpsInfog(29):.3g} factor entries" if mumps else
-                    f"{F.getInfo()['nz_used']:.3g} factor entries")
+            try:
+                what = (f"used ordering {F.getMumpsInfog(7)}, {F.getMumpsRinfog(3):.3g} flops, "
+                        f"{F.getMumpsInfog(29):.3g} factor entries" if mumps else
+                        f"{F.getInfo()['nz_used']:.3g} factor entries")
+            except PETSc.Error:
+                what = ksp.getPC().getFactorSolverType()
             print(f"{name:10s} {comm.size} rank(s): {what}, first {first:.3f} s, "
                   f"factorisation {min(numeric):.3f} s, solve {1e3 * solve:.1f} ms, "
                   f"relative residual {error:.1e}", flush=True)

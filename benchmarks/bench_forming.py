@@ -4,14 +4,19 @@
     ./drape exec python3 benchmarks/bench_forming.py --full           # + the full 2.5 mm sheet
     ./drape --np 2 exec python3 benchmarks/bench_forming.py --full    # the same on two ranks
     ./drape exec python3 benchmarks/bench_forming.py --before         # the solver of issue 17
-    ./drape exec python3 benchmarks/bench_forming.py --max-krylov 8   # reuse factorisations
     ./drape exec python3 benchmarks/bench_forming.py --single-factor  # factor in single precision
+    ./drape exec python3 benchmarks/bench_forming.py --petsc-option "-snes_type newtontr"
+    ./drape exec python3 benchmarks/bench_forming.py --save-nodes ref           # nodes to ref/
+    ./drape exec python3 benchmarks/bench_forming.py --reference ref --petsc-option ...
 
 A JIT warm-up run (30 mm cells) comes first. ``--before`` runs the solver as issue 17 found it
 (backtracking line search, exact geometric stiffness, penetrating nodes projected onto the
-tool surface) for the tables of docs/solver-notes.md. Every line: nodes, unknowns, ranks, wall time,
-accepted steps, cut-backs, Newton iterations (per step), factorisations, GMRES iterations on
-reused factors, residual evaluations, maximum shear; the machine's load average before the run.
+tool surface) for the tables of docs/solver-notes.md. Every line: nodes, unknowns, ranks, wall
+time, accepted steps, cut-backs, SNES iterations (per step), Jacobians, Krylov iterations, residual
+evaluations, maximum shear, the travel reached if the run stopped short; the machine's load
+average before the run; with ``--reference`` the largest and mean node distance to the nodes
+that ``--save-nodes`` wrote there. ``--petsc-option`` (repeatable) passes options to SNES as
+``drape form --petsc-option`` does (``docs/solver.md`` has the table these lines make).
 """
 
 import argparse
@@ -32,8 +37,10 @@ parser.add_argument("--only-full", action="store_true", help="only the full shee
 parser.add_argument("--cells", type=float, nargs="*", default=[10.0, 5.0],
                     help="cell sizes of the quarter model (mm)")
 parser.add_argument("--before", action="store_true", help="the solver as issue 17 found it")
-parser.add_argument("--max-krylov", type=int, default=0,
-                    help="GMRES iterations on a reused factorisation (0: none)")
+parser.add_argument("--petsc-option", action="append", default=[], metavar="OPTION",
+                    help="PETSc options for SNES, e.g. '-snes_type newtontr' (repeatable)")
+parser.add_argument("--save-nodes", metavar="DIR", help="write the formed nodes to DIR")
+parser.add_argument("--reference", metavar="DIR", help="node distance to those in DIR")
 parser.add_argument("--node-atol-N", type=float, default=None,
                     help=f"per-node force tolerance (N; default {NODE_ATOL_N}, 0: the 2-norm only)")
 parser.add_argument("--line-search", default=None, help="line search (fe/newton.py)")
@@ -43,7 +50,11 @@ args = parser.parse_args()
 comm = MPI.COMM_WORLD
 
 options = {"snes_atol": 1e-6, "node_atol_N": NODE_ATOL_N,
-           "petsc_options": {"pc_type": "cholesky"}, "max_krylov": args.max_krylov}
+           "petsc_options": {"pc_type": "cholesky"}}
+if args.petsc_option:
+    from fenicsx_drape.fe.newton import set_petsc_options
+
+    set_petsc_options(args.petsc_option)
 if args.line_search is not None:
     options["line_search"] = args.line_search
 if args.single_factor:
@@ -65,26 +76,36 @@ cases = [] if args.only_full else [HemisphereCase(cell_mm=c) for c in args.cells
 if args.full or args.only_full:
     cases.append(HemisphereCase(cell_mm=2.5, quarter=False))
 run_hemisphere(HemisphereCase(cell_mm=30.0, duration_s=8.0),
-               options=SolverOptions(**options))  # JIT warm-up
+               options=SolverOptions(**options), allow_incomplete=True)  # JIT warm-up
 rows = []
 for case in cases:
     load = os.getloadavg()[0]
     comm.Barrier()
     start = time.perf_counter()
-    run = run_hemisphere(case, options=SolverOptions(**options))
+    run = run_hemisphere(case, options=SolverOptions(**options), allow_incomplete=True)
     wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     steps = run.problem.steps
     nodes = run.grid.X[..., 0].size
     rows.append((nodes, wall))
+    name = f"{'quarter' if case.quarter else 'full'}_{case.cell_mm:g}.npz"
+    distance = ""
+    if args.save_nodes and comm.rank == 0:
+        os.makedirs(args.save_nodes, exist_ok=True)
+        np.savez(os.path.join(args.save_nodes, name), x=run.grid.x)
+    if args.reference:
+        d = np.linalg.norm(run.grid.x - np.load(os.path.join(args.reference, name))["x"], axis=-1)
+        distance = f", nodes {np.nanmax(d):.3f} mm from the reference (mean {np.nanmean(d):.3f})"
     if comm.rank == 0:
         print(f"{'quarter' if case.quarter else 'full'} {case.cell_mm:5.2f} mm: {nodes:6d} nodes "
               f"{3 * nodes:6d} unknowns, {comm.size} rank(s), load {load:.1f}: {wall:7.1f} s, "
               f"{run.steps} steps, {run.cutbacks} cut back, {run.iterations} Newton iterations "
               f"({run.iterations / max(run.steps, 1):.2f} per step), "
-              f"{sum(s.factorisations for s in steps)} factorisations, "
-              f"{sum(s.krylov_iterations for s in steps)} GMRES, "
+              f"{sum(s.factorisations for s in steps)} Jacobians, "
+              f"{sum(s.krylov_iterations for s in steps)} Krylov, "
               f"{sum(s.residual_evaluations for s in steps)} residuals, max shear "
-              f"{np.abs(run.grid.shear_deg()).max():.2f}°", flush=True)
+              f"{np.abs(run.grid.shear_deg()).max():.2f}°{distance}"
+              + (f"; stopped at {run.travel_mm:.1f} mm: {run.stopped}" if run.stopped else ""),
+              flush=True)
 if comm.rank == 0 and len(rows) > 1:
     n, t = np.array(rows, dtype=float).T
     slope = np.polyfit(np.log(n), np.log(t), 1)[0]

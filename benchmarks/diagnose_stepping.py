@@ -170,11 +170,12 @@ def along_step(newton, x, problem) -> None:
     F, G, H, d = (x.duplicate() for _ in range(4))
     newton.residual(x, F)
     newton.jacobian(x, True)
-    F.scale(-1.0)
-    newton.linear.solve(F, d)
-    F.scale(-1.0)
+    A, ksp = newton.snes.getJacobian()[0], newton.snes.getKSP()
+    ksp.setOperators(A)
+    ksp.solve(F, d)
+    d.scale(-1.0)
     Jd = d.duplicate()
-    newton.linear.A.mult(d, Jd)
+    A.mult(d, Jd)
     for ε in (1e-5, 1e-7):
         for sign, V in ((1.0, G), (-1.0, H)):
             y = x.copy()

@@ -6,6 +6,9 @@ commands that need no DOLFINx start fast and work without it.
 
 Exit status: 0 success, 2 bad input (the message names the file, line or parameter),
 1 internal failure.
+
+The commands that form (``form``, ``compare``, ``diagnose``) take ``--petsc-option`` for SNES
+(:func:`petsc_option_argument`; ``docs/solver.md``).
 """
 
 from __future__ import annotations
@@ -56,6 +59,14 @@ def command_parser(name: str) -> tuple[ModuleType, argparse.ArgumentParser]:
     return module, parser
 
 
+def petsc_option_argument(parser: argparse.ArgumentParser) -> None:
+    """``--petsc-option OPTION`` (repeatable): PETSc options for the load steps' SNES."""
+    parser.add_argument("--petsc-option", dest="petsc_options", action="append", default=[],
+                        metavar="OPTION", help="PETSc options for the forming solves, e.g. "
+                        "'-snes_type newtontr' or --petsc-option=-log_view (repeatable; "
+                        "docs/solver.md)")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -76,6 +87,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(rest)  # exits 2 on bad options
     apply_trust_option(args)
     try:
+        if getattr(args, "petsc_options", None):
+            from fenicsx_drape.fe.newton import set_petsc_options
+
+            set_petsc_options(args.petsc_options)
         return int(module.run(args) or 0)
     except DrapeInputError as err:
         print(f"drape {name}: error: {err}", file=sys.stderr)

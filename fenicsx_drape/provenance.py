@@ -95,6 +95,8 @@ def run_record(**details: Any) -> dict[str, Any]:
     """How a result was made: version, command line, platform, time, plus ``details``.
 
     Pass the model (effects and parameters), the inputs and the random seed as ``details``.
+    Where PETSc is loaded, the options in its database (``PETSC_OPTIONS``, ``--petsc-option``)
+    are recorded too.
     """
     record = {
         "fenicsx_drape": __version__,
@@ -110,6 +112,11 @@ def run_record(**details: Any) -> dict[str, Any]:
         record["dolfinx"] = dolfinx.__version__
     except ImportError:
         pass
+    petsc = sys.modules.get("petsc4py.PETSc")
+    if petsc is not None:  # not the per-solver defaults (fe/newton.py), only what was given
+        record["petsc_options"] = {key: value or "" for key, value
+                                   in petsc.Options().getAll().items()
+                                   if not key.startswith("drape_")}
     record.update(details)
     return record
 

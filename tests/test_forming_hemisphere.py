@@ -171,7 +171,7 @@ def test_the_jacobian_is_symmetric_unless_tool_friction_acts(with_tool_friction)
     asymmetry = A.copy().transpose()  # in place, on the copy
     asymmetry.axpy(-1.0, A)
     relative = asymmetry.norm() / A.norm()
-    pc = run.problem.linear.ksp.getPC().getType()
+    pc = run.problem.newton.snes.getKSP().getPC().getType()
     if with_tool_friction:
         assert relative > 1e-6 and pc == "lu"  # the friction tangent is not symmetric
     else:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from fenicsx_drape.cli import petsc_option_argument
 from fenicsx_drape.errors import DrapeInputError
 
 
@@ -20,6 +21,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--forming-cell-mm", type=float, default=None, metavar="MM",
                         help="unit cell of the forming simulations (default: a case's own "
                         "cell_mm; the hemisphere 10 mm, the paper's)")
+    petsc_option_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from fenicsx_drape.cli import petsc_option_argument
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the command's arguments."""
@@ -27,6 +29,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="also refit the baseline and the winner on this mesh and compare "
                         "them with the forming tests there (e.g. 5; default: no)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    petsc_option_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:

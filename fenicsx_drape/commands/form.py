@@ -20,7 +20,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fenicsx_drape.cli import positive_float
+from fenicsx_drape.cli import petsc_option_argument, positive_float
 from fenicsx_drape.errors import DrapeInputError, SolverError
 
 CASES = ("hemisphere",)
@@ -73,6 +73,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-fields", action="store_true",
                         help="skip the XDMF fields and tool meshes")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    petsc_option_argument(parser)
 
 
 def _model(args: argparse.Namespace, default):

@@ -1,8 +1,8 @@
-"""The implicit truss solver: one load step by Newton's method around DOLFINx assembly.
+"""The implicit truss solver: one load step by PETSc SNES around DOLFINx assembly.
 
 :class:`TrussProblem` owns the displacement, the material state at the quadrature points, the
 Dirichlet conditions and the nodal terms (contact, blank holder: :mod:`fenicsx_drape.nodal`).
-Newton's method (:mod:`~fenicsx_drape.fe.newton`) evaluates the material laws at every iterate
+SNES, set up by :mod:`~fenicsx_drape.fe.newton`, evaluates the material laws at every iterate
 and assembles the residual and the consistent Jacobian; a converged step commits the history of
 the laws and of the nodal terms, a failed one reverts both. Load stepping with cut-back is in
 :mod:`~fenicsx_drape.fe.stepping`, outputs in :mod:`~fenicsx_drape.fe.output`.
@@ -47,7 +47,7 @@ from fenicsx_drape.fe.coupling import ShearTensionCoupling
 from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
-from fenicsx_drape.fe.newton import LINE_SEARCHES, Iterate, LinearSolver, Newton, NewtonResult
+from fenicsx_drape.fe.newton import LINE_SEARCHES, Iterate, Newton, NewtonResult
 from fenicsx_drape.fe.state import MaterialState, StrainError
 from fenicsx_drape.fe.stepping import StepReport, run
 from fenicsx_drape.materials.base import MaterialLaw
@@ -102,16 +102,14 @@ class SolverOptions:
     # fe/newton.py. Unlike snes_atol it does not tighten as the mesh is refined.
     node_atol_N: float = 0.0
     snes_max_it: int = 25  # Newton iterations before a step is cut back
-    line_search: str = "full-l2"  # full-l2, l2, bt, basic: fe/newton.py
+    line_search: str = "full-l2"  # full-l2 or a PETSc line search (l2, bt, ...): fe/newton.py
     linear_solver: str = "mumps"  # LU factorisation package (mumps, superlu_dist, petsc)
-    # GMRES iterations allowed on a reused factorisation once Newton converges fast (0: a
-    # factorisation per iteration); fe/newton.py.
-    max_krylov: int = 0
     # The geometric stiffness takes the bar forces limited to the largest force of the last
     # converged step (solver docstring); the residual, hence the solution, is unchanged.
     limit_geometric_stiffness: bool = True
     predictor: bool = True  # extrapolate the last increment, then let nodal terms project
-    petsc_options: dict = dataclasses.field(default_factory=dict)  # extra KSP/PC options
+    # Extra SNES/KSP/PC options (those of the command line, fe.newton.set_petsc_options, win).
+    petsc_options: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         for name in ("tows_per_mm", "snes_atol"):
@@ -120,9 +118,6 @@ class SolverOptions:
         if self.line_search not in LINE_SEARCHES:
             raise DrapeInputError(f"solver option line_search = {self.line_search!r}: choose "
                                   f"from {', '.join(LINE_SEARCHES)}")
-        if not (isinstance(self.max_krylov, int) and self.max_krylov >= 0):
-            raise DrapeInputError(f"solver option max_krylov = {self.max_krylov!r} must be an "
-                                  "integer >= 0")
         for name in ("edge_tow_factor", "buckled_tow_stiffness_N", "tow_bending_EI_Nmm2",
                      "drag_N_per_mm", "node_atol_N"):
             if not getattr(self, name) >= 0:
@@ -305,17 +300,16 @@ class TrussProblem:
         """Which displacement components of the local nodes are prescribed, (n, 3)."""
         return self.constraints.constrained
 
-    # -- Newton ---------------------------------------------------------------------------
+    # -- SNES -----------------------------------------------------------------------------
 
     def _setup_newton(self) -> None:
         opts = self.options
         options = {"pc_factor_mat_solver_type": opts.linear_solver, **opts.petsc_options}
-        self.linear = LinearSolver(self._A, self.comm, f"drape_truss_{next(_ids)}_", options,
-                                   max_krylov=opts.max_krylov)
-        self.newton = Newton(self._residual, self._jacobian, self.linear, self._b,
-                             atol=opts.snes_atol, rtol=opts.snes_rtol, max_it=opts.snes_max_it,
+        self.newton = Newton(self._residual, self._jacobian, self._A, self._b,
+                             prefix=f"drape_truss_{next(_ids)}_", atol=opts.snes_atol,
+                             rtol=opts.snes_rtol, max_it=opts.snes_max_it,
                              node_atol=opts.node_atol_N, line_search=opts.line_search,
-                             monitor=self._monitor)
+                             options=options, monitor=self._monitor)
 
     def _monitor(self, iterate: Iterate) -> None:
         if self.monitor is not None:
@@ -477,7 +471,7 @@ class TrussProblem:
         except PETSc.Error:
             result = NewtonResult(False, "DIVERGED_LINEAR_SOLVE", self.options.snes_max_it)
         finally:
-            self.linear.release_options()  # the factor has read them
+            self.newton.release_options()  # the factor has read them
         converged = result.converged
         if converged:
             if self._stale(self._x):
@@ -494,7 +488,7 @@ class TrussProblem:
         else:
             self.revert()
         report = StepReport(t, dt, converged, result.iterations, result.reason,
-                            factorisations=result.factorisations,
+                            factorisations=result.jacobians,
                             krylov_iterations=result.krylov_iterations,
                             residual_evaluations=result.residual_evaluations)
         self.steps.append(report)

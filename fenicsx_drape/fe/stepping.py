@@ -29,9 +29,10 @@ class StepReport:
     dt_s: float  # step length
     converged: bool
     iterations: int  # Newton iterations (linear solves)
-    reason: str  # converged/diverged reason (SNES names, fe/newton.py)
-    factorisations: int = 0  # Jacobians factorised
-    krylov_iterations: int = 0  # GMRES iterations on reused factorisations
+    reason: str  # SNES's converged/diverged reason (fe/newton.py)
+    # Jacobians assembled: each factorised, unless -snes_lag_preconditioner keeps a factor.
+    factorisations: int = 0
+    krylov_iterations: int = 0  # Krylov iterations (0: a factorisation alone)
     residual_evaluations: int = 0  # residuals assembled (line searches included)
 
 
