@@ -177,8 +177,11 @@ def shear_at_formed(grid: FormedGrid, points: np.ndarray,
 
 
 def edge_segments(mesh: SheetMesh) -> tuple[np.ndarray, np.ndarray]:
-    """The blank's edge: boundary edges of the triangulation, (e, 2) node pairs, and the
-    outward in-plane direction (e, 2) of each on the flat blank."""
+    """The blank's edge: the triangulation's boundary edges.
+
+    Returns the edges' node pairs (e, 2) and the outward in-plane direction (e, 2) of each on
+    the flat blank.
+    """
     tri = mesh.triangles
     edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
     opposite = np.concatenate([tri[:, 2], tri[:, 0], tri[:, 1]])

@@ -40,8 +40,8 @@ import numpy as np
 
 MEASUREMENTS = ("shear_points", "surface", "outline", "punch_force")
 # Keys of a forming [[test]] table that describe its lab measurements (not case overrides).
-LAB_KEYS = (*MEASUREMENTS, "shear_sd_deg", "position_sd_mm", "shear_magnitude", "force_tool",
-            "frame")
+LAB_KEYS = (*MEASUREMENTS, "shear_sd_deg", "position_sd_mm", "force_sd_N", "shear_magnitude",
+            "force_tool", "frame")
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
 TEXT_COLUMNS = ("label", "line")
 
@@ -110,6 +110,7 @@ class LabData:
     shear_magnitude: bool = False  # shear_points hold |shear| only
     force_tool: str = "punch"  # punch_force: the tool whose force was measured
     flat: bool = False  # shear_points given at flat-blank positions (x0_mm, y0_mm)
+    anchor: np.ndarray | None = None  # register = true: the test's scan points (case frame)
 
 
 # --------------------------------------------------------------------------------------------
@@ -275,7 +276,10 @@ def _frame(raw: Any, fname: str, at: int, label: str, add) -> Frame:
     return Frame(vectors["translation_mm"], vectors["rotation_deg"], register)
 
 
-def read_measurement(name: str, path: Path, label: str, add, *, frame: Frame = Frame(),
+NO_FRAME = Frame()
+
+
+def read_measurement(name: str, path: Path, label: str, add, *, frame: Frame = NO_FRAME,
                      reach: tuple[np.ndarray, float] | None = None
                      ) -> tuple[dict[str, np.ndarray], dict[str, Any]] | None:
     """Read and check one lab measurement: its numeric columns (in the case's frame) and extras.
@@ -358,12 +362,13 @@ def read_measurement(name: str, path: Path, label: str, add, *, frame: Frame = F
                 bad = beyond_tools_reach(P, centre, radius)
                 if bad.size:
                     k = bad[0]
-                    where = f"line {int(lines[k])}" if lines[k] else f"point {k}"
-                    add(fname, int(lines[k]), f"{label}: the position ({', '.join(f'{v:.6g}' for v in P[k])}) "
-                                              f"mm ({where}) lies {np.linalg.norm(P[k] - centre[:P.shape[1]]):.4g} mm "
-                                              f"from the tools, beyond the blank's reach "
-                                              f"({radius:.4g} mm; {bad.size} such row(s)): "
-                                              "wrong units or frame?")
+                    at = ", ".join(f"{v:.6g}" for v in P[k])
+                    far = float(np.linalg.norm(P[k] - centre[: P.shape[1]]))
+                    add(fname, int(lines[k]), f"{label}: the position ({at}) mm "
+                                              f"{'' if lines[k] else f'(point {k}) '}lies "
+                                              f"{far:.4g} mm from the tools, beyond the "
+                                              f"blank's reach ({radius:.4g} mm; {bad.size} "
+                                              "such row(s)): wrong units or frame?")
                     return None
         if "travel_mm" in columns and (bad := np.flatnonzero(np.abs(columns["travel_mm"])
                                                               > radius)).size:
@@ -401,7 +406,7 @@ def split_test(test, raw: Mapping[str, Any], folder: Path, fname: str, where, in
     if not names:
         return [test]
     keys: dict[str, Any] = {}
-    for key in ("shear_sd_deg", "position_sd_mm"):
+    for key in ("shear_sd_deg", "position_sd_mm", "force_sd_N"):
         if key in raw:
             v = raw[key]
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < math.inf):
@@ -448,6 +453,11 @@ def split_test(test, raw: Mapping[str, Any], folder: Path, fname: str, where, in
                        keys.get(SD_KEY[name]), bool(magnitude), tool, extras["flat"])
         out.append(dataclasses.replace(test, id=f"{test.id}/{name}", file=file,
                                        columns=columns, lab=data))
+    scans = [t for t in out if t.lab.measurement == "surface"]
+    if frame.register and scans:  # the whole test's frame is registered on its scan
+        anchor = np.column_stack([scans[0].columns[c] for c in ("x_mm", "y_mm", "z_mm")])
+        out = [dataclasses.replace(t, lab=dataclasses.replace(t.lab, anchor=anchor))
+               if t.lab.measurement != "file" else t for t in out]
     return out
 
 
@@ -466,3 +476,20 @@ def measurement_of(test) -> str | None:
     """The lab measurement a test holds (``"file"`` for a grid split off), None for v2 tests."""
     lab = getattr(test, "lab", None)
     return None if lab is None else lab.measurement
+
+
+def without_rows(test, rows: Sequence[int]):
+    """A test with the given rows (indices) left out: its columns and row data (outliers)."""
+    keep = np.ones(test.n_rows, bool)
+    keep[list(rows)] = False
+    columns = {k: np.asarray(v)[keep] for k, v in test.columns.items()}
+    lab = test.lab
+    if lab is not None:
+        def pick(seq):
+            return tuple(x for x, k in zip(seq, keep) if k) if seq else seq
+
+        lab = dataclasses.replace(
+            lab, lines=np.asarray(lab.lines)[keep] if lab.lines.size == keep.size
+            else lab.lines, labels=pick(lab.labels), line_names=pick(lab.line_names),
+            triangles=None)
+    return dataclasses.replace(test, columns=columns, lab=lab)
