@@ -796,18 +796,37 @@ def plot_error_map(comparisons: Mapping[str, Comparison], test: Test, path: Path
     return save_figure(fig, path)
 
 
+# The hooks of lab measurements (spec version 3): :mod:`~fenicsx_drape.diagnosis.lab_kind`
+# registers itself here when imported (as :mod:`fenicsx_drape.diagnosis` does).
+_lab_hooks: list[Any] = []
+
+
+def register_lab_hooks(module: Any) -> None:
+    """Hand the forming tests that hold a lab measurement to ``module``'s functions."""
+    _lab_hooks[:] = [module]
+
+
+def _lab(test: Test) -> Any:
+    """The lab hooks' module when ``test`` holds a lab measurement, else None."""
+    if getattr(test, "lab", None) is None or test.lab.measurement == "file":
+        return None
+    if not _lab_hooks:
+        raise DrapeInputError(f"test {test.id!r}: lab measurements need "
+                              "fenicsx_drape.diagnosis.lab_kind (import fenicsx_drape.diagnosis)")
+    return _lab_hooks[0]
+
+
 def _by_measurement(grid_hook: Callable, name: str) -> Callable:
     """A hook of the forming kind: the grid's, or a lab measurement's.
 
-    A test holding a lab measurement (spec version 3) goes to :mod:`~fenicsx_drape.diagnosis.
-    lab_kind`'s function ``name``.
+    A test holding a lab measurement (spec version 3) goes to the registered lab hooks'
+    function ``name`` (:func:`register_lab_hooks`).
     """
 
     def hook(test: Test, *args, **kwargs):
-        from fenicsx_drape.diagnosis import lab_kind
-
-        if lab_kind.is_lab(test):
-            return getattr(lab_kind, name)(test, *args, **kwargs)
+        lab = _lab(test)
+        if lab is not None:
+            return getattr(lab, name)(test, *args, **kwargs)
         return grid_hook(test, *args, **kwargs)
 
     hook.__name__ = hook.__qualname__ = getattr(grid_hook, "__name__", name)
@@ -847,10 +866,9 @@ FORMING = Kind(unit=_by_measurement(lambda test: "mm", "unit"),
 
 def _plot(comparisons, test: Test, path: Path, shares=()) -> Path:
     """The forming kind's picture: the grid's error map, or a lab measurement's own."""
-    from fenicsx_drape.diagnosis import lab_kind
-
-    if lab_kind.is_lab(test):
-        return lab_kind.plot(comparisons, test, path, shares)
+    lab = _lab(test)
+    if lab is not None:
+        return lab.plot(comparisons, test, path, shares)
     return plot_error_map(comparisons, test, path, shares)
 
 

@@ -43,12 +43,14 @@ brings within reach (more than half its points unmatched, or an RMS distance abo
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.kinds import Region
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
@@ -213,9 +215,7 @@ def sheet_mesh(grid: FormedGrid) -> SheetMesh:
 
 def _runs(test: Test, model: Model) -> list[tuple[Any, Model]]:
     """The (case, model) jobs of a test: one per parameter set of a vectorised model."""
-    from fenicsx_drape.diagnosis.forming_kind import case_of
-
-    case = case_of(test)
+    case = fk.case_of(test)
     sizes = {np.size(v) for v in model.parameters.values() if np.ndim(v) > 0}
     if not sizes:
         return [(case, model)]
@@ -384,9 +384,7 @@ def match(test: Test, grid: FormedGrid, model: Model | None = None) -> dict[str,
 
 
 def _job(test: Test, model: Model) -> tuple[Any, Model]:
-    from fenicsx_drape.diagnosis.forming_kind import case_of
-
-    return case_of(test), model
+    return fk.case_of(test), model
 
 
 def simulate(test: Test, model: Model) -> np.ndarray:
@@ -411,8 +409,6 @@ def regions(test: Test) -> list[Region]:
     the regions of the part at the formed points; scan: the regions of the part; outline:
     the edge along the tow axes and at the bias corners; force: thirds of the travel.
     """
-    from fenicsx_drape.diagnosis.forming_kind import names_case
-
     m, c = measurement_of(test), test.columns
     n = test.n_rows
     per = 2 if _draw_in(test) else 1
@@ -448,7 +444,7 @@ def regions(test: Test) -> list[Region]:
         add("direction_deg", off_axis, off_axis >= 22.5, "edge at the bias corners")
         return out
     formed = "x_mm" in c and "z_mm" in c
-    if formed and names_case(test):
+    if formed and fk.names_case(test):
         which, names = part_region_of_points(test, points(test))
         height = points(test)[:, 2]
         for k, name in enumerate(names):
@@ -463,8 +459,6 @@ def part_region_of_points(test: Test, x: np.ndarray) -> tuple[np.ndarray, Sequen
 
     Indices into :data:`~fenicsx_drape.diagnosis.forming_kind.CASE_REGION_NAMES`.
     """
-    from fenicsx_drape.diagnosis import forming_kind as fk
-
     rel = x[:, :2] - _centre(test)
     θ = math.radians(test.forming_case.blank.ply_angle_deg)
     u = rel[:, 0] * math.cos(θ) + rel[:, 1] * math.sin(θ)
@@ -613,3 +607,6 @@ def _matched(test: Test, comparison: Comparison) -> dict[str, Any] | None:
         if test_id == test.id and np.array_equal(hit["values"], comparison.simulated):
             return hit
     return None
+
+
+fk.register_lab_hooks(sys.modules[__name__])
