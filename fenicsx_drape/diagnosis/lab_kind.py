@@ -232,10 +232,13 @@ def _centre(test: Test) -> np.ndarray:
 def register(mesh: SheetMesh, P: np.ndarray, noise_mm: float) -> dict[str, Any]:
     """A rigid frame bringing points (n, 3) onto the sheet: point-to-plane Gauss-Newton.
 
-    Rotations (deg) about the points' centre, then translations (mm). Returns ``R``,
-    ``centre``, ``t`` (x ↦ R (x − centre) + centre + t), ``rotation_deg``,
-    ``translation_mm``, their ``sd``, ``rms_mm``, ``matched`` (share of points within
-    :data:`UNMATCHED_CELLS` cells after the fit) and ``far``.
+    Fitted as rotations about the points' centre and a translation there: x ↦ R (x − centre)
+    + centre + t. Returns ``R``, ``centre``, ``t``, and as [test.frame] states a frame
+    (x ↦ R x + translation) ``rotation_deg`` (about x, then y, then z) and
+    ``translation_mm``, with the standard deviations ``sd_rotation_deg`` and
+    ``sd_translation_mm`` (of the translation at the points' centre), ``rms_mm``,
+    ``matched`` (share of the points within :data:`UNMATCHED_CELLS` cells after the fit),
+    ``far`` and ``points``. The registration is relative to a given frame, if any.
     """
     from fenicsx_drape.forming.measure import closest_points
     from fenicsx_drape.measurements.lab import rotation
@@ -275,8 +278,11 @@ def register(mesh: SheetMesh, P: np.ndarray, noise_mm: float) -> dict[str, Any]:
         sd = np.full(6, np.inf)
     rms = float(np.sqrt(np.mean(near.signed[matched] ** 2))) if matched.any() else math.inf
     far = bool(matched.mean() < 0.5 or rms > FAR_NOISE * noise_mm)
+    # As [test.frame] states a frame: x ↦ R x + translation.
+    translation = centre + t - R @ centre
     return {"R": R, "centre": centre, "t": t, "rotation_deg": angles.tolist(),
-            "translation_mm": t.tolist(), "sd_rotation_deg": np.degrees(sd[:3]).tolist(),
+            "translation_mm": translation.tolist(),
+            "sd_rotation_deg": np.degrees(sd[:3]).tolist(),
             "sd_translation_mm": sd[3:].tolist(), "rms_mm": rms,
             "matched": float(matched.mean()), "far": far, "points": len(P)}
 
@@ -302,13 +308,26 @@ def _anchor(test: Test) -> np.ndarray | None:
 _matches: dict[tuple, dict[str, Any]] = {}
 
 
+def _digest(test: Test) -> str:
+    """What a lab test's match depends on besides the run: its rows, frame and flags."""
+    import hashlib
+
+    h = hashlib.sha1(repr((test.lab.frame, test.lab.shear_magnitude, test.lab.force_tool,
+                           test.lab.flat, sorted(test.columns))).encode())
+    for name in sorted(test.columns):
+        h.update(np.ascontiguousarray(test.columns[name], float).tobytes())
+    if test.lab.anchor is not None:
+        h.update(np.ascontiguousarray(test.lab.anchor, float).tobytes())
+    return h.hexdigest()
+
+
 def match(test: Test, grid: FormedGrid, model: Model | None = None) -> dict[str, Any]:
     """A lab measurement against one formed sheet: the model's values and how they matched.
 
     Returns ``values`` (the model's values, as :func:`measured`), ``unmatched`` (mask of the
     rows), ``registration`` (or None) and, for a scan, ``coverage``.
     """
-    key = (test.id, test.file, id(grid), id(model))
+    key = (test.id, _digest(test), id(grid))
     hit = _matches.get(key)
     if hit is not None and hit["_grid"] is grid:
         return hit
@@ -603,7 +622,7 @@ def plot(comparisons: Mapping[str, Comparison], test: Test, path: Path,
 
 def _matched(test: Test, comparison: Comparison) -> dict[str, Any] | None:
     """The match (:func:`match`) whose model values a comparison holds, if still cached."""
-    for (test_id, _, _, _), hit in reversed(list(_matches.items())):
+    for (test_id, _, _), hit in reversed(list(_matches.items())):
         if test_id == test.id and np.array_equal(hit["values"], comparison.simulated):
             return hit
     return None
