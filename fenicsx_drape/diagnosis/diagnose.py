@@ -682,6 +682,9 @@ def summary(report: dict[str, Any]) -> str:
             if "stopped_at_travel_mm" in m:
                 lines.append(f"note: {label} could not form {test} to full travel (stopped at "
                              f"{m['stopped_at_travel_mm']:.1f} mm); compared as far as it got")
+    for o in report.get("outliers", []):
+        lines.append(f"outlier left out: {o['file']}:{o['line']} ({o['id']}), residual "
+                     f"{o['residual']:.3g} × noise")
     lines.append(f"missing_effect: {report['missing_effect']}")
     lines.append(report["conclusion"])
     return "\n".join(lines)

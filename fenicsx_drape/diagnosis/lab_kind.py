@@ -421,13 +421,26 @@ def simulate(test: Test, model: Model) -> np.ndarray:
 # Regions, abscissa, measures
 
 
+_regions: dict[tuple, list[Region]] = {}
+
+
 def regions(test: Test) -> list[Region]:
     """Named regions of a lab measurement's rows (a mask over its values).
 
     Shear points: each measuring line in thirds of its ``s_mm`` (positions along it), and
     the regions of the part at the formed points; scan: the regions of the part; outline:
-    the edge along the tow axes and at the bias corners; force: thirds of the travel.
+    the edge along the tow axes and at the bias corners; force: thirds of the travel. They
+    depend on the measurement alone: kept by its content.
     """
+    key = (test.id, _digest(test))
+    if key not in _regions:
+        if len(_regions) > 64:
+            _regions.pop(next(iter(_regions)))
+        _regions[key] = _regions_of(test)
+    return _regions[key]
+
+
+def _regions_of(test: Test) -> list[Region]:
     m, c = measurement_of(test), test.columns
     n = test.n_rows
     per = 2 if _draw_in(test) else 1
