@@ -144,3 +144,12 @@ def test_the_plain_checks():
     P = np.array([[0.0, 0.0, 0.0], [100.0, 0.0, 0.0], [0.0, 0.0, 1e300]])
     assert list(beyond_tools_reach(P, (0.0, 0.0, 0.0), 150.0)) == [2]
     assert list(beyond_tools_reach(P[:, :2], (0.0, 0.0, 0.0), 50.0)) == [1]
+
+
+def test_a_grid_alone_takes_the_position_noise_key_and_the_frame(tmp_path):
+    grid = "i,j,x0_mm,y0_mm,x_mm,y_mm,z_mm\n0,0,0,0,0,0,40\n1,0,10,0,10,0,39\n"
+    folder = write(tmp_path / "b", 'file = "grid.csv"\nposition_sd_mm = 0.4\n',
+                   {"grid.csv": grid}, "[test.frame]\ntranslation_mm = [0.0, 0.0, -1.0]\n")
+    (test,) = load_bundle(folder).tests
+    assert test.id == "dd" and list(test.columns["position_sd_mm"]) == [0.4, 0.4]
+    assert list(test.columns["z_mm"]) == [39.0, 38.0]

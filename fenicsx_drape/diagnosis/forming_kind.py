@@ -741,9 +741,9 @@ def confirm(bundle: Bundle, report, cell_mm: float = FULL_CELL_MM,
     with resolution(cell_mm):
         for label in labels:
             model = fit_forming(bundle, report.models[label], progress=progress)
-            values = {t.id: simulate(t, model) for t in tests}
+            values = {t.id: FORMING.simulate(t, model) for t in tests}
             out[label] = {"error": error_record(compare_tests(tests, values)),
-                          "metrics": {t.id: metrics(t, values[t.id], model) for t in tests},
+                          "metrics": {t.id: FORMING.metrics(t, values[t.id], model) for t in tests},
                           "forming_parameters": {n: float(model.parameters[n])
                                                  for n in forming_parameters(model)}}
     return out

@@ -393,7 +393,7 @@ def load_bundle(path: str | Path) -> Bundle:
                           notes)
         if test is None:
             continue
-        if test.kind == "forming" and any(m in raw for m in lab.MEASUREMENTS):
+        if test.kind == "forming" and any(k in raw for k in lab.LAB_KEYS):
             parts = lab.split_test(test, raw, folder, fname, where, index, problems.add)
             tests.extend(parts)
             seen.update({p.id: where("test", index, "id") for p in parts})

@@ -403,8 +403,6 @@ def split_test(test, raw: Mapping[str, Any], folder: Path, fname: str, where, in
     label = f"test {test.id!r}"
     names = [m for m in MEASUREMENTS if m in raw]
     grid = bool(test.file)
-    if not names:
-        return [test]
     keys: dict[str, Any] = {}
     for key in ("shear_sd_deg", "position_sd_mm", "force_sd_N"):
         if key in raw:
@@ -434,6 +432,11 @@ def split_test(test, raw: Mapping[str, Any], folder: Path, fname: str, where, in
         columns = dict(test.columns)
         if "position_sd_mm" in keys and "position_sd_mm" not in columns:
             columns["position_sd_mm"] = np.full(test.n_rows, keys["position_sd_mm"])
+        if not frame.identity:  # the grid's formed positions into the case's frame
+            x = frame.apply(np.column_stack([columns[c] for c in ("x_mm", "y_mm", "z_mm")]))
+            columns.update({c: x[:, k] for k, c in enumerate(("x_mm", "y_mm", "z_mm"))})
+        if not names:  # a grid alone keeps its id (version 2)
+            return [dataclasses.replace(test, columns=columns)]
         out.append(dataclasses.replace(
             test, id=f"{test.id}/file", columns=columns,
             lab=LabData("file", test.id, folder / test.file, row_lines(folder / test.file),
