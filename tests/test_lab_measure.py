@@ -75,3 +75,20 @@ def test_coverage_of_a_scan_of_a_third_of_the_sheet():
     third = P[P[:, 0] < -50.0 + 100.0 / 3.0]
     cover = measure.coverage(mesh, np.column_stack([third, np.zeros(len(third))]))
     assert cover == pytest.approx(0.4, abs=0.07)
+
+
+def test_the_tool_forces_are_written_as_a_table_a_picture_and_peaks(tmp_path):
+    from types import SimpleNamespace
+
+    from fenicsx_drape.forming.outputs import write_tool_forces
+
+    rows = [{"time_s": t, "travel_mm": 2.0 * t, "punch": 3.0 * t, "die": -4.0 * t}
+            for t in (1.0, 2.0, 3.0)]
+    run = SimpleNamespace(tool_forces=rows, case=SimpleNamespace(name="part"))
+    peaks = write_tool_forces(run, tmp_path)
+    assert peaks == {"max_tool_force_N": {"punch": 9.0, "die": -12.0},
+                     "tool_forces_file": "tool_forces.csv"}
+    table = np.loadtxt(tmp_path / "tool_forces.csv", delimiter=",", skiprows=1)
+    assert (tmp_path / "tool_forces.csv").read_text().startswith("time_s,travel_mm,punch,die")
+    assert np.allclose(table[:, 3], [-4.0, -8.0, -12.0])
+    assert (tmp_path / "tool_forces.png").stat().st_size > 1000
