@@ -111,6 +111,13 @@ def test_a_scan_in_another_frame_is_registered_with_its_uncertainty(tmp_path, pa
                        atol=4 * max(reg["sd_rotation_deg"]) + 0.05)
     assert np.allclose(reg["translation_mm"], t, atol=0.5)
     assert max(reg["sd_rotation_deg"]) < 0.1 and max(reg["sd_translation_mm"]) < 0.1
+    # A ball of points is another part: no registration brings it onto this sheet.
+    from fenicsx_drape.diagnosis.lab_kind import register, sheet_mesh
+
+    rng = np.random.default_rng(0)
+    ball = rng.normal(size=(500, 3))
+    ball = 30.0 * ball / np.linalg.norm(ball, axis=1, keepdims=True) + [0.0, 0.0, 120.0]
+    assert register(sheet_mesh(grid), ball, 0.15)["far"]
 
 
 def test_a_scan_of_a_third_of_the_part(tmp_path, part):
