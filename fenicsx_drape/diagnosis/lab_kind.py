@@ -146,7 +146,7 @@ def model_free_noise(test: Test) -> tuple[float, str]:
             if "s_mm" in c and any(names):
                 estimates, weights = [], []
                 for name in sorted(set(names)):
-                    rows = np.array([n == name for n in names])
+                    rows = np.asarray(names) == name
                     if rows.sum() >= 5:
                         estimates.append(_along(c["s_mm"][rows], c["shear_deg"][rows]))
                         weights.append(rows.sum())
@@ -455,7 +455,7 @@ def _regions_of(test: Test) -> list[Region]:
         names = test.lab.line_names if any(test.lab.line_names) else ("",) * n
         s = c["s_mm"]
         for name in sorted(set(names)):
-            on = np.array([k == name for k in names])
+            on = np.asarray(names) == name
             lo, hi = float(s[on].min()), float(s[on].max())
             cuts = np.linspace(lo, hi, 4)
             for a, b, where in zip(cuts[:-1], cuts[1:], ("start", "middle", "end")):
@@ -573,7 +573,7 @@ def plot(comparisons: Mapping[str, Comparison], test: Test, path: Path,
         s = (test.columns["s_mm"] if "s_mm" in test.columns
              else np.arange(test.n_rows, dtype=float))
         for ax, name in zip(axes[:, 0], lines):
-            on = np.array([k == name for k in names])
+            on = np.asarray(names) == name
             order = np.flatnonzero(on)[np.argsort(s[on])]
             ax.errorbar(s[order], first.measured[order], yerr=first.noise, fmt=".", ms=4,
                         color="0.3", label="measured")
