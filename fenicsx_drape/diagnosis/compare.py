@@ -149,33 +149,58 @@ def _row_lines(test: Test, folder: Path | None) -> np.ndarray:
     return np.asarray(lines) if len(lines) == test.n_rows else np.zeros(test.n_rows, int)
 
 
+OUTLIER_NEIGHBOURS = 6  # rows an outlier is told apart from (nearest in the row's coordinates)
+
+
+def _row_coordinates(test: Test) -> np.ndarray:
+    """Where each row of a test was measured: its position, flat position, travel or time."""
+    c = test.columns
+    for names in (("x_mm", "y_mm", "z_mm"), ("x_mm", "y_mm"), ("x0_mm", "y0_mm"),
+                  ("travel_mm",), ("time_s",)):
+        if all(n in c for n in names):
+            return np.column_stack([c[n] for n in names])
+    return np.arange(test.n_rows, dtype=float)[:, None]
+
+
 def find_outliers(comparisons: Sequence[Comparison], tests: Sequence[Test],
                   folder: Path | None = None) -> list[dict[str, Any]]:
-    """The rows whose residual lies beyond :data:`OUTLIER_SD` robust standard deviations.
+    """The rows whose residual stands out of their neighbours' (spec version 3, outliers).
 
-    Per test, the residuals in noise units r; the robust sd is 1.4826 × their median
-    absolute deviation (at least 1: a model at the noise floor); a row (its largest value:
-    x, y, z of a grid node) beyond :data:`OUTLIER_SD` of them from the median, and beyond
-    :data:`OUTLIER_SD` noise units, is an outlier. Each: ``test`` (the forming test's id),
-    ``measurement`` ("file" for a grid or a coupon's table), ``id`` (the compared test),
-    ``file``, ``line``, ``row`` and ``residual`` (noise units).
+    Per test, the residuals in noise units r, and each row's departure from the median
+    residual of its :data:`OUTLIER_NEIGHBOURS` nearest rows (in position, flat position,
+    travel or time: :func:`_row_coordinates`), per value (x, y, z of a grid node). A row whose
+    departure lies beyond :data:`OUTLIER_SD` robust standard deviations of the departures
+    (1.4826 × their median absolute deviation, at least 1), with a residual beyond
+    :data:`OUTLIER_SD` noise units, is an outlier unless its nearest row shares its residual
+    (the same way, at least half of it): a single wild row, not a region the model misses.
+    Each: ``test`` (the forming test's id), ``measurement`` ("file" for a grid or a coupon's
+    table), ``id`` (the compared test), ``file``, ``line``, ``row`` and ``residual`` (noise
+    units).
     """
+    from scipy.spatial import cKDTree
+
     from fenicsx_drape.measurements.lab import measurement_of
 
     by_id = {t.id: t for t in tests}
     out = []
     for c in comparisons:
         test = by_id.get(c.id)
-        if test is None or c.residual.size < 5:
+        if test is None or test.n_rows <= OUTLIER_NEIGHBOURS or c.residual.size % test.n_rows:
             continue
-        r = c.residual / c.noise
-        centre = float(np.median(r))
-        sd = max(1.4826 * float(np.median(np.abs(r - centre))), 1.0)
-        per = r.size // test.n_rows if test.n_rows else 1
-        row_r = r.reshape(test.n_rows, per) if per * test.n_rows == r.size else r[:, None]
-        worst = np.abs(row_r - centre).max(axis=1)
-        signed = row_r[np.arange(len(row_r)), np.abs(row_r - centre).argmax(axis=1)]
-        rows = np.flatnonzero((worst > OUTLIER_SD * sd) & (np.abs(signed) > OUTLIER_SD))
+        row_r = (c.residual / c.noise).reshape(test.n_rows, -1)
+        X = _row_coordinates(test)
+        _, near = cKDTree(X).query(X, k=OUTLIER_NEIGHBOURS + 1)
+        local = np.median(row_r[near[:, 1:]], axis=1)  # (rows, values): the neighbours'
+        d = row_r - local
+        sd = max(1.4826 * float(np.median(np.abs(d - np.median(d)))), 1.0)
+        worst = np.abs(d).max(axis=1)
+        column = np.abs(d).argmax(axis=1)
+        signed = row_r[np.arange(len(row_r)), column]
+        wild = (worst > OUTLIER_SD * sd) & (np.abs(signed) > OUTLIER_SD)
+        # A row whose nearest row shares its residual (same way, at least half) is part of a
+        # region the model misses.
+        shared = row_r[near[:, 1], column] / np.where(signed == 0, 1.0, signed) >= 0.5
+        rows = np.flatnonzero(wild & ~shared)
         if not rows.size:
             continue
         lines = _row_lines(test, folder)
