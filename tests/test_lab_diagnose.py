@@ -1,8 +1,9 @@
-"""Diagnosis from lab measurements alone (spec version 3): a small square part, no grid.
+"""Diagnosis from lab measurements alone (spec version 3): a small part, no grid.
 
-A 200 mm square blank (quarter model, 20 mm cells) drawn over a small builtin hemisphere is
-"measured" as a lab would (shear lines, a scan with a hole, an outline, the punch's force)
-from the paper's model. A model lacking ``tow_buckling`` is diagnosed from that data with
+An octagonal blank (half model, 20 mm cells; the generic case of
+``test_forming_case_diagnosis``) drawn over a small builtin hemisphere is "measured" as a
+lab would (shear lines, a scan with a hole, an outline, the punch's force) from the paper's
+model. A model lacking ``tow_buckling`` is diagnosed from that data with
 one wild row in it: the row is listed and the effect still named. The paper's model itself
 stays null (no effect named).
 """
@@ -16,17 +17,18 @@ from fenicsx_drape.measurements.bundle import load_bundle
 
 pytestmark = [pytest.mark.slow, pytest.mark.skip_in_parallel]
 TOOLS = ("punch_radius_mm = 40.0, fillet_radius_mm = 15.0, shoulder_radius_mm = 58.0, "
-         "holder_opening_mm = 120.0, travel_mm = 45.0")
-SQUARE = f"""[case]
-name = "square"
+         "holder_opening_mm = 120.0, travel_mm = 55.0")
+OCTAGON = f"""[case]
+name = "octagon"
 duration_s = 20.0
 step_mm = 2.0
 
 [blank]
-outline = "rectangle"
-size_mm = [200.0, 200.0]
+outline = "polygon"
+points_mm = [[-40.0, -95.0], [40.0, -95.0], [95.0, -40.0], [95.0, 40.0], [40.0, 95.0],
+             [-40.0, 95.0], [-95.0, 40.0], [-95.0, -40.0]]
 cell_mm = 20.0
-symmetry = ["x", "y"]
+symmetry = ["x"]
 
 [holder]
 tool = "holder"
@@ -54,7 +56,7 @@ parameters = {{ {TOOLS} }}
 
 @pytest.fixture(scope="module")
 def lab_bundle(tmp_path_factory):
-    """The square part's lab bundle (one wild shear row), formed by the paper's model."""
+    """The octagon's lab bundle (one wild shear row), formed by the paper's model."""
     pytest.importorskip("dolfinx")
     from fenicsx_drape.diagnosis import forming_runs as runs
     from fenicsx_drape.forming.case import load_case
@@ -62,7 +64,7 @@ def lab_bundle(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("lab")
     (folder / "part").mkdir()
-    (folder / "part" / "case.toml").write_text(SQUARE)
+    (folder / "part" / "case.toml").write_text(OCTAGON)
     case = load_case(folder / "part" / "case.toml")
     truth = default_model()
     (grid,) = runs.form_many([(case, truth)])
@@ -84,9 +86,11 @@ def test_a_hidden_effect_is_named_from_lab_data_with_a_wild_row_listed(lab_bundl
 
     report = diagnose(lab_bundle, default_model().without_effects("tow_buckling"),
                       candidates=["tow_buckling"])
-    (wild,) = report["outliers"]
-    assert (wild["test"], wild["measurement"], wild["file"], wild["line"]) == \
-        ("part", "shear_points", "shear.csv", 9)
+    # The wild row is listed (against a baseline this far off, a few scan points on its
+    # folds may stand out of their neighbours too: they are listed, not hidden).
+    (wild,) = [o for o in report["outliers"] if o["measurement"] == "shear_points"]
+    assert (wild["test"], wild["file"], wild["line"]) == ("part", "shear.csv", 9)
+    assert wild["residual"] < -5.0
     assert report["missing_effect"] == "tow_buckling"
     assert set(report["baseline"]["error"]["per_test"]) == {
         "part/shear_points", "part/surface", "part/outline", "part/punch_force"}

@@ -171,7 +171,8 @@ def find_outliers(comparisons: Sequence[Comparison], tests: Sequence[Test],
     travel or time: :func:`_row_coordinates`), per value (x, y, z of a grid node). A row whose
     departure lies beyond :data:`OUTLIER_SD` robust standard deviations of the departures
     (1.4826 × their median absolute deviation, at least 1), with a residual beyond
-    :data:`OUTLIER_SD` noise units, is an outlier unless its nearest row shares its residual
+    :data:`OUTLIER_SD` noise units and :data:`OUTLIER_SD` robust standard deviations of the
+    test's residuals from their median, is an outlier unless its nearest row shares its residual
     (the same way, at least half of it): a single wild row, not a region the model misses.
     Each: ``test`` (the forming test's id), ``measurement`` ("file" for a grid or a coupon's
     table), ``id`` (the compared test), ``file``, ``line``, ``row`` and ``residual`` (noise
@@ -196,7 +197,11 @@ def find_outliers(comparisons: Sequence[Comparison], tests: Sequence[Test],
         worst = np.abs(d).max(axis=1)
         column = np.abs(d).argmax(axis=1)
         signed = row_r[np.arange(len(row_r)), column]
-        wild = (worst > OUTLIER_SD * sd) & (np.abs(signed) > OUTLIER_SD)
+        # ... and beyond OUTLIER_SD robust sd of the test's residuals (about their median).
+        centre = np.median(row_r)
+        spread = max(1.4826 * float(np.median(np.abs(row_r - centre))), 1.0)
+        wild = ((worst > OUTLIER_SD * sd) & (np.abs(signed) > OUTLIER_SD)
+                & (np.abs(signed - centre) > OUTLIER_SD * spread))
         # A row whose nearest row shares its residual (same way, at least half) is part of a
         # region the model misses.
         shared = row_r[near[:, 1], column] / np.where(signed == 0, 1.0, signed) >= 0.5

@@ -20,7 +20,8 @@ measurements), on the whole formed blank triangulated (:mod:`fenicsx_drape.formi
   interleaved);
 - **punch_force**: the model's force on the named tool along its motion
   (:func:`~fenicsx_drape.diagnosis.forming_runs.tool_forces`), linear in the travel between
-  the run's steps, at the measured travels. Error in N.
+  the run's steps, at the measured travels (a run that stopped short holds its last force).
+  Error in N.
 
 A point farther than :data:`UNMATCHED_CELLS` cells from the formed sheet (or edge, or off
 the blank) is **unmatched**: its residual is 0 and it is listed (file and line) in the
@@ -385,14 +386,16 @@ def match(test: Test, grid: FormedGrid, model: Model | None = None) -> dict[str,
             raise ValueError("a force curve is matched with the model's run")
         curves = tool_forces(*_job(test, model))
         tool = test.lab.force_tool
+        if not curves:  # a run that stopped before its first step: the flat sheet, no force
+            curves = {"travel_mm": np.zeros(1), tool: np.zeros(1)}
         if tool not in curves:
             known = ", ".join(k for k in curves if k not in ("time_s", "travel_mm"))
             raise DrapeInputError(f"test {test.id!r}: the model records no force of tool "
                                   f"{tool!r} (its tools: {known})")
+        # A run that stopped short is compared as far as it got (its last force held), as
+        # the grid compares the sheet where it stopped.
         values = np.interp(c["travel_mm"], curves["travel_mm"], curves[tool])
-        beyond = c["travel_mm"] > curves["travel_mm"][-1] + 1e-6
-        unmatched = beyond  # the run stopped short of these travels
-        values = np.where(beyond, c["force_N"], values)
+        unmatched = np.zeros(len(values), bool)
         out["model_curve"] = {"travel_mm": curves["travel_mm"], "force_N": curves[tool]}
     out["values"] = np.asarray(values, float)
     out["unmatched"] = np.asarray(unmatched, bool)
