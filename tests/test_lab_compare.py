@@ -138,6 +138,25 @@ def test_an_outline_only_sees_the_draw_in(tmp_path, part):
     assert at_floor < 1.5 < gripped.normalised
     # More holder friction draws less in: the measured edge lies inside the model's.
     assert np.mean(gripped.residual) < 0.0
+    # With the measured draw-in (here the model's own at each edge point, plus 0.3 mm
+    # noise), each row gives two values: its distance to the edge and its draw-in.
+    from fenicsx_drape.forming import measure
+
+    path = bundle.path / "edge.csv"
+    table = np.genfromtxt(path, delimiter=",", names=True)
+    edge = measure.closest_on_edge(measure.SheetMesh.of(part[2]),
+                                   np.column_stack([table["x_mm"], table["y_mm"]]))
+    rng = np.random.default_rng(1)
+    draw_in = edge["draw_in"] + rng.normal(0.0, 0.3, len(table))
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join([lines[0] + ",draw_in_mm"] + [
+        f"{line},{d:.4f}" for line, d in zip(lines[1:], draw_in)]) + "\n")
+    (test,) = load_bundle(bundle.path).tests
+    result = evaluate(load_bundle(bundle.path), part[1]).tests[0]
+    assert result.residual.size == 2 * test.n_rows and result.normalised < 1.5
+    assert np.allclose(result.measured[1::2], test.columns["draw_in_mm"])
+    gripped = evaluate(load_bundle(bundle.path), part[1].with_parameters(mu=1.5)).tests[0]
+    assert np.mean(gripped.residual[1::2]) > 0.0  # measured draw-in beyond the gripped model's
 
 
 def test_shear_magnitudes_only(tmp_path, part):
