@@ -55,6 +55,9 @@ def summary(result) -> str:
         lines.append(f"{c.id:<16} {c.rmse:>8.3g} {c.unit:<1} {c.mean_abs:>8.3g} {c.unit:<1} "
                      f"{c.percent:>6.1f} {c.noise:>8.3g} {c.unit:<1} {c.normalised:>10.2f}")
     for test_id, m in (result.metrics or {}).items():
+        if "mean_distance_mm" not in m:  # a lab measurement (spec version 3)
+            lines.append(lab_line(test_id, m))
+            continue
         line = (f"{test_id}: mean distance {m['mean_distance_mm']:.2f} mm "
                 f"({m['percent_of_displacement']:.1f} % of the mean node displacement)")
         if "shear_rmse_deg" in m:
@@ -67,5 +70,29 @@ def summary(result) -> str:
     for e in result.where():
         lines.append(f"  {100 * e['share_of_error']:5.1f} %  {e['test']}: {e['says']} "
                      f"({e['variable']} {e['range'][0]:.3g} to {e['range'][1]:.3g})")
+    for o in result.outliers:
+        lines.append(f"outlier: {o['file']}:{o['line']} ({o['id']}), residual "
+                     f"{o['residual']:.3g} × noise")
+    if result.outliers:
+        without = result.to_dict()["error_without_outliers"]["normalised"]
+        lines.append(f"normalised error without the outliers {without:.3f}")
     lines += [f"note: {s}" for s in result.skipped]
     return "\n".join(lines)
+
+
+def lab_line(test_id: str, m: dict) -> str:
+    """A lab measurement's own measures as text: unmatched rows, coverage, registration."""
+    parts = [f"{m.get('unmatched', 0)} unmatched row(s)"]
+    if m.get("unmatched_lines"):
+        parts[0] += f" (lines {', '.join(map(str, m['unmatched_lines'][:5]))})"
+    if "coverage" in m:
+        parts.append(f"covers {100 * m['coverage']:.0f} % of the formed sheet")
+    if (reg := m.get("registration")) is not None:
+        parts.append("registered: rotation "
+                     + ", ".join(f"{a:.2f}±{s:.2f}" for a, s in zip(reg["rotation_deg"],
+                                                                 reg["sd_rotation_deg"]))
+                     + " deg, translation "
+                     + ", ".join(f"{a:.2f}±{s:.2f}" for a, s in zip(reg["translation_mm"],
+                                                                 reg["sd_translation_mm"]))
+                     + " mm" + (" (FAR from any registration)" if reg["far"] else ""))
+    return f"{test_id}: " + "; ".join(parts)

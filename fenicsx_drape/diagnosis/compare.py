@@ -34,13 +34,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.kinds import KINDS, Region
+from fenicsx_drape.diagnosis.kinds import KINDS, Region, unit_of
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
+# A row whose residual lies beyond this many robust standard deviations (and noise units)
+# after the fit is an outlier (spec version 3, "bad and odd rows").
+OUTLIER_SD = 5.0
 # Regions listed in ``where``: those carrying at least this share of the error, at most this
 # many (the complete list is in ``CompareResult.regions``).
 WHERE_MIN_SHARE = 0.05
@@ -84,7 +87,7 @@ class Comparison:
     def percent(self) -> float:
         """Mean absolute error in % of the mean absolute measured value (the paper's 7-9 %)."""
         scale = float(np.mean(np.abs(self.measured)))
-        return 100.0 * self.mean_abs / scale if scale > 0 else math.inf
+        return 100.0 * self.mean_abs / scale if scale > 0 else math.nan
 
     @property
     def normalised(self) -> float:
@@ -130,8 +133,108 @@ def compare_tests(tests: Sequence[Test], simulated: Mapping[str, np.ndarray],
                              f"{measured.shape} measured")
         level, source = noise[test.id] if noise else kind.noise(test)
         test_regions = regions[test.id] if regions is not None else kind.regions(test)
-        out.append(Comparison(test.id, test.kind, kind.unit, measured, values, level,
+        out.append(Comparison(test.id, test.kind, unit_of(kind, test), measured, values, level,
                                   source, tuple(test_regions), conditions_of(test)))
+    return out
+
+
+def _row_lines(test: Test, folder: Path | None) -> np.ndarray:
+    """The file line of each row of a test's table (0 where unknown)."""
+    from fenicsx_drape.measurements.lab import row_lines
+
+    lab = getattr(test, "lab", None)
+    if lab is not None and lab.lines.size == test.n_rows:
+        return np.asarray(lab.lines)
+    lines = row_lines(Path(folder) / test.file) if folder is not None and test.file else []
+    return np.asarray(lines) if len(lines) == test.n_rows else np.zeros(test.n_rows, int)
+
+
+OUTLIER_NEIGHBOURS = 6  # rows an outlier is told apart from (nearest in the row's coordinates)
+
+
+def _row_coordinates(test: Test) -> np.ndarray:
+    """Where each row of a test was measured: its position, flat position, travel or time."""
+    c = test.columns
+    for names in (("x_mm", "y_mm", "z_mm"), ("x_mm", "y_mm"), ("x0_mm", "y0_mm"),
+                  ("travel_mm",), ("time_s",)):
+        if all(n in c for n in names):
+            return np.column_stack([c[n] for n in names])
+    return np.arange(test.n_rows, dtype=float)[:, None]
+
+
+def find_outliers(comparisons: Sequence[Comparison], tests: Sequence[Test],
+                  folder: Path | None = None) -> list[dict[str, Any]]:
+    """The rows whose residual stands out of their neighbours' (spec version 3, outliers).
+
+    Per test, the residuals in noise units r, and each row's departure from the median
+    residual of its :data:`OUTLIER_NEIGHBOURS` nearest rows (in position, flat position,
+    travel or time: :func:`_row_coordinates`), per value (x, y, z of a grid node). A row whose
+    departure lies beyond :data:`OUTLIER_SD` robust standard deviations of the departures
+    (1.4826 × their median absolute deviation, at least 1), with a residual beyond
+    :data:`OUTLIER_SD` noise units and :data:`OUTLIER_SD` robust standard deviations of the
+    test's residuals from their median, is an outlier unless its nearest row shares its residual
+    (the same way, at least half of it): a single wild row, not a region the model misses.
+    Each: ``test`` (the forming test's id), ``measurement`` ("file" for a grid or a coupon's
+    table), ``id`` (the compared test), ``file``, ``line``, ``row`` and ``residual`` (noise
+    units).
+    """
+    from scipy.spatial import cKDTree
+
+    from fenicsx_drape.measurements.lab import measurement_of
+
+    by_id = {t.id: t for t in tests}
+    out = []
+    for c in comparisons:
+        test = by_id.get(c.id)
+        if test is None or test.n_rows <= OUTLIER_NEIGHBOURS or c.residual.size % test.n_rows:
+            continue
+        row_r = (c.residual / c.noise).reshape(test.n_rows, -1)
+        X = _row_coordinates(test)
+        _, near = cKDTree(X).query(X, k=OUTLIER_NEIGHBOURS + 1)
+        local = np.median(row_r[near[:, 1:]], axis=1)  # (rows, values): the neighbours'
+        d = row_r - local
+        sd = max(1.4826 * float(np.median(np.abs(d - np.median(d)))), 1.0)
+        worst = np.abs(d).max(axis=1)
+        column = np.abs(d).argmax(axis=1)
+        signed = row_r[np.arange(len(row_r)), column]
+        # ... and beyond OUTLIER_SD robust sd of the test's residuals (about their median).
+        centre = np.median(row_r)
+        spread = max(1.4826 * float(np.median(np.abs(row_r - centre))), 1.0)
+        wild = ((worst > OUTLIER_SD * sd) & (np.abs(signed) > OUTLIER_SD)
+                & (np.abs(signed - centre) > OUTLIER_SD * spread))
+        # A row whose nearest row shares its residual (same way, at least half) is part of a
+        # region the model misses.
+        shared = row_r[near[:, 1], column] / np.where(signed == 0, 1.0, signed) >= 0.5
+        rows = np.flatnonzero(wild & ~shared)
+        if not rows.size:
+            continue
+        lines = _row_lines(test, folder)
+        lab = getattr(test, "lab", None)
+        for k in rows:
+            out.append({"test": lab.parent if lab is not None else c.id,
+                        "measurement": measurement_of(test) or "file", "id": c.id,
+                        "file": test.file, "line": int(lines[k]), "row": int(k),
+                        "residual": float(signed[k])})
+    return out
+
+
+def without_outliers(comparisons: Sequence[Comparison], outliers: Sequence[Mapping[str, Any]],
+                     tests: Sequence[Test]) -> list[Comparison]:
+    """The comparisons with the outliers' rows left out (regions with them)."""
+    by_id = {t.id: t for t in tests}
+    out = []
+    for c in comparisons:
+        rows = [o["row"] for o in outliers if o["id"] == c.id]
+        if not rows:
+            out.append(c)
+            continue
+        n = by_id[c.id].n_rows
+        keep = np.ones(n, bool)
+        keep[rows] = False
+        keep = np.repeat(keep, c.residual.size // n)
+        regions = tuple(dataclasses.replace(r, rows=r.rows[keep]) for r in c.regions)
+        out.append(dataclasses.replace(c, measured=c.measured[keep], simulated=c.simulated[keep],
+                                       regions=regions))
     return out
 
 
@@ -286,6 +389,8 @@ class CompareResult:
     tests: tuple[Comparison, ...]
     skipped: tuple[str, ...] = ()  # tests left out, with the reason
     metrics: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
+    outliers: tuple[Mapping[str, Any], ...] = ()  # rows beyond OUTLIER_SD (find_outliers)
+    compared: tuple[Test, ...] = ()  # the tests compared (to leave the outliers' rows out)
 
     @property
     def normalised(self) -> float:
@@ -309,7 +414,8 @@ class CompareResult:
             "error": error_record(self.tests),
             "noise_floor": noise_record(self.tests),
             "per_test": {c.id: {"kind": c.kind, "unit": c.unit, "rmse": c.rmse,
-                                "mean_abs": c.mean_abs, "percent": c.percent,
+                                "mean_abs": c.mean_abs,
+                                "percent": c.percent if math.isfinite(c.percent) else None,
                                 "noise": c.noise, "noise_source": c.noise_source,
                                 "normalised": c.normalised, "rows": int(c.measured.size),
                                 **self.metrics.get(c.id, {})}
@@ -318,6 +424,10 @@ class CompareResult:
             "regions": locate(self.tests),
             "trends": trends(self.tests),
             "skipped": list(self.skipped),
+            "outliers": list(self.outliers),
+            "error_without_outliers": error_record(
+                without_outliers(self.tests, self.outliers, self.compared)
+                if self.outliers else self.tests),
         }
 
 
@@ -363,7 +473,8 @@ def evaluate(bundle: Bundle, model: Model) -> CompareResult:
     tests, skipped = prepare(bundle)
     comparisons = compare_tests(tests, simulate(tests, model))
     return CompareResult(bundle.name, model, tuple(comparisons), tuple(skipped),
-                         kind_metrics(tests, comparisons, model))
+                         kind_metrics(tests, comparisons, model),
+                         tuple(find_outliers(comparisons, tests, bundle.path)), tuple(tests))
 
 
 def compare(bundle: Bundle, model: Model, *, fit: bool = True,

@@ -63,6 +63,7 @@ from fenicsx_drape.diagnosis.compare import (
     Comparison,
     compare_tests,
     error_record,
+    find_outliers,
     fit_bundle,
     locate,
     model_record,
@@ -73,7 +74,7 @@ from fenicsx_drape.diagnosis.compare import (
     trends,
     where,
 )
-from fenicsx_drape.diagnosis.kinds import KINDS
+from fenicsx_drape.diagnosis.kinds import KINDS, sd_column_of
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
@@ -108,6 +109,7 @@ class Report(dict):
 
     models: dict[str, Model]
     comparisons: dict[str, list[Comparison]]
+    tests: tuple[Test, ...]  # the tests compared (without the outliers' rows)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -179,6 +181,17 @@ def make_folds(bundle: Bundle) -> tuple[tuple[Fold, ...], str]:
         f"most {FOLD_ITERATIONS} iterations.")
 
 
+def _without_outliers(bundle: Bundle, outliers: Sequence[dict[str, Any]]) -> Bundle:
+    """The bundle with the outliers' rows left out of their tests."""
+    from fenicsx_drape.measurements.lab import without_rows
+
+    tests = []
+    for test in bundle.tests:
+        rows = [o["row"] for o in outliers if o["id"] == test.id]
+        tests.append(without_rows(test, rows) if rows else test)
+    return dataclasses.replace(bundle, tests=tuple(tests))
+
+
 def _ordinal(n: int) -> str:
     return {2: "second", 3: "third", 4: "fourth", 5: "fifth"}.get(n, f"{n}th")
 
@@ -189,7 +202,7 @@ def _without_rows(test: Test, rows: np.ndarray) -> Test:
     The other rows keep their ``force_sd_N``, or get the test's model-free noise estimate,
     so that they weigh in the fit exactly as they do without a ``force_sd_N`` column.
     """
-    column = KINDS[test.kind].sd_column
+    column = sd_column_of(KINDS[test.kind], test)
     sd = test.column(column)
     if sd is None:
         sd = np.full(test.n_rows, KINDS[test.kind].noise(test)[0])
@@ -342,6 +355,18 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     optimiser = optimiser_record(details.get("coupons"))
     say(f"  {optimiser['statement']}")
     base = data.compare(simulate(data.tests, baseline))
+    # Bad and odd rows (spec version 3): one row never decides a diagnosis. The rows beyond
+    # OUTLIER_SD robust sd after the fit are listed and left out; the baseline is refitted.
+    outliers = find_outliers(base, data.tests, bundle.path)
+    error_with = error_record(base)
+    if outliers:
+        say(f"  {len(outliers)} outlier row(s) ("
+            + ", ".join(f"{o['file']}:{o['line']}" for o in outliers[:5])
+            + "): left out, baseline refitted")
+        data = _prepare(_without_outliers(data.bundle, outliers))
+        baseline = _fit(data.bundle, model, max_iterations=BASELINE_ITERATIONS,
+                        from_features=True, details=details)
+        base = data.compare(simulate(data.tests, baseline))
     say(f"  normalised error {normalised_error(base):.3g}; held-out folds")
     base_ho_cmp = data.compare(_heldout(data, baseline, say))
     base_ho = normalised_error(base_ho_cmp)
@@ -409,6 +434,8 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         "baseline": {**model_record(baseline), "error": error_record(base),
                      "heldout_normalised": base_ho, "optimiser": optimiser},
         "noise_floor": noise_record(base) | _noise_notes(details.get("coupons")),
+        "outliers": outliers,
+        "error_with_outliers": error_with,
         "where": where(base),
         "trends": trends(base),
         "candidates": ranked,
@@ -432,6 +459,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         "seconds": time.perf_counter() - start,
     })
     report.models, report.comparisons = models, comparisons
+    report.tests = data.tests
     say(report["conclusion"])
     return report
 
@@ -700,6 +728,9 @@ def summary(report: dict[str, Any]) -> str:
             if "stopped_at_travel_mm" in m:
                 lines.append(f"note: {label} could not form {test} to full travel (stopped at "
                              f"{m['stopped_at_travel_mm']:.1f} mm); compared as far as it got")
+    for o in report.get("outliers", []):
+        lines.append(f"outlier left out: {o['file']}:{o['line']} ({o['id']}), residual "
+                     f"{o['residual']:.3g} × noise")
     lines.append(f"missing_effect: {report['missing_effect']}")
     lines.append(report["conclusion"])
     return "\n".join(lines)
@@ -727,7 +758,7 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     comparisons = getattr(report, "comparisons", None)
     if bundle is not None and comparisons:
         best = report["candidates"][0]["effect"] if report["candidates"] else None
-        tests = {t.id: t for t in bundle.tests}
+        tests = {t.id: t for t in getattr(report, "tests", None) or bundle.tests}
         regions = locate(comparisons["baseline"])
         for i, base in enumerate(comparisons["baseline"]):
             shown = {"baseline": base} | ({best: comparisons[best][i]} if best else {})

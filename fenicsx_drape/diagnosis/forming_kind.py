@@ -65,6 +65,7 @@ on another mesh to check a verdict.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -396,14 +397,24 @@ def case_region_of_nodes(test: Test) -> np.ndarray:
     part's depth and the *flat base* when lower; else free. Nodes of a whole grid are folded
     into the modelled part first (the tools need only be given there).
     """
+    return region_of_points(test, measured_positions(test), direction_of_nodes(test),
+                            noise(test)[0])
+
+
+def region_of_points(test: Test, x: np.ndarray, direction_deg: np.ndarray,
+                     noise_mm: float) -> np.ndarray:
+    """:func:`case_region_of_nodes` of any formed points (n, 3).
+
+    With their directions (deg, 0-45) from the nearest tow axis and the positions' noise (mm).
+    """
     case = forming_case_of(test)
     tools = _tools_of(case)
     t = case.duration_s
-    x = measured_positions(test).copy()
+    x = np.array(x, float)
     for plane in case.planes:
         axis = {"x": 0, "y": 1}[plane]
         x[:, axis] = np.abs(x[:, axis])
-    tol = CONTACT_MM + 3.0 * noise(test)[0]
+    tol = CONTACT_MM + 3.0 * noise_mm
     n = len(x)
     best = np.full(n, np.inf)
     normal = np.zeros((n, 3))
@@ -419,7 +430,7 @@ def case_region_of_nodes(test: Test) -> np.ndarray:
     wall = touching & (cos < math.cos(math.radians(WALL_DEG)))
     height = x @ e
     top = touching & ~wall & (height >= 0.5 * max(float(height.max()), 0.0))
-    bias = direction_of_nodes(test) >= 22.5
+    bias = np.asarray(direction_deg) >= 22.5
     which = np.select([wall & ~bias, wall & bias, top, touching], [1, 2, 0, 3], default=5)
     if case.holder is not None:
         holder = tools[case.holder.tool]
@@ -541,9 +552,10 @@ def _residuals(tests: Sequence[Test], model: Model, names: Sequence[str],
     vectorised = model.with_parameters(**{n: sets[:, i] for i, n in enumerate(names)})
     out = []
     for test in tests:
-        values = np.atleast_2d(simulate(test, vectorised))
-        w = np.repeat(1.0 / row_noise(test), 3) / math.sqrt(3 * test.n_rows)
-        r = (values - measured_positions(test).ravel()) * w
+        values = np.atleast_2d(FORMING.simulate(test, vectorised))
+        sd = _by_measurement(value_noise, "row_sd")(test)
+        w = 1.0 / sd / math.sqrt(sd.size)
+        r = (values - FORMING.measured(test)) * w
         out.append(np.where(np.isfinite(r), r, 0.0))
     return np.concatenate(out, axis=1)
 
@@ -734,9 +746,9 @@ def confirm(bundle: Bundle, report, cell_mm: float = FULL_CELL_MM,
     with resolution(cell_mm):
         for label in labels:
             model = fit_forming(bundle, report.models[label], progress=progress)
-            values = {t.id: simulate(t, model) for t in tests}
+            values = {t.id: FORMING.simulate(t, model) for t in tests}
             out[label] = {"error": error_record(compare_tests(tests, values)),
-                          "metrics": {t.id: metrics(t, values[t.id], model) for t in tests},
+                          "metrics": {t.id: FORMING.metrics(t, values[t.id], model) for t in tests},
                           "forming_parameters": {n: float(model.parameters[n])
                                                  for n in forming_parameters(model)}}
     return out
@@ -789,7 +801,81 @@ def plot_error_map(comparisons: Mapping[str, Comparison], test: Test, path: Path
     return save_figure(fig, path)
 
 
-FORMING = Kind(unit="mm", measured=lambda test: measured_positions(test).ravel(), noise=noise,
-               simulate=simulate, regions=part_regions, abscissa=_abscissa,
-               sd_column="position_sd_mm", fit=_fit, metrics=metrics, plot=plot_error_map)
+# The hooks of lab measurements (spec version 3): :mod:`~fenicsx_drape.diagnosis.lab_kind`
+# registers itself here when imported (as :mod:`fenicsx_drape.diagnosis` does).
+_lab_hooks: list[Any] = []
+
+
+def register_lab_hooks(module: Any) -> None:
+    """Hand the forming tests that hold a lab measurement to ``module``'s functions."""
+    _lab_hooks[:] = [module]
+
+
+def _lab(test: Test) -> Any:
+    """The lab hooks' module when ``test`` holds a lab measurement, else None."""
+    if getattr(test, "lab", None) is None or test.lab.measurement == "file":
+        return None
+    if not _lab_hooks:
+        raise DrapeInputError(f"test {test.id!r}: lab measurements need "
+                              "fenicsx_drape.diagnosis.lab_kind (import fenicsx_drape.diagnosis)")
+    return _lab_hooks[0]
+
+
+def _by_measurement(grid_hook: Callable, name: str) -> Callable:
+    """A hook of the forming kind: the grid's, or a lab measurement's.
+
+    A test holding a lab measurement (spec version 3) goes to the registered lab hooks'
+    function ``name`` (:func:`register_lab_hooks`).
+    """
+
+    def hook(test: Test, *args, **kwargs):
+        lab = _lab(test)
+        if lab is not None:
+            return getattr(lab, name)(test, *args, **kwargs)
+        return grid_hook(test, *args, **kwargs)
+
+    hook.__name__ = hook.__qualname__ = getattr(grid_hook, "__name__", name)
+    hook.__doc__ = grid_hook.__doc__
+    return hook
+
+
+def measured_values(test: Test) -> np.ndarray:
+    """The measured values of a forming test: x, y, z of every node (flattened)."""
+    return measured_positions(test).ravel()
+
+
+def value_noise(test: Test) -> np.ndarray:
+    """Per compared value, the noise (``inf``: not fitted).
+
+    The grid's x, y, z of a node share its ``position_sd_mm``.
+    """
+    return np.repeat(row_noise(test), 3)
+
+
+def _sd_column(test: Test) -> str:
+    from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
+
+    return SD_COLUMN.get(measurement_of(test) or "file", "position_sd_mm")
+
+
+FORMING = Kind(unit=_by_measurement(lambda test: "mm", "unit"),
+               measured=_by_measurement(measured_values, "measured"),
+               noise=_by_measurement(noise, "noise"),
+               simulate=_by_measurement(simulate, "simulate"),
+               regions=_by_measurement(part_regions, "regions"),
+               abscissa=_by_measurement(_abscissa, "abscissa"),
+               sd_column=_sd_column, fit=_fit,
+               metrics=_by_measurement(metrics, "metrics"),
+               plot=None)
+
+
+def _plot(comparisons, test: Test, path: Path, shares=()) -> Path:
+    """The forming kind's picture: the grid's error map, or a lab measurement's own."""
+    lab = _lab(test)
+    if lab is not None:
+        return lab.plot(comparisons, test, path, shares)
+    return plot_error_map(comparisons, test, path, shares)
+
+
+FORMING = dataclasses.replace(FORMING, plot=_plot)
 register_kind("forming", FORMING)

@@ -29,6 +29,8 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case import FormingCase, case_dict
 from fenicsx_drape.trust import set_trusted, trusted
@@ -44,6 +46,7 @@ WORKERS = max(1, min(2, os.cpu_count() or 1))  # processes running forming solve
 _settings: dict[str, float | None] = {"cell_mm": None}  # None: each case's own cell
 _cache: dict[tuple, FormedGrid] = {}
 _stopped: dict[tuple, float] = {}  # travel (mm) reached by the runs that stopped short
+_forces: dict[tuple, dict] = {}  # the tools' force curves of the cached runs (run.tool_forces)
 _CACHE_SIZE = 256
 _digests: dict[tuple, str] = {}  # file digests by (path, size, mtime)
 
@@ -108,12 +111,13 @@ def _key(case, model: Model) -> tuple:
             tuple(str(p) for p in model.plugins))
 
 
-def _form(case, model: Model, comm=None) -> tuple[FormedGrid, float | None]:
+def _form(case, model: Model, comm=None) -> tuple[FormedGrid, float | None, dict]:
     """One forming run (on this process alone by default): the formed sheet (modelled part).
 
     A model that cannot form the part to full travel (its solve fails at the smallest step)
     is compared as far as it got: the second value is then the travel reached (mm), which
-    :func:`stopped_at` gives back, else None.
+    :func:`stopped_at` gives back, else None. The third is the tools' force curves
+    (:func:`tool_forces`).
     """
     from mpi4py import MPI
 
@@ -125,7 +129,9 @@ def _form(case, model: Model, comm=None) -> tuple[FormedGrid, float | None]:
         run = run_hemisphere(case, model, comm=comm, allow_incomplete=True)
     else:
         run = run_case(case, model, comm=comm, allow_incomplete=True)
-    return run.grid, (run.travel_mm if run.stopped else None)
+    rows = run.tool_forces
+    curves = {k: np.array([r[k] for r in rows]) for k in (rows[0] if rows else {})}
+    return run.grid, (run.travel_mm if run.stopped else None), curves
 
 
 def _in_workers(jobs: list[tuple[Any, Model]]) -> list[tuple]:
@@ -227,15 +233,29 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
             results = [_form(c, m, comm) for c, m in todo.values()]
         else:
             results = _in_workers(list(todo.values()))
-        for k, (grid, stopped_mm) in zip(todo, results):
+        for k, (grid, stopped_mm, curves) in zip(todo, results):
             if len(_cache) >= _CACHE_SIZE:
                 oldest = next(iter(_cache))
                 del _cache[oldest]
                 _stopped.pop(oldest, None)
+                _forces.pop(oldest, None)
             _cache[k] = grid
+            _forces[k] = curves
             if stopped_mm is not None:
                 _stopped[k] = stopped_mm
     return [_cache[k] for k in keys]
+
+
+def tool_forces(case, model: Model) -> dict[str, np.ndarray]:
+    """The force curves of a cached run of ``(case, model)`` (run :func:`form_many` first).
+
+    ``time_s``, ``travel_mm`` and each tool's force along its motion (N, the whole part;
+    :func:`~fenicsx_drape.forming.run.record_tool_forces`), one value per converged step.
+    """
+    key = _key(case, model)
+    if key not in _forces:
+        form_many([(case, model)])
+    return _forces[key]
 
 
 def stopped_at(case, model: Model) -> float | None:

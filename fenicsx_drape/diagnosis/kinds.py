@@ -54,13 +54,16 @@ class FitHook(Protocol):
 class Kind:
     """How one test kind is compared: what is measured, its noise, how it is simulated."""
 
-    unit: str  # unit of the compared quantity ("N" for coupons, "mm" for forming)
+    # unit of the compared quantity ("N" for coupons, "mm" for forming), or per test
+    # (a callable of the test: a forming test's shear points are in degrees, its force in N)
+    unit: str | Callable[[Test], str]
     measured: Callable[[Test], np.ndarray]  # the measured values, one per row
     noise: Callable[[Test], tuple[float, str]]  # (noise in ``unit``, source)
     simulate: Callable[[Test, Model], np.ndarray]  # the model's values, one per row
     regions: Callable[[Test], list[Region]]  # physically meaningful regions of the rows
     abscissa: Callable[[Test], tuple[str, np.ndarray]]  # (name, values) to plot against
-    sd_column: str  # the per-row standard deviation column ("force_sd_N", "position_sd_mm")
+    # the per-row standard deviation column ("force_sd_N", "position_sd_mm"), or per test
+    sd_column: str | Callable[[Test], str]
     # Optional: fitting the parameters the kind's tests determine (kinds sharing one fit run
     # it once; the kinds' fits run in registration order, so forming fits after the coupons).
     fit: FitHook | None = None
@@ -71,6 +74,16 @@ class Kind:
 
 
 KINDS: dict[str, Kind] = {}
+
+
+def unit_of(kind: Kind, test: Test) -> str:
+    """The unit of a test's compared values."""
+    return kind.unit(test) if callable(kind.unit) else kind.unit
+
+
+def sd_column_of(kind: Kind, test: Test) -> str:
+    """The per-row standard deviation column of a test."""
+    return kind.sd_column(test) if callable(kind.sd_column) else kind.sd_column
 
 
 def register_kind(name: str, kind: Kind) -> None:

@@ -15,7 +15,10 @@
 - ``kinematic_shear.png``: the kinematic drape (pin-jointed net) beside the FE result;
 - ``shear.png``, ``wrinkling.png``: the formed sheet (mirrored to the whole part for a
   symmetric model) coloured by shear angle, and the wrinkled tows;
-- ``provenance.json``: version, command, model, solver options and the case.
+- ``provenance.json``: version, command, model, solver options and the case;
+- ``tool_forces.csv`` and ``tool_forces.png``: the force of every tool along its motion
+  against the travel, for the whole part (the press's force curve; ``summary.json`` gives
+  each tool's peak, ``max_tool_force_N``; :func:`write_tool_forces`).
 
 :func:`form_hemisphere` is the Python twin of ``drape form hemisphere``: it runs the case
 (:func:`~fenicsx_drape.forming.hemisphere.run_hemisphere`) and writes into one folder
@@ -170,6 +173,7 @@ def form_hemisphere(out_dir: str | os.PathLike, case: HemisphereCase | None = No
     kin = kinematic_drape(case.tools, grid_mm)
     result = summary(run, kin)
     if comm.rank == 0:
+        result.update(write_tool_forces(run, out, pictures=pictures))
         write_json(out / "summary.json", result)
         μ = float(np.max(model.parameters.get("mu", 0.0)))
         write_bundle(forming_bundle(run, μ, grid_mm), out / "bundle",
@@ -315,6 +319,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
     if comm.rank == 0:
         kinematic = _kinematic_beside(case, run, out if pictures else None)
         result.update(kinematic)
+        result.update(write_tool_forces(run, out, pictures=pictures))
         write_json(out / "summary.json", result)
         given = case.holder.mu if case.holder is not None else None
         μ = float(np.max(given if given is not None else model.parameters.get("mu", 0.0)))
@@ -337,6 +342,36 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
                          solver=_plain(vars(run.problem.options)))
     comm.Barrier()
     return run, result
+
+
+def write_tool_forces(run: FormingRun, out: str | os.PathLike, *,
+                      pictures: bool = True) -> dict:
+    """Write the run's tool forces (``tool_forces.csv``, ``tool_forces.png``).
+
+    One row per converged step: ``time_s``, ``travel_mm`` and each tool's force along its
+    motion (N, the whole part; :func:`~fenicsx_drape.forming.run.record_tool_forces`).
+
+    Returns:
+        For ``summary.json``: ``max_tool_force_N`` (each tool's largest force in magnitude,
+        signed) and ``tool_forces_file``.
+    """
+    from fenicsx_drape.forming.plots import plot_tool_forces
+    from fenicsx_drape.provenance import atomic_write_text
+
+    rows = run.tool_forces
+    if not rows:
+        return {}
+    names = list(rows[0])
+    text = ",".join(names) + "\n" + "".join(
+        ",".join(repr(float(r[n])) for n in names) + "\n" for r in rows)
+    atomic_write_text(Path(out) / "tool_forces.csv", text)
+    curves = {n: np.array([r[n] for r in rows]) for n in names}
+    if pictures:
+        plot_tool_forces(curves, Path(out) / "tool_forces.png",
+                         f"{run.case.name}: force of each tool along its motion")
+    peak = {n: float(v[np.argmax(np.abs(v))]) for n, v in curves.items()
+            if n not in ("time_s", "travel_mm")}
+    return {"max_tool_force_N": peak, "tool_forces_file": "tool_forces.csv"}
 
 
 def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None) -> dict:

@@ -129,3 +129,31 @@ def plot_paths(grids: Mapping[str, FormedGrid], path: str | os.PathLike) -> Path
         ax.grid(alpha=0.3)
         ax.legend()
     return save_figure(fig, path)
+
+
+def plot_tool_forces(curves: Mapping[str, np.ndarray], path: str | os.PathLike,
+                     title: str = "", measured: Mapping[str, np.ndarray] | None = None) -> Path:
+    """Each tool's force along its motion against the travel (N; the press's force curve).
+
+    Args:
+        curves: ``travel_mm`` and one array per tool (the run's ``tool_forces``).
+        path: The PNG to write.
+        title: The picture's title.
+        measured: A measured curve beside them: ``travel_mm``, ``force_N`` and ``label``.
+    """
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    travel = np.asarray(curves["travel_mm"])
+    for name, values in curves.items():
+        if name not in ("time_s", "travel_mm"):
+            ax.plot(travel, values, "-", label=f"model: {name}")
+    if measured is not None:
+        ax.plot(measured["travel_mm"], measured["force_N"], ".", ms=3, color="0.3",
+                label=str(measured.get("label", "measured")))
+    ax.axhline(0.0, color="0.7", lw=0.5)
+    ax.set_xlabel("travel (mm)")
+    ax.set_ylabel("force along the tool's motion (N)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=8)
+    return save_figure(fig, path)

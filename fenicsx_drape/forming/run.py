@@ -68,6 +68,9 @@ class FormingRun:
     holder: BlankHolder | None
     tools: dict[str, object] = dataclasses.field(default_factory=dict)  # built tools by name
     stopped: str | None = None  # why the run stopped short of full travel (allow_incomplete)
+    # Per converged step: time_s, travel_mm and the force (N) of every tool along its motion
+    # on the whole part (:func:`record_tool_forces`).
+    tool_forces: list[dict[str, float]] = dataclasses.field(default_factory=list)
 
     @property
     def travel_mm(self) -> float:
@@ -193,9 +196,11 @@ def run_case(case: FormingCase, model=None, options=None, *,
                      f"{travel:6.2f} mm  Newton {step.iterations:2d}  {state}")
 
     touched = False  # whether a node ever touched a punch, die or surface
+    forces_of_tools = record_tool_forces(case, problem, contact, holder)
 
     def after_step(problem) -> None:
         nonlocal touched
+        forces_of_tools(problem)
         if not touched:
             x = problem.positions()[: problem.num_owned]
             touched = any(bool(np.any(c.penetration(x, problem.t) > 0.0)) for c in contact)
@@ -229,7 +234,68 @@ def run_case(case: FormingCase, model=None, options=None, *,
         max_penetration_mm=comm.allreduce(depth, op=MPI.MAX),
         draw_in_mm=draw_in(formed) if case.blank.outline == "rectangle" else None,
         edge_displacement_mm=edge_displacement(formed), contact=contact, holder=holder,
-        tools=built, stopped=stopped)
+        tools=built, stopped=stopped, tool_forces=forces_of_tools.rows)
+
+
+def tool_direction(case: FormingCase, name: str) -> np.ndarray:
+    """The unit direction a tool moves (its motion from start to end), else the case's travel.
+
+    A fixed tool (die, holder) is measured along the travel of the case's fastest tool.
+    """
+    specs = {t.name: t for t in case.tools}
+    order = sorted(case.tools, key=lambda t: -case.speed_mm_per_s(t))
+    for spec in ([specs[name]] if name in specs else []) + order:
+        m = spec.motion
+        if m is not None:
+            d = m.translation(m.time_s[-1]) - m.translation(m.time_s[0])
+            if np.linalg.norm(d) > 0:
+                return d / np.linalg.norm(d)
+    return np.array([0.0, 0.0, 1.0])
+
+
+def record_tool_forces(case: FormingCase, problem, contact, holder):
+    """A step callback recording the force of every tool along its motion (whole part, N).
+
+    The force a tool exerts on the sheet is the sum of its nodal term's forces at the
+    converged state (the last evaluation of a step); its component along the tool's motion
+    (:func:`tool_direction`) is the press force that drives it (the punch's is positive).
+    A quarter or half model's sum is weighted by node (½ on a symmetry plane, ¼ on both)
+    and multiplied by the number of parts, so the figure is the whole part's. The callback's
+    ``rows`` hold one dict per converged step: ``time_s``, ``travel_mm`` and each tool's name.
+    """
+    from mpi4py import MPI
+
+    planes = case.planes
+    X = problem.X[: problem.num_owned]
+    weight = np.ones(len(X))
+    for p in planes:
+        weight *= np.where(np.abs(X[:, {"x": 0, "y": 1}[p]]) < 1e-9, 0.5, 1.0)
+    weight *= 2 ** len(planes)
+    terms = {c.tool.name: c for c in contact}
+    if holder is not None and case.holder is not None:
+        terms[case.holder.tool] = holder
+    last: dict[str, np.ndarray] = {}
+    for name, term in terms.items():
+        forces = term.forces
+
+        def recorded(x, t, dt, _forces=forces, _name=name):
+            f, K = _forces(x, t, dt)
+            last[_name] = f
+            return f, K
+
+        term.forces = recorded
+    directions = {name: tool_direction(case, name) for name in terms}
+
+    def callback(problem) -> None:
+        row = {"time_s": float(problem.t), "travel_mm": float(case.travel_mm(problem.t))}
+        for name, d in directions.items():
+            f = last.get(name)
+            local = 0.0 if f is None else float((weight * (f[: len(X)] @ d)).sum())
+            row[name] = problem.comm.allreduce(local, op=MPI.SUM)
+        callback.rows.append(row)
+
+    callback.rows = []
+    return callback
 
 
 def sheet_normal(contact: list[PenaltyContact], near_mm: float = 3.0):

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.measurements import lab
 from fenicsx_drape.provenance import atomic_write_text
 
 KINDS = ("tensile", "bias_extension", "picture_frame", "forming")
@@ -166,6 +167,9 @@ class Test:
     forming_case: Any = None
     conditions: Mapping[str, float] = dataclasses.field(default_factory=dict)  # e.g. temperature_C
     notes: Mapping[str, str] = dataclasses.field(default_factory=dict)  # non-numeric extra keys
+    # forming (version 3): the lab measurement this test holds, a
+    # :class:`~fenicsx_drape.measurements.lab.LabData` (None: a test as in version 2)
+    lab: Any = None
 
     def column(self, name: str) -> np.ndarray | None:
         """A column of the table, or None when the table does not have it."""
@@ -397,6 +401,11 @@ def load_bundle(path: str | Path) -> Bundle:
                           notes)
         if test is None:
             continue
+        if test.kind == "forming" and any(k in raw for k in lab.LAB_KEYS):
+            parts = lab.split_test(test, raw, folder, fname, where, index, problems.add)
+            tests.extend(parts)
+            seen.update({p.id: where("test", index, "id") for p in parts})
+            continue
         if bundle_noise and test.kind in ("tensile", "bias_extension", "picture_frame"):
             test = declared_noise(test, bundle_noise, f"{fname} [bundle]")
         at = where("test", index, "id")
@@ -430,9 +439,14 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
                      f"{', '.join(KINDS)})")
         return None
     file = raw.get("file")
-    if not isinstance(file, str) or not file:
+    measured = kind == "forming" and any(m in raw for m in lab.MEASUREMENTS)
+    if measured and file is None:
+        file = ""  # version 3: a forming test may hold lab measurements without a grid
+    elif not isinstance(file, str) or not file:
         problems.add(fname, where("test", index, "file"),
-                     f"{label}: needs file = \"table.csv\" (relative to the bundle folder)")
+                     f"{label}: needs file = \"table.csv\" (relative to the bundle folder)"
+                     + (f" or one of {', '.join(lab.MEASUREMENTS)}" if kind == "forming"
+                        else ""))
     names_case = kind == "forming" and "case" in raw
     if names_case and "geometry" in raw:
         problems.add(fname, where("test", index, "case"),
@@ -453,8 +467,8 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
     if kind == "forming" and "geometry" in raw and not isinstance(geometry, str):
         problems.add(fname, where("test", index, "geometry"),
                      f"{label}: geometry must be a string (e.g. \"hemisphere\")")
-    known = {"id", "kind", "file", "conditions"} | ({"geometry", "case"} if kind == "forming"
-                                                    else set())
+    known = {"id", "kind", "file", "conditions"} | ({"geometry", "case", *lab.LAB_KEYS}
+                                                    if kind == "forming" else set())
     case_file, case_path, used, forming_case = None, None, {}, None
     if names_case:
         case_file, case_path, used, forming_case = _read_case(
@@ -523,12 +537,14 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
     if len(problems.items) > before or not isinstance(file, str):
         return None
     csv_path = folder / file
-    check = None
-    if kind == "forming":  # every number plausible
-        from fenicsx_drape.measurements.plausible import grid_table_check
+    table = ({}, [], 0)
+    if file:
+        check = None
+        if kind == "forming":  # every number plausible
+            from fenicsx_drape.measurements.plausible import grid_table_check
 
-        check = grid_table_check(setup, forming_case, fname, where("test", index, "grid_mm"))
-    table = _read_table(csv_path, kind, label, problems, check)
+            check = grid_table_check(setup, forming_case, fname, where("test", index, "grid_mm"))
+        table = _read_table(csv_path, kind, label, problems, check)
     if table is None:
         return None
     columns, extra_columns, header_line = table

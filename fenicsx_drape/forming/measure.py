@@ -1,0 +1,239 @@
+"""What a lab measures on a formed sheet, taken from the model: points, edge, shear, distance.
+
+The formed sheet (:class:`~fenicsx_drape.forming.post.FormedGrid`, mirrored to the whole
+blank) is triangulated (:class:`SheetMesh`: each unit cell split along its 00-11 diagonal),
+so that
+
+- the **closest point** of the formed sheet to any point (a scanned point, a point where a
+  shear angle was read) is found with a k-d tree on the triangles' centres and a vectorised
+  point-to-triangle projection (:func:`closest_points`), with its material (flat) position
+  by the barycentric coordinates;
+- the **shear angle at a material point** (flat x0, y0) is interpolated within its cell
+  (bilinear in the cell of the nodal shear field, not the nearest node:
+  :func:`shear_at_flat`), and at a formed point it is that of the closest point's material
+  position (:func:`shear_at_formed`);
+- the **blank's edge after forming** is the chain of the triangulation's boundary edges
+  (:func:`edge_segments`), with the distance of a point to it and the model's **draw-in**
+  there (inward in-plane displacement of the edge's material point, as
+  :func:`~fenicsx_drape.forming.run.draw_in`) from :func:`closest_on_edge`.
+
+No Python loop over points: everything is NumPy over (points × candidates) arrays.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from fenicsx_drape.forming.post import FormedGrid
+
+CANDIDATES = 8  # triangles (or edges) tried per point, nearest centres first
+
+
+@dataclasses.dataclass(frozen=True)
+class SheetMesh:
+    """A formed sheet as triangles: flat and formed node positions (n, 3), triangles (m, 3)."""
+
+    X: np.ndarray  # flat positions of the nodes
+    x: np.ndarray  # formed positions
+    triangles: np.ndarray  # node indices, counter-clockwise on the flat sheet
+    cell_mm: float
+
+    @classmethod
+    def of(cls, grid: FormedGrid) -> SheetMesh:
+        """The whole blank's triangulation (a symmetric part is mirrored first)."""
+        g = grid.full()
+        ok = g.present
+        index = -np.ones(ok.shape, int)
+        index[ok] = np.arange(int(ok.sum()))
+        cells = ok[:-1, :-1] & ok[1:, :-1] & ok[:-1, 1:] & ok[1:, 1:]
+        i, j = np.nonzero(cells)
+        a, b = index[i, j], index[i + 1, j]
+        c, d = index[i + 1, j + 1], index[i, j + 1]
+        tri = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+        return cls(g.X[ok], g.x[ok], tri, g.cell_mm)
+
+    @property
+    def areas(self) -> np.ndarray:
+        """Area (mm²) of every formed triangle."""
+        p = self.x[self.triangles]
+        return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+    @property
+    def normals(self) -> np.ndarray:
+        """Unit normal of every formed triangle (+z on the flat sheet)."""
+        p = self.x[self.triangles]
+        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def _closest_on_triangles(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closest points of triangles ABC to points P (all (..., 3)): point and barycentrics v, w.
+
+    The point is A + v (B − A) + w (C − A); the regions of the triangle (vertices, edges,
+    face) are told apart by the signs of the projections (Ericson, Real-Time Collision
+    Detection, 5.1.5), here for whole arrays at once.
+    """
+    ab, ac, ap = B - A, C - A, P - A
+    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
+    bp = P - B
+    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
+    cp = P - C
+    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    tiny = 1e-300
+    # Face (default), then overwrite by the edge and vertex regions in turn.
+    denom = np.where(np.abs(va + vb + vc) > tiny, va + vb + vc, tiny)
+    v, w = vb / denom, vc / denom
+    on_bc = (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)
+    t = (d4 - d3) / np.where((d4 - d3) + (d5 - d6) > tiny, (d4 - d3) + (d5 - d6), tiny)
+    v, w = np.where(on_bc, 1 - t, v), np.where(on_bc, t, w)
+    on_ac = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
+    t = d2 / np.where(d2 - d6 > tiny, d2 - d6, tiny)
+    v, w = np.where(on_ac, 0.0, v), np.where(on_ac, t, w)
+    on_ab = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
+    t = d1 / np.where(d1 - d3 > tiny, d1 - d3, tiny)
+    v, w = np.where(on_ab, t, v), np.where(on_ab, 0.0, w)
+    at_c = (d6 >= 0) & (d5 <= d6)
+    v, w = np.where(at_c, 0.0, v), np.where(at_c, 1.0, w)
+    at_b = (d3 >= 0) & (d4 <= d3)
+    v, w = np.where(at_b, 1.0, v), np.where(at_b, 0.0, w)
+    at_a = (d1 <= 0) & (d2 <= 0)
+    v, w = np.where(at_a, 0.0, v), np.where(at_a, 0.0, w)
+    Q = A + v[..., None] * ab + w[..., None] * ac
+    return Q, v, w
+
+
+@dataclasses.dataclass(frozen=True)
+class Closest:
+    """The closest points of a sheet to query points."""
+
+    distance: np.ndarray  # (n,) mm, ≥ 0
+    signed: np.ndarray  # (n,) mm, along the triangle's normal (+ on the +z side when flat)
+    point: np.ndarray  # (n, 3) the closest formed point
+    flat: np.ndarray  # (n, 3) its material position on the flat blank
+    triangle: np.ndarray  # (n,) index of its triangle
+
+
+def closest_points(mesh: SheetMesh, points: np.ndarray, k: int = CANDIDATES) -> Closest:
+    """The closest point of the formed sheet to each point (n, 3).
+
+    The ``k`` triangles with the nearest centres (a k-d tree) are projected on; on the
+    structured cells of a formed ply (aspect near 1) the closest point's triangle is among
+    them.
+    """
+    from scipy.spatial import cKDTree
+
+    P = np.asarray(points, float)
+    tri = mesh.triangles
+    corners = mesh.x[tri]
+    centres = corners.mean(axis=1)
+    k = min(k, len(tri))
+    _, cand = cKDTree(centres).query(P, k=k)
+    cand = cand.reshape(len(P), k)
+    A, B, C = (corners[cand, m] for m in range(3))
+    Q, v, w = _closest_on_triangles(P[:, None, :], A, B, C)
+    d = np.linalg.norm(P[:, None, :] - Q, axis=-1)
+    best = np.argmin(d, axis=1)
+    rows = np.arange(len(P))
+    t = cand[rows, best]
+    v, w, Q = v[rows, best], w[rows, best], Q[rows, best]
+    F = mesh.X[tri[t]]
+    flat = F[:, 0] + v[:, None] * (F[:, 1] - F[:, 0]) + w[:, None] * (F[:, 2] - F[:, 0])
+    signed = np.einsum("ni,ni->n", P - Q, mesh.normals[t])
+    return Closest(d[rows, best], signed, Q, flat, t)
+
+
+def coverage(mesh: SheetMesh, points: np.ndarray, reach_mm: float | None = None) -> float:
+    """The share of the formed sheet's area within ``reach_mm`` (default ¾ cell) of a point."""
+    from scipy.spatial import cKDTree
+
+    reach = 0.75 * mesh.cell_mm if reach_mm is None else reach_mm
+    centres = mesh.x[mesh.triangles].mean(axis=1)
+    d, _ = cKDTree(np.asarray(points, float)).query(centres, k=1)
+    areas = mesh.areas
+    return float(areas[d <= reach].sum() / areas.sum())
+
+
+def shear_at_flat(grid: FormedGrid, flat_mm: np.ndarray) -> np.ndarray:
+    """The model's shear angle (deg) at material points (m, 2): bilinear within the cell.
+
+    The cells' shear (:meth:`~fenicsx_drape.forming.post.FormedGrid.shear_nodes`, averaged
+    to the nodes) interpolated in the cell holding each point; NaN off the blank.
+    """
+    g = grid.full()
+    field = np.repeat(g.shear_nodes()[..., None], 3, axis=-1)
+    return FormedGrid(g.X, field, False).sample(np.asarray(flat_mm, float)[:, :2])[:, 0]
+
+
+def shear_at_formed(grid: FormedGrid, points: np.ndarray,
+                    mesh: SheetMesh | None = None) -> tuple[np.ndarray, Closest]:
+    """The model's shear angle (deg) at the closest point of the formed sheet to each point."""
+    mesh = mesh or SheetMesh.of(grid)
+    near = closest_points(mesh, points)
+    return shear_at_flat(grid, near.flat), near
+
+
+def edge_segments(mesh: SheetMesh) -> tuple[np.ndarray, np.ndarray]:
+    """The blank's edge: the triangulation's boundary edges.
+
+    Returns the edges' node pairs (e, 2) and the outward in-plane direction (e, 2) of each on
+    the flat blank.
+    """
+    tri = mesh.triangles
+    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    opposite = np.concatenate([tri[:, 2], tri[:, 0], tri[:, 1]])
+    key = np.sort(edges, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    once = counts[inverse.ravel()] == 1
+    e, o = edges[once], opposite[once]
+    mid = mesh.X[e, :2].mean(axis=1)
+    t = mesh.X[e[:, 1], :2] - mesh.X[e[:, 0], :2]
+    n = np.column_stack([t[:, 1], -t[:, 0]])
+    n *= np.sign(np.einsum("ni,ni->n", n, mid - mesh.X[o, :2]))[:, None]
+    return e, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def closest_on_edge(mesh: SheetMesh, points: np.ndarray, centre_mm=(0.0, 0.0),
+                    k: int = CANDIDATES) -> dict[str, np.ndarray]:
+    """The closest point of the formed blank's edge to each point (n, 2 or 3).
+
+    Points given in plan (two coordinates) are matched in plan. Returns ``signed`` (mm,
+    positive when the point lies outside the model's edge: less draw-in than modelled),
+    ``distance``, ``point`` (the edge's closest formed point) and ``draw_in`` (the model's
+    draw-in there: inward in-plane displacement of the edge's material point from
+    ``centre_mm``).
+    """
+    from scipy.spatial import cKDTree
+
+    P = np.asarray(points, float)
+    dim = P.shape[1]
+    e, outward = edge_segments(mesh)
+    a, b = mesh.x[e[:, 0], :dim], mesh.x[e[:, 1], :dim]
+    k = min(k, len(e))
+    _, cand = cKDTree(0.5 * (a + b)).query(P, k=k)
+    cand = cand.reshape(len(P), k)
+    A, B = a[cand], b[cand]
+    AB = B - A
+    s = np.clip(((P[:, None] - A) * AB).sum(-1) / np.maximum((AB * AB).sum(-1), 1e-300), 0, 1)
+    Q = A + s[..., None] * AB
+    d = np.linalg.norm(P[:, None] - Q, axis=-1)
+    best = np.argmin(d, axis=1)
+    rows = np.arange(len(P))
+    edge, s, Q = cand[rows, best], s[rows, best], Q[rows, best]
+    # Outward on the formed edge: the flat outward turned with the edge's in-plane direction.
+    t_flat = mesh.X[e[edge, 1], :2] - mesh.X[e[edge, 0], :2]
+    t_form = mesh.x[e[edge, 1], :2] - mesh.x[e[edge, 0], :2]
+    ang = np.arctan2(t_form[:, 1], t_form[:, 0]) - np.arctan2(t_flat[:, 1], t_flat[:, 0])
+    o = outward[edge]
+    o = np.column_stack([np.cos(ang) * o[:, 0] - np.sin(ang) * o[:, 1],
+                         np.sin(ang) * o[:, 0] + np.cos(ang) * o[:, 1]])
+    sign = np.sign(np.einsum("ni,ni->n", (P - Q)[:, :2], o))
+    F = mesh.X[e[edge, 0], :2] + s[:, None] * (mesh.X[e[edge, 1], :2] - mesh.X[e[edge, 0], :2])
+    x = mesh.x[e[edge, 0], :2] + s[:, None] * (mesh.x[e[edge, 1], :2] - mesh.x[e[edge, 0], :2])
+    c = np.asarray(centre_mm, float)[:2]
+    draw_in = np.linalg.norm(F - c, axis=1) - np.linalg.norm(x - c, axis=1)
+    return {"signed": np.where(sign == 0, 1.0, sign) * d[rows, best],
+            "distance": d[rows, best], "point": Q, "draw_in": draw_in}
