@@ -33,6 +33,13 @@ from fenicsx_drape.measurements.noise import (
 COUPON_KINDS = ("tensile", "bias_extension", "picture_frame")
 # The law role whose parameters each coupon kind identifies (the paper's blocks).
 BLOCK_ROLE = {"tensile": "tow", "bias_extension": "shear", "picture_frame": "shear"}
+
+
+def law_role(kind: str) -> str:
+    """The law a test kind identifies (:data:`BLOCK_ROLE`); other kinds (forming) are their own."""
+    return BLOCK_ROLE.get(kind, kind)
+
+
 # Forward-difference step in the fitting variables (log parameters): 1e-6 relative.
 FD_STEP = 1e-6
 # Bounds: at most this many decades away from the starting value (within physical bounds).

@@ -71,6 +71,7 @@ from fenicsx_drape.calibration.coupons import (
     Residuals,
     Variables,
     declare_noise,
+    law_role,
     noise_notes,
     simulate,
     test_noise,
@@ -239,11 +240,11 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str],
     res = Residuals(model, tests, variables)
     _, J = res.jacobian(variables.to_x(np.array([float(model.parameters[n]) for n in names])))
     # tests are grouped by the law they identify: bias extension and picture frame together
-    kinds = sorted({BLOCK_ROLE[t.kind] for t in tests})
+    kinds = sorted({law_role(t.kind) for t in tests})
     rows = np.cumsum([0] + [t.n_rows for t in tests])
     effect = np.zeros((len(kinds), len(names)))
     for i, t in enumerate(tests):
-        effect[kinds.index(BLOCK_ROLE[t.kind])] += np.sum(J[rows[i]:rows[i + 1]] ** 2, axis=0)
+        effect[kinds.index(law_role(t.kind))] += np.sum(J[rows[i]:rows[i + 1]] ** 2, axis=0)
     effect = np.sqrt(effect)
     strongest = effect.max(axis=0)
     dead = [n for n, s in zip(names, strongest) if not s > RESPONSE_FLOOR and n not in alive]
@@ -267,7 +268,7 @@ def plan_blocks(model, tests: Sequence[Test], names: Sequence[str],
     for k, kind in enumerate(kinds):
         block = tuple(names[j] for j in live if home[j] == k)
         if block:
-            blocks.append((block, tuple(t for t in tests if BLOCK_ROLE[t.kind] == kind)))
+            blocks.append((block, tuple(t for t in tests if law_role(t.kind) == kind)))
     return blocks, dead, notes
 
 
@@ -288,7 +289,7 @@ def initial_guess(model, tests: Sequence[Test], names: Sequence[str],
     notes = [] if notes is None else notes
     guess: dict[str, float] = {}
     tensile = [t for t in tests if t.kind == "tensile"]
-    bias = [t for t in tests if BLOCK_ROLE[t.kind] == "shear"]  # bias and picture frame
+    bias = [t for t in tests if law_role(t.kind) == "shear"]  # bias and picture frame
     rate_independent = "rate_dependence" not in model.effects
     try:
         if tensile:
