@@ -1,3 +1,13 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:light
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # # Which physics is a formed double dome missing? Diagnosis from what a lab measures
 #
 # A forming lab rarely has the tracked nodes of a drawn grid. After a trial it has shear

@@ -1,3 +1,13 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:light
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
 # # Picture frames of six labs and bias extension: one material, one parameter set?
 #
 # The woven-composites benchmark of Cao et al. (2008, Composites Part A 39:1037-1053) had six

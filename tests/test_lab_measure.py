@@ -84,8 +84,8 @@ def test_the_tool_forces_are_written_as_a_table_a_picture_and_peaks(tmp_path):
 
     rows = [{"time_s": t, "travel_mm": 2.0 * t, "punch": 3.0 * t, "die": -4.0 * t}
             for t in (1.0, 2.0, 3.0)]
-    run = SimpleNamespace(tool_forces=rows, case=SimpleNamespace(name="part"))
-    peaks = write_tool_forces(run, tmp_path)
+    run = SimpleNamespace(tool_forces=rows)
+    peaks = write_tool_forces(run, tmp_path, "part")
     assert peaks == {"max_tool_force_N": {"punch": 9.0, "die": -12.0},
                      "tool_forces_file": "tool_forces.csv"}
     table = np.loadtxt(tmp_path / "tool_forces.csv", delimiter=",", skiprows=1)

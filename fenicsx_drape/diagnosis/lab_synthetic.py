@@ -61,8 +61,8 @@ def lab_tables(grid, curves: Mapping[str, np.ndarray], *, seed: int = 0,
         magnitude: Shear points as magnitudes.
 
     Returns:
-        ``{"shear_points": columns, "surface": columns, "outline": columns,
-        "punch_force": columns}``.
+        The columns of each measurement, by name: ``shear_points``, ``surface``,
+        ``outline`` and ``punch_force``.
     """
     from fenicsx_drape.forming import measure
 

@@ -173,7 +173,7 @@ def form_hemisphere(out_dir: str | os.PathLike, case: HemisphereCase | None = No
     kin = kinematic_drape(case.tools, grid_mm)
     result = summary(run, kin)
     if comm.rank == 0:
-        result.update(write_tool_forces(run, out, pictures=pictures))
+        result.update(write_tool_forces(run, out, "hemisphere", pictures=pictures))
         write_json(out / "summary.json", result)
         μ = float(np.max(model.parameters.get("mu", 0.0)))
         write_bundle(forming_bundle(run, μ, grid_mm), out / "bundle",
@@ -319,7 +319,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
     if comm.rank == 0:
         kinematic = _kinematic_beside(case, run, out if pictures else None)
         result.update(kinematic)
-        result.update(write_tool_forces(run, out, pictures=pictures))
+        result.update(write_tool_forces(run, out, case.name, pictures=pictures))
         write_json(out / "summary.json", result)
         given = case.holder.mu if case.holder is not None else None
         μ = float(np.max(given if given is not None else model.parameters.get("mu", 0.0)))
@@ -344,12 +344,18 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
     return run, result
 
 
-def write_tool_forces(run: FormingRun, out: str | os.PathLike, *,
+def write_tool_forces(run: FormingRun, out: str | os.PathLike, part: str, *,
                       pictures: bool = True) -> dict:
     """Write the run's tool forces (``tool_forces.csv``, ``tool_forces.png``).
 
     One row per converged step: ``time_s``, ``travel_mm`` and each tool's force along its
     motion (N, the whole part; :func:`~fenicsx_drape.forming.run.record_tool_forces`).
+
+    Args:
+        run: The forming run.
+        out: The output folder.
+        part: The part's name, for the picture's title.
+        pictures: Also draw ``tool_forces.png``.
 
     Returns:
         For ``summary.json``: ``max_tool_force_N`` (each tool's largest force in magnitude,
@@ -368,7 +374,7 @@ def write_tool_forces(run: FormingRun, out: str | os.PathLike, *,
     curves = {n: np.array([r[n] for r in rows]) for n in names}
     if pictures:
         plot_tool_forces(curves, Path(out) / "tool_forces.png",
-                         f"{run.case.name}: force of each tool along its motion")
+                         f"{part}: force of each tool along its motion")
     peak = {n: float(v[np.argmax(np.abs(v))]) for n, v in curves.items()
             if n not in ("time_s", "travel_mm")}
     return {"max_tool_force_N": peak, "tool_forces_file": "tool_forces.csv"}
