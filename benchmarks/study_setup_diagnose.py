@@ -34,7 +34,7 @@ import numpy as np
 
 from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.diagnose import diagnose
-from fenicsx_drape.diagnosis.setup import setup_summary
+from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS, setup_summary
 from fenicsx_drape.forming.case import load_case, with_overrides
 from fenicsx_drape.forming.run import NODE_ATOL_N, forming_options, run_case
 from fenicsx_drape.measurements.bundle import Test, load_bundle
@@ -98,7 +98,7 @@ def main() -> None:
                                  comment="set-up study (benchmarks/study_setup_diagnose.py)")
             bundle = load_bundle(folder)
             start = time.perf_counter()
-            report = diagnose(bundle, paper, setup=None,
+            report = diagnose(bundle, paper, setup=SETUP_PARAMETERS,
                               candidates=["tool_friction", "shear_tension_coupling"],
                               progress=lambda line: print(line, file=sys.stderr, flush=True))
             seconds = time.perf_counter() - start

@@ -127,13 +127,17 @@ def test_a_turned_ply_is_named_with_its_angle_and_a_null_bundle_stays_null():
     pytest.importorskip("dolfinx")
     model = default_model()
     stated = load_case(CASE, **COARSE)
+    from fenicsx_drape.diagnosis import diagnose as dg
+
+    rules = st.Rules(dg.EVIDENCE_THRESHOLD, dg.PARSIMONY, dg.UNTESTABLE_BELOW, 1)
     names = ["ply_angle_deg", "holder_force_N"]
-    out = st.fit_setup(_bundle(model, stated, 41, ply_angle_deg=4.0), model, parameters=names)
+    out = st.fit_setup(_bundle(model, stated, 41, ply_angle_deg=4.0), model, rules,
+                       parameters=names)
     assert out["setup_error"] == "ply_angle_deg"
     best = out["setup"][0]
     assert abs(best["fitted"] - 4.0) <= max(2 * best["sd"], 1.0)
     assert best["evidence"] > 1.2 and best["error_after"]["normalised"] < 1.5
     assert out["stated_error"]["normalised"] > 3.0
-    null = st.fit_setup(_bundle(model, stated, 42), model, parameters=names)
+    null = st.fit_setup(_bundle(model, stated, 42), model, rules, parameters=names)
     assert null["setup_error"] is None
     assert all(s["evidence"] < 1.2 for s in null["setup"])

@@ -22,16 +22,21 @@ is chosen by the set-up, not by the user.
 
 Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
 
-1. **Untestable**: the parameter moved by its probe (:data:`PROBE`) changes the simulated
-   tests by less than ``UNTESTABLE_BELOW`` × their noise (normalised like the error), or the
-   part has nothing it acts on (no holder, no punch): listed with the reason, not ranked.
-2. **Fit**: Gauss-Newton on the per-coordinate residuals in noise units, the probe run as the
-   first finite difference, at most :data:`MAX_ITERATIONS` iterations, steps halved once
-   when they do not lower the cost. ``sd`` is the fit's standard deviation,
-   √diag((JᵀJ)⁻¹) × max(1, χ²/dof) (a lack of fit widens it).
+1. **Scan and untestable**: each axis of the parameter is moved by the values of
+   :data:`SCAN` about the stated value (one batch of runs: the error may lie either side,
+   and a turned net is clipped to the blank, so the error is not smooth through θ = 0).
+   When the smallest move changes the simulated tests by less than ``UNTESTABLE_BELOW`` ×
+   their noise (normalised like the error), or the part has nothing it acts on (no holder,
+   no punch), the parameter is listed as untestable with the reason, not ranked.
+2. **Fit**: Gauss-Newton from the best point of the scan (per axis) on the per-coordinate
+   residuals in noise units, forward differences of :data:`STEP`, at most
+   :data:`MAX_ITERATIONS` iterations, steps of at most :data:`MAX_STEP` halved once when
+   they do not lower the cost. ``sd`` is the fit's standard deviation,
+   √diag((JᵀJ)⁻¹ · max(1, χ²/dof)) (a lack of fit widens it).
 3. **Held-out**: every measured node is left out once, in :data:`FOLDS` interleaved folds
    of each test's rows; a fold refits the parameter from the full fit without its rows (one
-   Gauss-Newton step on the full fit's Jacobian) and predicts them by a run. The stated
+   Gauss-Newton step on the full fit's Jacobian, kept when it lowers the fold's own cost)
+   and predicts them by a run. The stated
    set-up fits nothing: its held-out error is its error.
 4. **Decision**: ``evidence`` = stated held-out / candidate held-out on the forming tests;
    significant when ``>= EVIDENCE_THRESHOLD`` (the effects' rule). Ranked by held-out error;
@@ -84,6 +89,16 @@ FOLDS = 3
 CONFOUNDED = {"holder_force_N": "mu", "mu": "holder_force_N"}
 
 Progress = Callable[[str], None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Rules:
+    """The diagnosis's fixed rules the set-up stage shares (given by ``diagnose``)."""
+
+    evidence: float  # significant: evidence at least this
+    parsimony: float  # held-out errors this close count as ties
+    untestable_below: float  # a change (× noise) below this: untestable
+    iterations: int  # the coupon fit's iteration cap (the stated model's material)
 
 
 # --------------------------------------------------------------------------------------------
@@ -218,7 +233,7 @@ def _in_part(P: np.ndarray, planes: Sequence[str]) -> bool:
 # One candidate
 
 
-def _candidate(runs: _Runs, base_values, base_ho: float, test0: Test,
+def _candidate(runs: _Runs, base_values, base_ho: float, test0: Test, below: float,
                say: Progress) -> dict[str, Any]:
     """Fit one set-up parameter, its held-out error and evidence (module doc, 1.-4.)."""
     name, model = runs.name, runs.model
@@ -234,11 +249,11 @@ def _candidate(runs: _Runs, base_values, base_ho: float, test0: Test,
     change = float(np.sqrt(np.mean([
         np.mean((scanned[j][t.id] - base_values[t.id]) ** 2) / runs.noise[t.id][0] ** 2
         for j in first for t in runs.tests])))
-    if change < _untestable_below():
+    if change < below:
         return {"untestable": True, "sensitivity": change,
                 "reason": (f"moving it by {_step_text(name)} changes the simulated tests by "
                            f"only {change:.2g} × their noise (testable from "
-                           f"{_untestable_below()})")}
+                           f"{below})")}
     costs = [float(runs.residual(v) @ runs.residual(v)) for v in scanned]
     p = start.copy()
     for i in range(k):  # the best of each axis (the offsets' axes act nearly apart)
@@ -304,12 +319,6 @@ def _candidate(runs: _Runs, base_values, base_ho: float, test0: Test,
             "values": fitted_values}
 
 
-def _untestable_below() -> float:
-    from fenicsx_drape.diagnosis.diagnose import UNTESTABLE_BELOW
-
-    return UNTESTABLE_BELOW
-
-
 def _step_text(name: str) -> str:
     v = min(u for u in SCAN[name] if u > 0)
     return {"ply_angle_deg": f"{v:g}°", "holder_force_N": f"a factor {1 + v:g}",
@@ -345,13 +354,15 @@ def _show(name: str, p: np.ndarray, test: Test, model: Model) -> str:
 # The set-up stage
 
 
-def fit_setup(bundle: Bundle, model: Model, *, parameters: Sequence[str] | None = None,
+def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
+              parameters: Sequence[str] | None = None,
               progress: Progress | None = None) -> dict[str, Any]:
     """Try every set-up candidate on the bundle's forming tests (module doc).
 
     Args:
         bundle: The measurements (only the forming tests count here).
         model: The model as stated: material as given or coupon-fitted, friction as given.
+        rules: The diagnosis's fixed rules (``diagnose``'s :data:`RULES`).
         parameters: The set-up parameters to try (default :data:`SETUP_PARAMETERS`).
         progress: Called with a line of text per stage.
 
@@ -360,8 +371,6 @@ def fit_setup(bundle: Bundle, model: Model, *, parameters: Sequence[str] | None 
         "stated_error": error record, "stated_heldout_normalised", "best": the chosen
         candidate's internal values, "scheme", "rule"}``.
     """
-    from fenicsx_drape.diagnosis.diagnose import EVIDENCE_THRESHOLD, PARSIMONY
-
     say = progress or (lambda line: None)
     names = list(parameters if parameters is not None else SETUP_PARAMETERS)
     unknown = [n for n in names if n not in SETUP_PARAMETERS]
@@ -387,8 +396,8 @@ def fit_setup(bundle: Bundle, model: Model, *, parameters: Sequence[str] | None 
                        "the full fit without them; the stated set-up fits nothing (its "
                        "held-out error is its error)"),
                rule=(f"significant when evidence (stated held-out / candidate held-out, on "
-                     f"the forming tests) >= {EVIDENCE_THRESHOLD}; ranked by held-out error, "
-                     f"near-ties ({100 * PARSIMONY:g} %) to fewer parameters, then to the "
+                     f"the forming tests) >= {rules.evidence}; ranked by held-out error, "
+                     f"near-ties ({100 * rules.parsimony:g} %) to fewer parameters, then to the "
                      f"order {', '.join(SETUP_PARAMETERS)}"))
     tried = []
     for name in names:
@@ -401,7 +410,7 @@ def fit_setup(bundle: Bundle, model: Model, *, parameters: Sequence[str] | None 
         start = _start(name, test0, model)
         say(f"set-up candidate {name}: from {_show(name, start, test0, model)}")
         try:
-            c = _candidate(runs, base_values, base_ho, test0, say)
+            c = _candidate(runs, base_values, base_ho, test0, rules.untestable_below, say)
         except (SolverError, DrapeInputError) as err:
             out["untestable"].append({"effect": name, "setup": True,
                                       "reason": f"the part cannot be formed so: {err}"})
@@ -416,7 +425,7 @@ def fit_setup(bundle: Bundle, model: Model, *, parameters: Sequence[str] | None 
                  "sd": _sd(name, c["sd_internal"], test0, model),
                  "error_after": error_record(c["after"]),
                  "heldout_normalised": c["heldout_normalised"], "evidence": c["evidence"],
-                 "significant": bool(c["evidence"] >= EVIDENCE_THRESHOLD),
+                 "significant": bool(c["evidence"] >= rules.evidence),
                  "sensitivity": c["sensitivity"],
                  "n_parameters": len(c["p"]),
                  "model": "full" if not _planes(tests, name, c["p"], model) else
@@ -431,7 +440,8 @@ def fit_setup(bundle: Bundle, model: Model, *, parameters: Sequence[str] | None 
     tried.sort(key=lambda ec: (ec[0]["heldout_normalised"], order[ec[0]["parameter"]]))
     if tried:
         top = tried[0][0]["heldout_normalised"]
-        near = [ec for ec in tried if ec[0]["heldout_normalised"] <= (1 + PARSIMONY) * top]
+        near = [ec for ec in tried
+                if ec[0]["heldout_normalised"] <= (1 + rules.parsimony) * top]
         first = min(near, key=lambda ec: (ec[0]["n_parameters"], order[ec[0]["parameter"]]))
         tried.remove(first)
         tried.insert(0, first)
@@ -501,7 +511,7 @@ def fitted_case(case: FormingCase, entry: dict[str, Any]) -> FormingCase:
 # In the diagnosis
 
 
-def setup_stage(bundle: Bundle, model: Model, parameters: Sequence[str] | None,
+def setup_stage(bundle: Bundle, model: Model, parameters: Sequence[str] | None, rules: Rules,
                 progress: Progress | None = None) -> tuple[dict[str, Any] | None, Bundle]:
     """The diagnosis's set-up stage: the candidates, and the bundle with the best applied.
 
@@ -510,7 +520,6 @@ def setup_stage(bundle: Bundle, model: Model, parameters: Sequence[str] | None,
     parameters, or no forming test).
     """
     from fenicsx_drape.diagnosis.compare import fit_bundle
-    from fenicsx_drape.diagnosis.diagnose import BASELINE_ITERATIONS
 
     if not parameters or not any(t.kind == "forming" for t in bundle.tests):
         return None, bundle
@@ -520,8 +529,8 @@ def setup_stage(bundle: Bundle, model: Model, parameters: Sequence[str] | None,
     if coupons:
         say("set-up: the material fitted to the coupon tests first")
         stated_model = fit_bundle(dataclasses.replace(bundle, tests=coupons), model,
-                                  max_iterations=BASELINE_ITERATIONS, from_features=True)
-    stage = fit_setup(bundle, stated_model, parameters=parameters, progress=say)
+                                  max_iterations=rules.iterations, from_features=True)
+    stage = fit_setup(bundle, stated_model, rules, parameters=parameters, progress=say)
     if stage["best"] is None:
         return stage, bundle
     best = stage["best"]
@@ -562,6 +571,8 @@ def record_history(report: dict[str, Any], out_dir, bundle: Bundle | None = None
     """
     from fenicsx_drape.diagnosis.ledger import record_version
 
+    if "error" not in report.get("baseline", {}) or "noise_floor" not in report:
+        return []
     base = report["baseline"]
     model = {k: base[k] for k in ("effects", "plugins", "parameters") if k in base}
     noise = report["noise_floor"]
