@@ -63,7 +63,7 @@ from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.compare import compare_tests, error_record, normalised_error
 from fenicsx_drape.diagnosis.forming_runs import form_many
 from fenicsx_drape.errors import DrapeInputError, SolverError
-from fenicsx_drape.forming.case import FormingCase, with_overrides
+from fenicsx_drape.forming.case import FormingCase, broken_planes, with_overrides
 
 if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test
@@ -84,6 +84,8 @@ BOUNDS = {"ply_angle_deg": (-45.0, 45.0), "blank_offset_mm": (-60.0, 60.0),
           "holder_force_N": (0.05, 20.0), "mu": (0.0, 2.0), "tool_offset_mm": (-30.0, 30.0)}
 MAX_STEP = {"ply_angle_deg": 10.0, "blank_offset_mm": 15.0, "holder_force_N": 2.0, "mu": 0.3,
             "tool_offset_mm": 10.0}
+# A value of each parameter that breaks every plane it can break (the model it needs).
+GENERIC = {"ply_angle_deg": 1.0, "blank_offset_mm": (1.0, 1.0), "tool_offset_mm": (1.0, 1.0)}
 MAX_ITERATIONS = 4
 FOLDS = 3
 CONFOUNDED = {"holder_force_N": "mu", "mu": "holder_force_N"}
@@ -131,7 +133,8 @@ def stated(test: Test, name: str, model: Model) -> float | list[float]:
     return [0.0, 0.0]
 
 
-def applied(test: Test, name: str, p: Sequence[float], model: Model) -> tuple[Test, np.ndarray]:
+def applied(test: Test, name: str | None, p: Sequence[float], model: Model
+            ) -> tuple[Test, np.ndarray]:
     """The test with set-up parameter ``name`` at ``p`` (internal units), and its read shift.
 
     ``p``: δθ (deg) for the ply angle, [x, y] (mm) for the offsets, the factor on the stated
@@ -140,6 +143,8 @@ def applied(test: Test, name: str, p: Sequence[float], model: Model) -> tuple[Te
     """
     case = fk.forming_case_of(test)
     shift = np.zeros(2)
+    if name is None:  # the set-up as stated, on the case's own model
+        return test, shift
     if name == "ply_angle_deg":
         changes = {"ply_angle_deg": case.blank.ply_angle_deg + float(p[0])}
     elif name == "blank_offset_mm":
@@ -154,7 +159,11 @@ def applied(test: Test, name: str, p: Sequence[float], model: Model) -> tuple[Te
     else:
         raise DrapeInputError(f"set-up parameter {name!r} is not one of "
                               f"{', '.join(SETUP_PARAMETERS)}")
-    new = with_overrides(case, **changes)
+    # The model the parameter needs at every value, its stated one too (the full or half
+    # model, which may not form quite as the quarter does): the candidate is judged against
+    # the stated set-up on that model.
+    keep = [q for q in case.planes if q not in broken_planes({name: GENERIC.get(name)})]
+    new = with_overrides(case, symmetry=keep, **changes)
     return dataclasses.replace(test, forming_case=new, case_keys={}), shift
 
 
@@ -187,7 +196,7 @@ def _why_not(name: str, tests: Sequence[Test]) -> str | None:
 class _Runs:
     """Simulated values of the forming tests at set-up points, batched through form_many."""
 
-    def __init__(self, tests: Sequence[Test], model: Model, name: str):
+    def __init__(self, tests: Sequence[Test], model: Model, name: str | None):
         self.tests, self.model, self.name = list(tests), model, name
         self.noise = {t.id: fk.noise(t) for t in self.tests}
         self.regions = {t.id: fk.part_regions(t) for t in self.tests}
@@ -233,13 +242,16 @@ def _in_part(P: np.ndarray, planes: Sequence[str]) -> bool:
 # One candidate
 
 
-def _candidate(runs: _Runs, base_values, base_ho: float, test0: Test, below: float,
-               say: Progress) -> dict[str, Any]:
+def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[str, Any]:
     """Fit one set-up parameter, its held-out error and evidence (module doc, 1.-4.)."""
     name, model = runs.name, runs.model
     start = _start(name, test0, model)
     lo, hi = BOUNDS[name]
     k = len(start)
+    # The stated set-up on the model this parameter needs (the same runs when it keeps the
+    # case's planes).
+    base_values = runs.values([start])[0]
+    base_ho = normalised_error(runs.compare(base_values))
     r0 = runs.residual(base_values)
     # 1. The scan: each axis moved by the values of SCAN (one batch of runs).
     axes = [(i, v) for i in range(k) for v in SCAN[name]]
@@ -316,7 +328,7 @@ def _candidate(runs: _Runs, base_values, base_ho: float, test0: Test, below: flo
     evidence = base_ho / heldout if heldout > 0 else math.inf
     return {"untestable": False, "p": p, "sd_internal": sd, "after": after,
             "heldout_normalised": heldout, "evidence": evidence, "sensitivity": change,
-            "values": fitted_values}
+            "values": fitted_values, "stated_normalised": base_ho}
 
 
 def _step_text(name: str) -> str:
@@ -384,9 +396,8 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                               "bundle"} for n in names]
         return out
     test0 = tests[0]
-    stated_runs = _Runs(tests, model, names[0] if names else "mu")
-    base_values = stated_runs.values([_start(stated_runs.name, test0, model)])[0] \
-        if names else None
+    stated_runs = _Runs(tests, model, None)
+    base_values = stated_runs.values([np.zeros(0)])[0]
     base_cmp = stated_runs.compare(base_values)
     base_ho = normalised_error(base_cmp)  # nothing is fitted: held-out = the error
     say(f"set-up as stated: normalised error {base_ho:.3g} on {len(tests)} forming test(s)")
@@ -410,7 +421,7 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         start = _start(name, test0, model)
         say(f"set-up candidate {name}: from {_show(name, start, test0, model)}")
         try:
-            c = _candidate(runs, base_values, base_ho, test0, rules.untestable_below, say)
+            c = _candidate(runs, test0, rules.untestable_below, say)
         except (SolverError, DrapeInputError) as err:
             out["untestable"].append({"effect": name, "setup": True,
                                       "reason": f"the part cannot be formed so: {err}"})
@@ -427,6 +438,7 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                  "heldout_normalised": c["heldout_normalised"], "evidence": c["evidence"],
                  "significant": bool(c["evidence"] >= rules.evidence),
                  "sensitivity": c["sensitivity"],
+                 "stated_on_model": c["stated_normalised"],
                  "n_parameters": len(c["p"]),
                  "model": "full" if not _planes(tests, name, c["p"], model) else
                           "/".join(_planes(tests, name, c["p"], model)) + " symmetry"}
