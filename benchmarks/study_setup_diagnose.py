@@ -12,7 +12,9 @@ formed with a hidden one:
   blank, so its flat positions are where the stated set-up puts the material);
 - ``force2x``: 400 N on the holder where the sheet says 200 N;
 - ``ply4+tool_friction``: the turned ply and tool friction (μ_tool = 0.8) the model lacks;
-- ``null``: nothing hidden.
+- ``null``: nothing hidden;
+- ``tool_friction``: tool friction alone (no set-up error: the physics must not be taken for
+  a set-up).
 
 Each is diagnosed in full (set-up candidates, then the effects ``tool_friction`` and
 ``shear_tension_coupling``) on cells of ``--cell-mm`` (default 20 mm, 4 mm steps). Printed
@@ -49,6 +51,7 @@ BUNDLES = {
     "force2x": ({"holder_force_N": 400.0}, None),
     "ply4+tool_friction": ({"ply_angle_deg": 4.0}, 0.8),
     "null": ({}, None),
+    "tool_friction": ({}, 0.8),
 }
 TRUTH = {"ply_angle_deg": 4.0, "blank_offset_mm": [10.0, 0.0], "holder_force_N": 400.0}
 
