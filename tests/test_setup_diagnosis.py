@@ -38,11 +38,14 @@ def test_each_set_up_is_applied_to_the_case_on_the_model_it_needs():
     t, shift = st.applied(test, "ply_angle_deg", [4.0], model)
     assert t.forming_case.blank.ply_angle_deg == 4.0 and t.forming_case.planes == ()
     t, shift = st.applied(test, "blank_offset_mm", [6.0, 0.0], model)
-    assert t.forming_case.blank.centre_mm == (6.0, 0.0) and t.forming_case.planes == ("y",)
+    # An offset is fitted in x and y: the whole blank at every value, the stated one too.
+    assert t.forming_case.blank.centre_mm == (6.0, 0.0) and t.forming_case.planes == ()
     np.testing.assert_array_equal(shift, [6.0, 0.0])
     t, _ = st.applied(test, "tool_offset_mm", [0.0, 2.0], model)
     assert t.forming_case.tool("punch").motion.y_mm == (2.0, 2.0)
-    assert t.forming_case.planes == ("x",)
+    assert t.forming_case.planes == ()
+    t, _ = st.applied(test, "tool_offset_mm", [0.0, 0.0], model)
+    assert t.forming_case.planes == ()
     t, _ = st.applied(test, "holder_force_N", [2.0], model)
     assert t.forming_case.holder.force_N == 400.0 and t.forming_case.planes == ("x", "y")
     t, _ = st.applied(test, "mu", [0.45], model)
@@ -76,7 +79,7 @@ def test_a_hemisphere_test_gets_its_case():
     assert case.name == "hemisphere" and case.planes == ("x", "y")
     t, _ = st.applied(named, "tool_offset_mm", [2.0, 0.0], default_model())
     assert t.forming_case.tool("punch").params["punch_x_mm"] == 2.0
-    assert t.forming_case.planes == ("y",)
+    assert t.forming_case.planes == ()
 
 
 def test_the_report_and_the_ledger_record_the_set_up(tmp_path):
