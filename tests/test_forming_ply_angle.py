@@ -342,12 +342,19 @@ def test_summary_pictures_and_bundle_of_a_turned_ply(runs, tmp_path):
     assert np.abs(np.column_stack([columns["x0_mm"], columns["y0_mm"]])).max() <= SIZE / 2 + 1e-9
 
 
-def test_cli_refuses_a_ply_angle_on_the_quarter(tmp_path, capsys):
+@pytest.mark.skip_in_parallel
+def test_cli_forms_a_ply_angle_on_the_full_sheet_unasked(tmp_path, capsys):
     pytest.importorskip("dolfinx")
+    import json
+
     from fenicsx_drape.cli import main
 
-    assert main(["form", "hemisphere", "--out", str(tmp_path / "q"), "--ply-angle-deg", "3"]) == 2
-    assert "quarter" in capsys.readouterr().err
+    out = tmp_path / "q"
+    assert main(["form", "hemisphere", "--out", str(out), "--ply-angle-deg", "3",
+                 "--cell-mm", "20", "--duration-s", "8", "--no-fields", "--quiet"]) == 0
+    assert "breaks the symmetry plane(s) x = 0 and y = 0" in capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["case"]["quarter"] is False
 
 
 @pytest.mark.slow

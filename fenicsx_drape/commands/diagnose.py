@@ -28,6 +28,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--confirm-cell-mm", type=float, default=0.0, metavar="MM",
                         help="also refit the baseline and the winner on this mesh and compare "
                         "them with the forming tests there (e.g. 5; default: no)")
+    parser.add_argument("--setup", nargs="*", default=None, metavar="PARAMETER",
+                        help="the set-up candidates tried on forming tests before the effects "
+                        "(default: all of ply_angle_deg, blank_offset_mm, holder_force_N, mu, "
+                        "tool_offset_mm; none given: no set-up candidates)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     petsc_option_argument(parser)
 
@@ -49,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model) if args.model else default_model()
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
     with resolution(args.forming_cell_mm):
-        report = diagnose(bundle, model, progress=progress)
+        report = diagnose(bundle, model, progress=progress, setup=args.setup)
     forming = any(t.kind == "forming" for t in bundle.tests)
     if forming and args.confirm_cell_mm and report["candidates"]:
         report["confirmation"] = confirm(bundle, report, args.confirm_cell_mm, progress)

@@ -7,11 +7,14 @@ Example::
     ./drape form hemisphere --out results/hemisphere
     ./drape --np 2 form hemisphere --out results/full --full --cell-mm 5
     ./drape form hemisphere --out results/ply3 --full --ply-angle-deg 3
+    ./drape form meshes/double_dome/case.toml --out out --blank-offset-mm 8 0 --tool-offset-mm 0 2
 
 The outputs are listed in :mod:`fenicsx_drape.forming.outputs`; the same is one call in
 Python: :func:`~fenicsx_drape.forming.outputs.form_case` (any case) or
 :func:`~fenicsx_drape.forming.outputs.form_hemisphere`. Options given on the command line
-override the case file's values (:func:`~fenicsx_drape.forming.case.with_overrides`).
+override the case file's values (:func:`~fenicsx_drape.forming.case.with_overrides`) before
+the case is checked. A set-up that breaks a symmetry plane of the case (a turned ply, an
+offset blank or punch) is formed without that plane, and the command says so.
 """
 
 from __future__ import annotations
@@ -61,6 +64,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ply-angle-deg", type=float, default=None, metavar="THETA",
                         help="initial ply angle: the tows at THETA to x (degrees; needs a "
                         "model without symmetry planes, --full)")
+    parser.add_argument("--blank-offset-mm", type=float, nargs=2, default=None,
+                        metavar=("X", "Y"), help="the blank (and its net) placed X, Y mm off "
+                        "where the case puts it")
+    parser.add_argument("--tool-offset-mm", type=float, nargs=2, default=None,
+                        metavar=("X", "Y"), help="the punch misaligned by X, Y mm relative to "
+                        "the die and holder")
     parser.add_argument("--no-die", action="store_true", help="leave the die(s) out")
     parser.add_argument("--penalty-factor", type=float, default=None,
                         help="contact stiffness in units of l_t E_o (hemisphere default 0.3)")
@@ -92,6 +101,7 @@ def _model(args: argparse.Namespace, default):
 
 
 def _hemisphere(args: argparse.Namespace):
+    from fenicsx_drape.forming.case import broken_planes
     from fenicsx_drape.forming.hemisphere import HemisphereCase
 
     given = {"cell_mm": args.cell_mm, "duration_s": args.duration_s,
@@ -99,8 +109,31 @@ def _hemisphere(args: argparse.Namespace):
              "stabilisation_N_per_mm": args.stabilisation, "step_mm": args.step_mm,
              "ply_angle_deg": args.ply_angle_deg,
              "holder_force_share": args.holder_force_share}
-    return HemisphereCase(quarter=not args.full, die=not args.no_die,
-                          **{k: v for k, v in given.items() if v is not None})
+    given.update(_offsets(args))
+    given = {k: v for k, v in given.items() if v is not None}
+    quarter = not (args.full or broken_planes(given))
+    if not args.full and not quarter:
+        _note_full(given, ("x", "y"))
+    return HemisphereCase(quarter=quarter, die=not args.no_die, **given)
+
+
+def _offsets(args: argparse.Namespace) -> dict:
+    return {k: tuple(v) for k, v in (("blank_offset_mm", args.blank_offset_mm),
+                                     ("tool_offset_mm", args.tool_offset_mm)) if v is not None}
+
+
+def _note_full(setup: dict, planes) -> None:
+    from mpi4py import MPI
+
+    from fenicsx_drape.forming.case import SETUP_OVERRIDES, broken_planes
+
+    broken = sorted(broken_planes(setup) & set(planes))
+    if broken and MPI.COMM_WORLD.rank == 0:
+        text = ", ".join(f"{k} = {list(v) if isinstance(v, tuple) else v}"
+                         for k, v in setup.items() if k in SETUP_OVERRIDES)
+        print(f"drape form: note: {text} breaks the symmetry plane(s) "
+              f"{' and '.join(p + ' = 0' for p in broken)}: modelled without them",
+              file=sys.stderr)
 
 
 def _case(args: argparse.Namespace):
@@ -117,7 +150,12 @@ def _case(args: argparse.Namespace):
                      holder_force_share=args.holder_force_share,
                      penalty_factor=args.penalty_factor,
                      stabilisation_N_per_mm=args.stabilisation, step_mm=args.step_mm,
-                     ply_angle_deg=args.ply_angle_deg, symmetry=[] if args.full else None)
+                     ply_angle_deg=args.ply_angle_deg, symmetry=[] if args.full else None,
+                     **_offsets(args))
+    if not args.full:
+        setup = {"ply_angle_deg": args.ply_angle_deg, **_offsets(args)}
+        _note_full({k: v for k, v in setup.items() if v is not None},
+                   _file_planes(path))
     if args.no_die:
         dies = [t.name for t in case.tools if t.role == "die"]
         if not dies:
@@ -127,6 +165,16 @@ def _case(args: argparse.Namespace):
         # The command line wins over the case file's holder mu.
         case = dataclasses.replace(case, holder=dataclasses.replace(case.holder, mu=None))
     return case
+
+
+def _file_planes(path: Path) -> tuple[str, ...]:
+    """The symmetry planes the case file itself names (for the note on dropped planes)."""
+    import tomllib
+
+    try:
+        return tuple(tomllib.loads(path.read_text(encoding="utf-8"))["blank"]["symmetry"])
+    except (OSError, KeyError, TypeError, ValueError):
+        return ()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -139,6 +187,8 @@ def run(args: argparse.Namespace) -> int:
 
     def progress(line: str) -> None:
         print(line, flush=True)
+
+    from fenicsx_drape.forming.outputs import FormingOutputError
 
     hemisphere = args.case in CASES
     try:
@@ -160,6 +210,10 @@ def run(args: argparse.Namespace) -> int:
     except SolverError as err:
         if rank0:
             print(f"drape form: the forming solve failed: {err}", file=sys.stderr)
+        return 1
+    except FormingOutputError as err:
+        if rank0:
+            print(f"drape form: error: {err}", file=sys.stderr)
         return 1
     if rank0:
         print(f"max shear {result['max_shear_deg']:.1f}°, total wrinkling "

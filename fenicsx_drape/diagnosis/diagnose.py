@@ -327,7 +327,8 @@ def _refit_parameters(model: Model, name: str) -> tuple[str, ...]:
 
 
 def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
-             candidates: Sequence[str] | None = None) -> Report:
+             candidates: Sequence[str] | None = None,
+             setup: Sequence[str] | None = None) -> Report:
     """Find which effect ``model`` misses to explain ``bundle`` (the module doc's procedure).
 
     Args:
@@ -335,6 +336,9 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         model: The current model (effects, plugins, starting parameters).
         progress: Called with a line of text at each stage.
         candidates: Only try these effects (default: every one not in the model).
+        setup: The set-up parameters tried first on forming tests
+            (:mod:`~fenicsx_drape.diagnosis.setup`); default: all of them, or none when
+            ``candidates`` restricts the effects.
 
     Returns:
         The report: a dict with every field of the diagnosis contract (version 2) plus
@@ -343,10 +347,15 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     """
     from fenicsx_drape.calibration.coupons import declare_noise
     from fenicsx_drape.diagnosis.compare import kind_metrics
+    from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS, Rules, add_setup, setup_stage
     from fenicsx_drape.effects import describe_effect
 
     start = time.perf_counter()
     say = progress or (lambda line: None)
+    # Set-up before physics (spec version 3): the best set-up fitted, then the effects.
+    rules = Rules(EVIDENCE_THRESHOLD, PARSIMONY, UNTESTABLE_BELOW, BASELINE_ITERATIONS)
+    stage, bundle = setup_stage(bundle, model, SETUP_PARAMETERS if setup is None
+                                and candidates is None else setup, rules, say)
     data = _prepare(declare_noise(bundle, model.noise))
     say(f"baseline ({', '.join(model.effects) or 'no effects'}): fitting (global stage)")
     details: dict[str, Any] = {}
@@ -458,6 +467,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         "notes": list(data.notes),
         "seconds": time.perf_counter() - start,
     })
+    add_setup(report, stage)
     report.models, report.comparisons = models, comparisons
     report.tests = data.tests
     say(report["conclusion"])
@@ -715,6 +725,9 @@ def summary(report: dict[str, Any]) -> str:
     lines.append("where the error sits:")
     lines += [f"  {100 * e['share_of_error']:5.1f} %  {e['test']}: {e['says']}"
               for e in report["where"][:5]]
+    from fenicsx_drape.diagnosis.setup import setup_summary
+
+    lines += setup_summary(report)
     lines.append(f"{'candidate':<44} {'after':>7} {'held-out':>9} {'evidence':>9}  significant")
     for c in report["candidates"]:
         lines.append(f"{c['effect']:<44} {c['error_after']['normalised']:>7.3g} "
@@ -741,6 +754,8 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     """Write ``REPORT.json`` (atomically); with ``out_dir``, the plots and provenance too.
 
     ``out_dir`` gets ``candidates.png`` (each candidate's fitted and held-out error),
+    ``ledger.jsonl`` (the model versions: set-up as stated, fitted, effect added; ``drape
+    history``),
     ``where.png`` (the baseline's error by region) and, given the ``bundle`` and a
     :class:`Report`, ``residual_<test>.png`` (the baseline and the best candidate against
     each test), plus ``provenance.json``.
@@ -765,6 +780,9 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
             plot = KINDS[base.kind].plot or plot_residuals
             plot(shown, tests[base.id], out / f"residual_{safe_name(base.id)}.png",
                  [e for e in regions if e["tests"] == [base.id]])
+    from fenicsx_drape.diagnosis.setup import record_history
+
+    record_history(report, out, bundle)  # the versions, for drape history
     write_provenance(out, bundle=report["bundle"], report=str(Path(json_path).resolve()),
                      effects=report["baseline"]["effects"],
                      parameters=report["baseline"]["parameters"],

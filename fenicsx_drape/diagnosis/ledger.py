@@ -45,19 +45,36 @@ def record(out_dir: str | Path, result: Compared, *, bundle: Bundle,
            model_path: str | Path | None = None) -> dict[str, Any]:
     """Append the version compared in ``result`` to ``out_dir/ledger.jsonl``; returns it."""
     record = result.to_dict()
+    return record_version(out_dir, result.bundle, record["model"], record["error"],
+                          record["noise_floor"], bundle=bundle, model_path=model_path)
+
+
+def record_version(out_dir: str | Path, bundle_name: str, model: dict[str, Any],
+                   error: dict[str, Any], noise_floor: dict[str, Any], *,
+                   bundle: Bundle | None = None, model_path: str | Path | None = None,
+                   setup: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Append one model version to ``out_dir/ledger.jsonl``; returns the entry.
+
+    ``model`` has ``effects`` (and ``plugins``, ``parameters``); ``error`` and
+    ``noise_floor`` are the contract's records. ``setup``: the process set-up fitted with
+    this version (parameter: value; a diagnosis's set-up stage), shown as a change like an
+    effect.
+    """
     entry = {
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="microseconds"),
         "dir": str(Path(out_dir).resolve()),
-        "bundle": result.bundle,
-        "bundle_path": str(Path(bundle.path).resolve()) if bundle.path else None,
+        "bundle": bundle_name,
+        "bundle_path": str(Path(bundle.path).resolve()) if bundle and bundle.path else None,
         "model_path": str(Path(model_path).resolve()) if model_path else None,
-        **record["model"],
-        "normalised": record["error"]["normalised"],
-        "rmse": record["error"]["rmse_N"],
-        "noise_rmse": record["noise_floor"]["rmse_N"],
-        "per_test": record["error"]["per_test"],
-        "noise_per_test": record["noise_floor"]["per_test"],
+        **model,
+        "normalised": error["normalised"],
+        "rmse": error["rmse_N"],
+        "noise_rmse": noise_floor["rmse_N"],
+        "per_test": error["per_test"],
+        "noise_per_test": noise_floor["per_test"],
     }
+    if setup:
+        entry["setup"] = setup
     entry["id"] = hashlib.sha1(json_text(entry, indent=None, sort_keys=True).encode()
                                ).hexdigest()[:12]
     path = Path(out_dir) / LEDGER
@@ -120,11 +137,18 @@ def _change(previous: dict[str, Any] | None, entry: dict[str, Any]) -> str:
         return "first version"
     before, after = set(previous["effects"]), set(entry["effects"])
     parts = [f"+{e}" for e in sorted(after - before)] + [f"-{e}" for e in sorted(before - after)]
+    before_setup, setup = previous.get("setup") or {}, entry.get("setup") or {}
+    parts += [f"setup {k} = {_value(v)}" for k, v in setup.items() if before_setup.get(k) != v]
+    parts += [f"setup {k} as stated" for k in before_setup if k not in setup]
     new_plugins = sorted(set(entry.get("plugins", [])) - set(previous.get("plugins", [])))
     parts += [f"plugin {Path(p).name}" for p in new_plugins]
     if entry["bundle"] != previous["bundle"]:
         parts.append(f"bundle {entry['bundle']}")
     return ", ".join(parts) if parts else "same model (refit)"
+
+
+def _value(v) -> str:
+    return f"[{v[0]:.3g}, {v[1]:.3g}]" if isinstance(v, list) else f"{v:.4g}"
 
 
 def table(history: Sequence[Version]) -> str:

@@ -45,7 +45,9 @@ DEFAULT_SHEET_SIDE = {"punch": "+z", "die": "-z", "holder": "+z", "surface": "+z
 # Names a measured test (or a command line) may override, besides tool parameter names.
 OVERRIDES = ("duration_s", "step_mm", "penalty_factor", "stabilisation_N_per_mm", "cell_mm",
              "ply_angle_deg", "symmetry", "sheet_mm", "holder_force_N", "holder_mu",
-             "holder_force_share", "travel_mm")
+             "holder_force_share", "travel_mm", "blank_offset_mm", "tool_offset_mm")
+# Set-up overrides that move or turn something off the case's symmetry planes (issue 27).
+SETUP_OVERRIDES = ("ply_angle_deg", "blank_offset_mm", "tool_offset_mm")
 
 
 class CaseError(DrapeInputError):
@@ -526,15 +528,20 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
                            penalty_factor=penalty, stabilisation_N_per_mm=stab, path=path)
     except CaseError as err:
         raise CaseError([f"{fname}: {p.split(': ', 1)[1]}" for p in err.problems]) from None
-    try:
-        case.blank.grid()
-    except DrapeInputError as err:
-        raise CaseError([f"{fname}: [blank]: {err}"]) from None
+    if any(v is not None for v in overrides.values()):
+        # Overrides first (--full removes the planes an off-centre blank breaks), then the
+        # check of the blank, in with_overrides.
+        case = with_overrides(case, **overrides)
+    else:
+        try:
+            case.blank.grid()
+        except DrapeInputError as err:
+            raise CaseError([f"{fname}: [blank]: {err}"]) from None
     try:
         check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
     except DrapeInputError as err:
         raise CaseError([str(err)]) from None
-    return with_overrides(case, **overrides) if overrides else case
+    return case
 
 
 def _read_blank(r: _Reader, raw: Mapping, folder: Path) -> BlankSpec:
@@ -778,8 +785,14 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     ``ply_angle_deg``, ``symmetry`` (a list of planes; ``[]`` for the full blank),
     ``sheet_mm`` (a square rectangle blank), ``holder_force_N``, ``holder_mu``,
     ``holder_force_share``, ``travel_mm`` (builtin tools' parameter; motion tables are
-    scaled so that the fastest tool travels it), and any tool parameter by name (every tool
-    that has it, e.g. ``punch_radius_mm``). None values are ignored.
+    scaled so that the fastest tool travels it), ``blank_offset_mm`` ([x, y]: the blank and
+    its net moved on the tools), ``tool_offset_mm`` ([x, y]: the punch moved off the die and
+    holder), and any tool parameter by name (every tool that has it, e.g.
+    ``punch_radius_mm``). None values are ignored.
+
+    A set-up override (:data:`SETUP_OVERRIDES`) that breaks a symmetry plane of the case
+    removes that plane (the model needs the part of the blank the plane would mirror) unless
+    ``symmetry`` is given too; :func:`broken_planes` says which.
     """
     overrides = {k: v for k, v in overrides.items() if v is not None}
     where = str(case.path) if case.path is not None else f"case {case.name!r}"
@@ -815,8 +828,28 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
         blank = dataclasses.replace(blank, cell_mm=float(overrides["cell_mm"]))
     if "ply_angle_deg" in overrides:
         blank = dataclasses.replace(blank, ply_angle_deg=float(overrides["ply_angle_deg"]))
+    if "blank_offset_mm" in overrides:
+        d = _offset(overrides["blank_offset_mm"], "blank_offset_mm", where)
+        def shift(p):
+            return (float(p[0] + d[0]), float(p[1] + d[1]))
+
+        moved = {"origin_mm": shift(blank.origin_mm)}
+        if blank.outline == "rectangle":
+            moved["centre_mm"] = shift(blank.centre_mm)
+        else:  # a polygon, or a curve's sampled points: the moved points are the outline
+            moved.update(outline="polygon", path=None,
+                         points_mm=tuple(shift(p) for p in blank.points_mm))
+        blank = dataclasses.replace(blank, **moved)
     if "symmetry" in overrides:
         blank = dataclasses.replace(blank, symmetry=tuple(overrides["symmetry"]))
+        kept = broken_planes(overrides) & set(blank.symmetry)
+        if kept:
+            raise CaseError([f"{where}: the set-up {_setup_text(overrides)} breaks the "
+                             f"symmetry plane(s) {sorted(kept)}: model without them "
+                             "(symmetry = [], drape form --full)"])
+    elif broken_planes(overrides) & set(blank.symmetry):
+        blank = dataclasses.replace(blank, symmetry=tuple(
+            p for p in blank.symmetry if p not in broken_planes(overrides)))
     if "sheet_mm" in overrides:
         if blank.outline != "rectangle":
             raise CaseError([f"{where}: override sheet_mm: the blank is not a rectangle"])
@@ -847,6 +880,10 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
 
         tools = [dataclasses.replace(t, parameters=tuple({**t.params, **{
             k: v for k, v in params.items() if applies(t, k)}}.items())) for t in tools]
+    if "tool_offset_mm" in overrides:  # after travel_mm, which scales the motion tables
+        tools = _offset_punches(tools, _offset(overrides["tool_offset_mm"], "tool_offset_mm",
+                                               where), changes.get("duration_s",
+                                                                   case.duration_s), where)
     try:
         new_case = dataclasses.replace(case, blank=blank, tools=tuple(tools), holder=holder,
                                        **changes)
@@ -858,6 +895,63 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     except DrapeInputError as err:
         raise CaseError([f"{where}: with overrides {overrides}: {err}"]) from None
     return new_case
+
+
+def broken_planes(overrides: Mapping[str, Any]) -> set[str]:
+    """The symmetry planes (``"x"``: x = 0, ``"y"``: y = 0) a set-up's overrides break.
+
+    A ply turned by other than a multiple of 90° breaks both; an offset of the blank or the
+    punch along x breaks the plane x = 0, along y the plane y = 0.
+    """
+    out = set()
+    θ = overrides.get("ply_angle_deg")
+    if θ is not None and float(θ) % 90.0 != 0.0:
+        out |= {"x", "y"}
+    for key in ("blank_offset_mm", "tool_offset_mm"):
+        d = overrides.get(key)
+        if d is not None:
+            out |= {p for p, v in zip(("x", "y"), np.ravel(np.asarray(d, dtype=float)))
+                    if v != 0.0}
+    return out
+
+
+def _setup_text(overrides: Mapping[str, Any]) -> str:
+    return ", ".join(f"{k} = {overrides[k]}" for k in SETUP_OVERRIDES if k in overrides)
+
+
+def _offset(value: Any, key: str, where: str) -> tuple[float, float]:
+    """An [x, y] offset in mm, checked."""
+    try:
+        d = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        d = ()
+    if len(d) != 2 or not all(math.isfinite(v) for v in d):
+        raise CaseError([f"{where}: override {key} = {value!r} must be [x, y] in mm"])
+    return d
+
+
+def _offset_punches(tools: list[ToolSpec], d: tuple[float, float], duration: float,
+                    where: str) -> list[ToolSpec]:
+    """The tools with every punch moved by ``d`` (mm) in x and y, die and holder in place."""
+    punches = [t for t in tools if t.role == "punch"]
+    if not punches:
+        raise CaseError([f"{where}: override tool_offset_mm: the case has no tool of role "
+                         "'punch'"])
+    out = []
+    for t in tools:
+        if t.role != "punch":
+            out.append(t)
+        elif t.builtin:
+            p = t.params
+            p["punch_x_mm"] = p.get("punch_x_mm", 0.0) + d[0]
+            p["punch_y_mm"] = p.get("punch_y_mm", 0.0) + d[1]
+            out.append(dataclasses.replace(t, parameters=tuple(p.items())))
+        else:
+            m = t.motion or Motion((0.0, duration), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
+            # A constant translation added to the motion's table: the same travel and speed.
+            out.append(dataclasses.replace(t, motion=dataclasses.replace(
+                m, x_mm=tuple(v + d[0] for v in m.x_mm), y_mm=tuple(v + d[1] for v in m.y_mm))))
+    return out
 
 
 # The forming keys of the measurement spec's hemisphere tests: in a test that names a case,
@@ -884,6 +978,8 @@ def case_value(case: FormingCase, key: str) -> Any:
         return case.total_travel_mm
     if key in ("cell_mm", "ply_angle_deg"):
         return getattr(case.blank, key)
+    if key in ("blank_offset_mm", "tool_offset_mm"):
+        return None  # offsets are relative to the case: every value given moves something
     if key == "sheet_mm" and case.blank.outline == "rectangle":
         a, b = case.blank.size_mm
         return a if a == b else None

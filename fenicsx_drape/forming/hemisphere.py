@@ -42,7 +42,15 @@ from collections.abc import Callable
 import numpy as np
 
 from fenicsx_drape.errors import ParameterError
-from fenicsx_drape.forming.case import BUILTIN, BlankSpec, FormingCase, HolderSpec, ToolSpec
+from fenicsx_drape.forming.case import (
+    BUILTIN,
+    BlankSpec,
+    FormingCase,
+    HolderSpec,
+    ToolSpec,
+    broken_planes,
+    with_overrides,
+)
 from fenicsx_drape.forming.holder import check_force_share, part_force_N
 from fenicsx_drape.forming.run import (  # noqa: F401 (re-exported: the hemisphere's API)
     FormingRun,
@@ -72,6 +80,10 @@ class HemisphereCase:
     # holder; the default, chosen on the paper's numbers: README) or "symmetric_part" (a
     # quarter carries F/4, symmetry-plane nodes count ½).
     holder_force_share: str = "model"
+    # The set-up as placed (issue 27): the blank (and its net) moved by [x, y] mm on the tools,
+    # and the punch moved by [x, y] mm off the die and holder. Off the axes: the full sheet.
+    blank_offset_mm: tuple[float, float] = (0.0, 0.0)
+    tool_offset_mm: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         for name in ("cell_mm", "duration_s", "penalty_factor", "step_mm"):
@@ -83,10 +95,18 @@ class HemisphereCase:
         if not np.isfinite(self.ply_angle_deg):
             raise ParameterError(f"hemisphere: ply_angle_deg = {self.ply_angle_deg} is not a "
                                  "number")
-        if self.ply_angle_deg and self.quarter:
-            raise ParameterError(f"hemisphere: ply_angle_deg = {self.ply_angle_deg} breaks the "
-                                 "quarter symmetry; model the full sheet (quarter=False)")
+        if self.quarter and broken_planes(self.setup):
+            text = ", ".join(f"{k} = {v}" for k, v in self.setup.items())
+            raise ParameterError(f"hemisphere: {text} breaks the quarter symmetry; model the "
+                                 "full sheet (quarter=False, drape form --full)")
         check_force_share(self.holder_force_share, "hemisphere: holder_force_share")
+
+    @property
+    def setup(self) -> dict:
+        """The set-up overrides that differ from the paper's (ply angle and offsets)."""
+        out = {"ply_angle_deg": self.ply_angle_deg, "blank_offset_mm": self.blank_offset_mm,
+               "tool_offset_mm": self.tool_offset_mm}
+        return {k: v for k, v in out.items() if np.any(np.asarray(v) != 0.0)}
 
     @property
     def speed_mm_per_s(self) -> float:
@@ -111,13 +131,15 @@ class HemisphereCase:
         blank = BlankSpec("rectangle", cell_mm=self.cell_mm, size_mm=(side, side),
                           ply_angle_deg=self.ply_angle_deg,
                           symmetry=("x", "y") if self.quarter else ())
-        return FormingCase(
+        case = FormingCase(
             name="hemisphere", duration_s=self.duration_s, blank=blank, tools=tuple(tools),
             holder=HolderSpec("holder", self.holder_force_N,
                               force_share=self.holder_force_share),
             description="the paper's hemisphere (section 4)", step_mm=self.step_mm,
             penalty_factor=self.penalty_factor,
             stabilisation_N_per_mm=self.stabilisation_N_per_mm)
+        offsets = {k: v for k, v in self.setup.items() if k != "ply_angle_deg"}
+        return with_overrides(case, **offsets) if offsets else case
 
 
 @dataclasses.dataclass

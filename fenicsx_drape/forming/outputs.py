@@ -170,31 +170,77 @@ def form_hemisphere(out_dir: str | os.PathLike, case: HemisphereCase | None = No
     finally:
         if "file" in writer:
             writer["file"].close()
-    kin = kinematic_drape(case.tools, grid_mm)
-    result = summary(run, kin)
-    if comm.rank == 0:
-        result.update(write_tool_forces(run, out, "hemisphere", pictures=pictures))
-        write_json(out / "summary.json", result)
-        μ = float(np.max(model.parameters.get("mu", 0.0)))
-        write_bundle(forming_bundle(run, μ, grid_mm), out / "bundle",
-                     comment=f"simulated by fenicsx_drape (drape form hemisphere): "
-                             f"{'quarter' if case.quarter else 'full sheet'}, "
-                             f"cell {case.cell_mm:g} mm, ply angle {case.ply_angle_deg:g}°"
-                             f"{' (drawn grid along the tows)' if case.ply_angle_deg else ''}")
-        if pictures:
-            plot_shear(run.grid, out / "shear.png",
-                       f"formed sheet, shear angle (max {result['max_shear_deg']:.1f}°)")
-            plot_wrinkling(run.grid, out / "wrinkling.png")
-            plot_paths({"FE truss": run.grid, "kinematic (PjN)": kin}, out / "paths.png")
-        if fields:
-            from fenicsx_drape.forming.tool_models import write_tool_meshes
+    with _WrittenOnFailure(out, run, comm, "drape form hemisphere") as partial:
+        kin = kinematic_drape(case.tools, grid_mm)
+        result = partial.update(summary(run, kin))
+        if comm.rank == 0:
+            result.update(write_tool_forces(run, out, "hemisphere", pictures=pictures))
+            write_json(out / "summary.json", result)
+            μ = float(np.max(model.parameters.get("mu", 0.0)))
+            write_bundle(forming_bundle(run, μ, grid_mm), out / "bundle",
+                         comment=f"simulated by fenicsx_drape (drape form hemisphere): "
+                                 f"{'quarter' if case.quarter else 'full sheet'}, "
+                                 f"cell {case.cell_mm:g} mm, ply angle {case.ply_angle_deg:g}°"
+                                 f"{' (drawn grid along the tows)' if case.ply_angle_deg else ''}")
+            if pictures:
+                plot_shear(run.grid, out / "shear.png",
+                           f"formed sheet, shear angle (max {result['max_shear_deg']:.1f}°)")
+                plot_wrinkling(run.grid, out / "wrinkling.png")
+                plot_paths({"FE truss": run.grid, "kinematic (PjN)": kin}, out / "paths.png")
+            if fields:
+                from fenicsx_drape.forming.tool_models import write_tool_meshes
 
-            write_tool_meshes(case.tools, out / "tools")
-        write_provenance(out, model={"effects": list(model.effects),
-                                     "parameters": _plain(model.parameters)},
-                         case=dataclasses.asdict(case), solver=_plain(vars(run.problem.options)))
+                write_tool_meshes(case.tools, out / "tools")
+            write_provenance(out, model={"effects": list(model.effects),
+                                         "parameters": _plain(model.parameters)},
+                             case=dataclasses.asdict(case),
+                             solver=_plain(vars(run.problem.options)))
     comm.Barrier()
     return run, result
+
+
+class FormingOutputError(RuntimeError):
+    """The solve finished but writing its outputs failed; what was computed is written."""
+
+
+class _Partial:
+    """The summary as far as it was computed (the run's statistics until then)."""
+
+    def __init__(self, run):
+        self.result = {"steps": run.steps, "cutbacks": run.cutbacks,
+                       "snes_iterations": run.iterations, "wall_time_s": run.wall_time_s,
+                       "travel_mm": run.travel_mm, "max_penetration_mm": run.max_penetration_mm}
+
+    def update(self, result: dict) -> dict:
+        self.result = result
+        return result
+
+
+class _WrittenOnFailure:
+    """Context of the outputs after a solve: on a failure, write what was computed and say so.
+
+    The fields (written during the solve) stay; ``summary.json`` gets the summary as far as it
+    was computed with the error; :class:`FormingOutputError` names the folder and the files.
+    """
+
+    def __init__(self, out: Path, run, comm, what: str):
+        self.out, self.comm, self.what = out, comm, what
+        self.partial = _Partial(run)
+
+    def __enter__(self) -> _Partial:
+        return self.partial
+
+    def __exit__(self, kind, err, tb) -> bool:
+        if err is None or not isinstance(err, Exception):
+            return False
+        result = dict(self.partial.result)
+        result["error"] = f"after the solve: {type(err).__name__}: {err}"
+        if self.comm.rank == 0:
+            write_json(self.out / "summary.json", result)
+        written = sorted(p.name for p in self.out.iterdir()) if self.out.is_dir() else []
+        raise FormingOutputError(
+            f"{self.what}: the solve finished but its outputs failed ({err}); what was "
+            f"computed is in {self.out}: {', '.join(written)}") from err
 
 
 def _plain(d: dict) -> dict:
@@ -315,31 +361,32 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
     finally:
         if "file" in writer:
             writer["file"].close()
-    result = case_summary(run)
-    if comm.rank == 0:
-        kinematic = _kinematic_beside(case, run, out if pictures else None)
-        result.update(kinematic)
-        result.update(write_tool_forces(run, out, case.name, pictures=pictures))
-        write_json(out / "summary.json", result)
-        given = case.holder.mu if case.holder is not None else None
-        μ = float(np.max(given if given is not None else model.parameters.get("mu", 0.0)))
-        note = (f"simulated by fenicsx_drape (drape form): case {case.name!r}, cell "
-                f"{case.blank.cell_mm:g} mm, symmetry {list(case.planes) or 'none'}")
-        write_case(case, out / "bundle" / "case", comment=note)
-        write_bundle(case_bundle(run, μ, grid_mm), out / "bundle", comment=note)
-        if pictures:
-            plot_shear(run.grid, out / "shear.png",
-                       f"{case.name}: shear angle (max {result['max_shear_deg']:.1f}°)")
-            plot_wrinkling(run.grid, out / "wrinkling.png")
-        if fields:
-            result["tool_files"] = [str(p.relative_to(out)) for p in
-                                    write_case_tools(run, out / "tools")]
+    with _WrittenOnFailure(out, run, comm, "drape form") as partial:
+        result = partial.update(case_summary(run))
+        if comm.rank == 0:
+            kinematic = _kinematic_beside(case, run, out if pictures else None)
+            result.update(kinematic)
+            result.update(write_tool_forces(run, out, case.name, pictures=pictures))
             write_json(out / "summary.json", result)
-        write_provenance(out, model={"effects": list(model.effects),
-                                     "parameters": _plain(model.parameters)},
-                         case=case_dict(case, case.folder),
-                         case_file=str(case.path) if case.path else None,
-                         solver=_plain(vars(run.problem.options)))
+            given = case.holder.mu if case.holder is not None else None
+            μ = float(np.max(given if given is not None else model.parameters.get("mu", 0.0)))
+            note = (f"simulated by fenicsx_drape (drape form): case {case.name!r}, cell "
+                    f"{case.blank.cell_mm:g} mm, symmetry {list(case.planes) or 'none'}")
+            write_case(case, out / "bundle" / "case", comment=note)
+            write_bundle(case_bundle(run, μ, grid_mm), out / "bundle", comment=note)
+            if pictures:
+                plot_shear(run.grid, out / "shear.png",
+                           f"{case.name}: shear angle (max {result['max_shear_deg']:.1f}°)")
+                plot_wrinkling(run.grid, out / "wrinkling.png")
+            if fields:
+                result["tool_files"] = [str(p.relative_to(out)) for p in
+                                        write_case_tools(run, out / "tools")]
+                write_json(out / "summary.json", result)
+            write_provenance(out, model={"effects": list(model.effects),
+                                         "parameters": _plain(model.parameters)},
+                             case=case_dict(case, case.folder),
+                             case_file=str(case.path) if case.path else None,
+                             solver=_plain(vars(run.problem.options)))
     comm.Barrier()
     return run, result
 

@@ -231,7 +231,7 @@ class FormedGrid:
         g = self.full()
         γ = np.abs(g.shear_nodes())
         field = FormedGrid(g.X, np.stack([γ] * 3, axis=-1), False)
-        mirrored = field.sample(g.X[g.present][:, :2] * [-1.0, 1.0])[:, 0]
+        mirrored = field.sample(g.X[g.present][:, :2] * [-1.0, 1.0], outside="nan")[:, 0]
         return float(np.nanmax(np.abs(mirrored - γ[g.present])))
 
     def diagonal_path(self) -> tuple[np.ndarray, np.ndarray]:
@@ -262,16 +262,19 @@ class FormedGrid:
         warp = q.tow_frame()[2][:, 0]  # the warp direction on the flat sheet
         return (q.X[:, 0, :2] @ warp)[ok], q.wrinkle_strain_nodes()[ok, 0]
 
-    def sample(self, points_mm: np.ndarray) -> np.ndarray:
+    def sample(self, points_mm: np.ndarray, outside: str = "raise") -> np.ndarray:
         """Formed positions (m, 3) of flat-sheet points (m, 2), bilinear in each cell.
 
-        NaN for points outside the cells of a clipped net.
+        NaN for points outside the cells of a clipped net. A point outside the grid's
+        lattice raises, or with ``outside="nan"`` is NaN too (the mirror image of a point of
+        a turned net may lie beyond the lattice).
         """
         p = np.asarray(points_mm, float)
         origin, Δ, R = self.tow_frame()
         s = ((p - origin) @ R) / Δ
         n = np.array(self.X.shape[:2]) - 1
-        if (s < -1e-9).any() or (s > n + 1e-9).any():
+        beyond = np.any((s < -1e-9) | (s > n + 1e-9), axis=1)
+        if beyond.any() and outside != "nan":
             raise DrapeInputError("FormedGrid.sample: a point lies outside the sheet")
         x = self.x
         out = np.full((len(p), 3), np.nan)
@@ -285,6 +288,7 @@ class FormedGrid:
                  + (1 - a) * b * x[k[:, 0], k[:, 1] + 1] + a * b * x[k[:, 0] + 1, k[:, 1] + 1])
             inside = np.all((s - k > -1e-9) & (s - k < 1 + 1e-9), axis=1)
             out = np.where(np.isnan(out) & inside[:, None], v, out)
+        out[beyond] = np.nan
         return out
 
     def drawn_grid(self, grid_mm: float = 10.0) -> dict[str, np.ndarray]:

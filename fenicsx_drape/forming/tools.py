@@ -124,15 +124,17 @@ class Gap:
 
 @dataclasses.dataclass(frozen=True)
 class RevolvedTool:
-    """A rigid tool: a G1 profile revolved about the z axis, translated along z in time.
+    """A rigid tool: a G1 profile revolved about a vertical axis, translated along z in time.
 
-    The profile's reference plane h = 0 sits at ``z = z0_mm + speed_mm_per_s · t``.
+    The profile's reference plane h = 0 sits at ``z = z0_mm + speed_mm_per_s · t``; the axis
+    passes through ``axis_mm`` = (x, y) (the z axis unless a punch is misaligned).
     """
 
     name: str
     profile: tuple[Piece, ...]
     z0_mm: float = 0.0
     speed_mm_per_s: float = 0.0
+    axis_mm: tuple[float, float] = (0.0, 0.0)
 
     def z_offset(self, t: float) -> float:
         """Height (mm) of the tool's reference plane at time ``t`` (s)."""
@@ -147,7 +149,7 @@ class RevolvedTool:
 
     def gap(self, x: np.ndarray, t: float) -> Gap:
         """Signed gap, normal and curvature at the positions ``x`` (n, 3) in mm at time ``t``."""
-        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        x = np.asarray(x, dtype=float).reshape(-1, 3) - [*self.axis_mm, 0.0]
         r = np.hypot(x[:, 0], x[:, 1])
         p = np.column_stack([r, x[:, 2] - self.z_offset(t)])
         D, PHI, N, C, HOOP = [], [], [], [], []
@@ -218,10 +220,17 @@ class HemisphereTools:
     travel_mm: float = 80.0
     ply_thickness_mm: float = 0.3
     cap_centre_drop_mm: float = 0.0  # the cap's centre below the fillet's centre (issue 15)
+    # The punch's misalignment: its axis at (x, y) while die and holder stay on the z axis.
+    punch_x_mm: float = 0.0
+    punch_y_mm: float = 0.0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
+            if f.name in ("punch_x_mm", "punch_y_mm"):
+                if not math.isfinite(value):
+                    raise ParameterError(f"HemisphereTools: {f.name} = {value} is not a number")
+                continue
             if f.name == "cap_centre_drop_mm":
                 if not (math.isfinite(value) and 0.0 <= value <= self.fillet_radius_mm):
                     raise ParameterError(f"HemisphereTools: cap_centre_drop_mm = {value} must "
@@ -306,7 +315,8 @@ class HemisphereTools:
         if not duration_s > 0.0:
             raise ParameterError(f"punch: duration_s = {duration_s} must be positive")
         return RevolvedTool("punch", self.punch_profile(), z0_mm=-self.height_mm,
-                            speed_mm_per_s=self.travel_mm / duration_s)
+                            speed_mm_per_s=self.travel_mm / duration_s,
+                            axis_mm=(self.punch_x_mm, self.punch_y_mm))
 
     def die(self) -> RevolvedTool:
         """The matched die, fixed at the punch's final position, material above its surface.
@@ -327,7 +337,8 @@ class HemisphereTools:
 
         The punch at its final position, continued by the holder plane z = 0.
         """
-        return RevolvedTool("part", self.part_profile(), z0_mm=self.travel_mm - self.height_mm)
+        return RevolvedTool("part", self.part_profile(), z0_mm=self.travel_mm - self.height_mm,
+                            axis_mm=(self.punch_x_mm, self.punch_y_mm))
 
 
 class MeshedTool:

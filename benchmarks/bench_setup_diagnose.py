@@ -1,0 +1,70 @@
+"""Time of a forming diagnosis with and without the set-up candidates (issue 27, speed).
+
+A quarter-model double-dome bundle (the case's own 10 mm cells and 1 mm steps; the grid
+"measured" on the whole blank with 0.3 mm noise, by a run formed with the ply turned by 4°)
+is diagnosed twice:
+
+- effects only (``setup=()``): the candidates ``tool_friction`` and
+  ``shear_tension_coupling``;
+- set-up and effects: the five set-up candidates first, then the same effects.
+
+Printed: the wall time of each, their ratio (target: the set-up adds at most 2×; the whole
+diagnosis under 5 minutes on one core), the forming runs made, and the verdicts.
+``--workers 1`` runs the forming solves on one process (one core); the default is the pool's
+(:data:`~fenicsx_drape.diagnosis.forming_runs.WORKERS`); ``--cell-mm`` and ``--step-mm``
+change the net and the step.
+
+    ./drape exec python3 benchmarks/bench_setup_diagnose.py --workers 1
+"""
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+from fenicsx_drape.diagnosis import forming_kind as fk
+from fenicsx_drape.diagnosis import forming_runs as runs
+from fenicsx_drape.diagnosis.diagnose import diagnose
+from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS
+from fenicsx_drape.forming.case import load_case, with_overrides
+from fenicsx_drape.measurements.bundle import Bundle
+from fenicsx_drape.model import default_model
+
+CASE = Path(__file__).parents[1] / "meshes" / "double_dome" / "case.toml"
+EFFECTS = ["tool_friction", "shear_tension_coupling"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workers", type=int, default=None)
+    parser.add_argument("--cell-mm", type=float, default=None)
+    parser.add_argument("--step-mm", type=float, default=None)
+    args = parser.parse_args()
+    if args.workers:
+        runs.WORKERS = args.workers
+    paper = default_model()
+    stated = load_case(CASE, cell_mm=args.cell_mm, step_mm=args.step_mm)
+    test = fk.synthetic_case_test(paper, with_overrides(stated, ply_angle_deg=4.0), sd_mm=0.3,
+                                  seed=2028, full=True)
+    bundle = Bundle(name="ply4", tests=(dataclasses.replace(test, forming_case=stated,
+                                                            case_keys={}),))
+    print(f"double dome, cells {stated.blank.cell_mm:g} mm, steps {stated.step_mm:g} mm, "
+          f"{runs.WORKERS} forming worker(s); bundle: the ply turned by 4°", flush=True)
+    times = {}
+    for label, setup in (("effects only", ()), ("set-up and effects", SETUP_PARAMETERS)):
+        runs._cache.clear()
+        start = time.perf_counter()
+        report = diagnose(bundle, paper, candidates=EFFECTS, setup=setup,
+                          progress=lambda line: print(line, file=sys.stderr, flush=True))
+        times[label] = time.perf_counter() - start
+        print(f"{label}: {times[label]:.0f} s, {len(runs._cache)} forming runs cached; "
+              f"setup_error {report.get('setup_error')}, missing_effect "
+              f"{report['missing_effect']}", flush=True)
+    ratio = times["set-up and effects"] / times["effects only"]
+    print(f"set-up and effects / effects only: {ratio:.2f}× (target <= 2); whole diagnosis "
+          f"{times['set-up and effects'] / 60:.1f} min (target < 5 min on one core)")
+
+
+if __name__ == "__main__":
+    main()

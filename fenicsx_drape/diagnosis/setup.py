@@ -1,0 +1,617 @@
+"""Process set-up before physics: the diagnosis's set-up candidates (spec version 3, issue 27).
+
+When a formed part disagrees with the model, its set-up is the first suspect. Before any
+physics effect is tried, :func:`fit_setup` fits each set-up parameter of
+:data:`SETUP_PARAMETERS` to the forming tests of a bundle, as a candidate of its own:
+
+- ``ply_angle_deg``: the warp's angle to x as laid (the net turned by δθ);
+- ``blank_offset_mm``: the blank (with its net) placed [x, y] mm off where the case puts it.
+  The measured grid's flat positions are where the *stated* set-up puts the material, so the
+  model with an offset d is read at (x0, y0) + d;
+- ``holder_force_N``: the holding force that acted (a factor on each test's stated force);
+- ``mu``: the holder's friction coefficient (eq. 1; the case's ``[holder] mu`` if it has
+  one, else the model's);
+- ``tool_offset_mm``: the punch misaligned by [x, y] mm relative to the die and holder.
+
+All start from the test's stated value (the case's, with the test's keys; offsets 0) and are
+shared by the bundle's forming tests. The model's material and friction stay as stated (as
+given, or as the coupons fitted them): the reference is the **stated set-up**, fitted to
+nothing. A set-up that breaks a symmetry plane of the case is formed without it
+(:func:`~fenicsx_drape.forming.case.with_overrides` drops the plane): the full or half model
+is chosen by the set-up, not by the user.
+
+Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
+
+1. **Scan and untestable**: each axis of the parameter is moved by the values of
+   :data:`SCAN` about the stated value (one batch of runs: the error may lie either side,
+   and a turned net is clipped to the blank, so the error is not smooth through θ = 0).
+   When the smallest move changes the simulated tests by less than ``UNTESTABLE_BELOW`` ×
+   their noise (normalised like the error), or the part has nothing it acts on (no holder,
+   no punch), the parameter is listed as untestable with the reason, not ranked.
+2. **Fit**: Gauss-Newton from the best point of the scan (per axis) on the per-coordinate
+   residuals in noise units, forward differences of :data:`STEP`, at most
+   :data:`MAX_ITERATIONS` iterations, steps of at most :data:`MAX_STEP` halved once when
+   they do not lower the cost. ``sd`` is the fit's standard deviation,
+   √diag((JᵀJ)⁻¹ · max(1, χ²/dof)) (a lack of fit widens it).
+3. **Held-out**: every measured node is left out once, in :data:`FOLDS` interleaved folds
+   of each test's rows; a fold refits the parameter from the full fit without its rows (one
+   Gauss-Newton step on the full fit's Jacobian, kept when it lowers the fold's own cost)
+   and predicts them by a run. The stated
+   set-up fits nothing: its held-out error is its error.
+4. **Decision**: ``evidence`` = stated held-out / candidate held-out on the forming tests
+   (the stated set-up on the case's own model), ``evidence_on_model`` the same against the
+   stated set-up on the model the candidate needs (a whole blank may form a little unlike the
+   mirrored quarter: that difference is not the set-up's); significant when both are
+   ``>= EVIDENCE_THRESHOLD`` (the effects' rule). Ranked by held-out error;
+   near-ties (``PARSIMONY``) go to the fewer parameters, then to the order of
+   :data:`SETUP_PARAMETERS` (``holder_force_N`` and ``mu`` act on the holder's friction only
+   through their product μF, eq. 1: the data cannot tell them apart, and the report says so).
+   ``setup_error`` is the first if significant.
+
+Each round's runs (a point and its finite differences, the folds' predictions) go to
+:func:`~fenicsx_drape.diagnosis.forming_runs.form_many` at once: worker processes on every
+core of the pool, or all ranks under ``mpirun``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fenicsx_drape.diagnosis import forming_kind as fk
+from fenicsx_drape.diagnosis.compare import compare_tests, error_record, normalised_error
+from fenicsx_drape.diagnosis.forming_runs import form_many
+from fenicsx_drape.errors import DrapeInputError, SolverError
+from fenicsx_drape.forming.case import FormingCase, broken_planes, with_overrides
+
+if TYPE_CHECKING:
+    from fenicsx_drape.measurements.bundle import Bundle, Test
+    from fenicsx_drape.model import Model
+
+SETUP_PARAMETERS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", "tool_offset_mm")
+# The scan of each parameter about its stated value, per axis (one batch of runs: a set-up
+# error may lie either side, and a turned net is clipped to the blank, so that the error is
+# not smooth through θ = 0): degrees, mm, a change of the factor on the force, μ. The
+# smallest positive move is the sensitivity's probe.
+SCAN = {"ply_angle_deg": (-6.0, -3.0, 3.0, 6.0), "blank_offset_mm": (-10.0, -5.0, 5.0, 10.0),
+        "holder_force_N": (-0.5, 1.0), "mu": (-0.15, 0.3),
+        "tool_offset_mm": (-4.0, -2.0, 2.0, 4.0)}
+# The finite-difference step of the Gauss-Newton fit, per axis.
+STEP = {"ply_angle_deg": (1.0,), "blank_offset_mm": (1.5, 1.5), "holder_force_N": (0.2,),
+        "mu": (0.05,), "tool_offset_mm": (1.0, 1.0)}
+BOUNDS = {"ply_angle_deg": (-45.0, 45.0), "blank_offset_mm": (-60.0, 60.0),
+          "holder_force_N": (0.05, 20.0), "mu": (0.0, 2.0), "tool_offset_mm": (-30.0, 30.0)}
+MAX_STEP = {"ply_angle_deg": 10.0, "blank_offset_mm": 15.0, "holder_force_N": 2.0, "mu": 0.3,
+            "tool_offset_mm": 10.0}
+# A value of each parameter that breaks every plane it can break (the model it needs).
+GENERIC = {"ply_angle_deg": 1.0, "blank_offset_mm": (1.0, 1.0), "tool_offset_mm": (1.0, 1.0)}
+MAX_ITERATIONS = 4
+FOLDS = 3
+CONFOUNDED = {"holder_force_N": "mu", "mu": "holder_force_N"}
+
+Progress = Callable[[str], None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Rules:
+    """The diagnosis's fixed rules the set-up stage shares (given by ``diagnose``)."""
+
+    evidence: float  # significant: evidence at least this
+    parsimony: float  # held-out errors this close count as ties
+    untestable_below: float  # a change (× noise) below this: untestable
+    iterations: int  # the coupon fit's iteration cap (the stated model's material)
+
+
+# --------------------------------------------------------------------------------------------
+# A set-up applied to a test
+
+
+def forming_tests(bundle: Bundle) -> list[Test]:
+    """The bundle's forming tests, each naming its case (a hemisphere test gets its case)."""
+    out = []
+    for test in bundle.tests:
+        if test.kind != "forming":
+            continue
+        if not fk.names_case(test):
+            hemi = fk.case_of(test)
+            test = dataclasses.replace(test, forming_case=hemi.to_case())
+        out.append(test)
+    return out
+
+
+def stated(test: Test, name: str, model: Model) -> float | list[float]:
+    """The test's stated value of a set-up parameter (offsets: [0, 0], where the case puts it)."""
+    case = fk.forming_case_of(test)
+    if name == "ply_angle_deg":
+        return case.blank.ply_angle_deg
+    if name == "holder_force_N":
+        return case.holder.force_N if case.holder is not None else math.nan
+    if name == "mu":
+        given = case.holder.mu if case.holder is not None else None
+        return float(given if given is not None else np.max(model.parameters.get("mu", 0.0)))
+    return [0.0, 0.0]
+
+
+def applied(test: Test, name: str | None, p: Sequence[float], model: Model
+            ) -> tuple[Test, np.ndarray]:
+    """The test with set-up parameter ``name`` at ``p`` (internal units), and its read shift.
+
+    ``p``: δθ (deg) for the ply angle, [x, y] (mm) for the offsets, the factor on the stated
+    force for ``holder_force_N``, μ itself for ``mu``. The shift (mm) is added to the
+    measured grid's flat positions where the model is read (a moved blank).
+    """
+    case = fk.forming_case_of(test)
+    shift = np.zeros(2)
+    if name is None:  # the set-up as stated, on the case's own model
+        return test, shift
+    if name == "ply_angle_deg":
+        changes = {"ply_angle_deg": case.blank.ply_angle_deg + float(p[0])}
+    elif name == "blank_offset_mm":
+        changes = {"blank_offset_mm": [float(p[0]), float(p[1])]}
+        shift = np.array([float(p[0]), float(p[1])])
+    elif name == "tool_offset_mm":
+        changes = {"tool_offset_mm": [float(p[0]), float(p[1])]}
+    elif name == "holder_force_N":
+        changes = {"holder_force_N": case.holder.force_N * float(p[0])}
+    elif name == "mu":
+        changes = {"holder_mu": float(p[0])}
+    else:
+        raise DrapeInputError(f"set-up parameter {name!r} is not one of "
+                              f"{', '.join(SETUP_PARAMETERS)}")
+    # The model the parameter needs at every value, its stated one too (the full or half
+    # model, which may not form quite as the quarter does): the candidate is judged against
+    # the stated set-up on that model.
+    keep = [q for q in case.planes if q not in broken_planes({name: GENERIC.get(name)})]
+    new = with_overrides(case, symmetry=keep, **changes)
+    return dataclasses.replace(test, forming_case=new, case_keys={}), shift
+
+
+def _start(name: str, test: Test, model: Model) -> np.ndarray:
+    """The stated point in internal units."""
+    if name == "holder_force_N":
+        return np.array([1.0])
+    if name == "mu":
+        return np.array([float(stated(test, name, model))])
+    return np.zeros(len(STEP[name]))
+
+
+def _why_not(name: str, tests: Sequence[Test]) -> str | None:
+    """Why the part cannot have this set-up error at all (nothing it acts on), else None."""
+    cases = [fk.forming_case_of(t) for t in tests]
+    if name in ("holder_force_N", "mu") and all(c.holder is None for c in cases):
+        return "the part has no blank holder"
+    if name == "tool_offset_mm" and all(not any(s.role == "punch" for s in c.tools)
+                                        for c in cases):
+        return "the part has no punch"
+    if name == "holder_force_N" and all(c.holder is None or c.holder.force_N == 0 for c in cases):
+        return "the stated holding force is 0 (a factor on it changes nothing)"
+    return None
+
+
+# --------------------------------------------------------------------------------------------
+# Runs
+
+
+class _Runs:
+    """Simulated values of the forming tests at set-up points, batched through form_many."""
+
+    def __init__(self, tests: Sequence[Test], model: Model, name: str | None):
+        self.tests, self.model, self.name = list(tests), model, name
+        self.noise = {t.id: fk.noise(t) for t in self.tests}
+        self.regions = {t.id: fk.part_regions(t) for t in self.tests}
+        self.measured = {t.id: fk.measured_positions(t).ravel() for t in self.tests}
+        self.weights = {t.id: np.repeat(1.0 / fk.row_noise(t), 3) for t in self.tests}
+
+    def values(self, points: Sequence[np.ndarray]) -> list[dict[str, np.ndarray]]:
+        """Per point, the simulated ``x, y, z`` of every measured node of every test."""
+        jobs, reads = [], []
+        for p in points:
+            for test in self.tests:
+                t, shift = applied(test, self.name, p, self.model)
+                jobs.append((fk.case_of(t), self.model))
+                reads.append((test, shift))
+        sheets = form_many(jobs)
+        out: list[dict[str, np.ndarray]] = [{} for _ in points]
+        for k, (sheet, (test, shift)) in enumerate(zip(sheets, reads)):
+            P = fk.reference_points(test) + shift
+            part = sheet if _in_part(P, sheet.planes) else sheet.full()
+            out[k // len(self.tests)][test.id] = fk.sample(part, P, test.id).ravel()
+        return out
+
+    def residual(self, values: dict[str, np.ndarray], rows: dict[str, np.ndarray] | None = None
+                 ) -> np.ndarray:
+        """Residuals in noise units (per coordinate), rows left out at weight 0."""
+        out = []
+        for test in self.tests:
+            r = (values[test.id] - self.measured[test.id]) * self.weights[test.id]
+            if rows is not None:
+                r = np.where(np.repeat(rows[test.id], 3), r, 0.0)
+            out.append(np.where(np.isfinite(r), r, 0.0) / math.sqrt(r.size))
+        return np.concatenate(out)
+
+    def compare(self, values: dict[str, np.ndarray]):
+        return compare_tests(self.tests, values, self.regions, self.noise)
+
+
+def _in_part(P: np.ndarray, planes: Sequence[str]) -> bool:
+    return all(bool((P[:, {"x": 0, "y": 1}[p]] >= -1e-9).all()) for p in planes)
+
+
+# --------------------------------------------------------------------------------------------
+# One candidate
+
+
+def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[str, Any]:
+    """Fit one set-up parameter, its held-out error and evidence (module doc, 1.-4.)."""
+    name, model = runs.name, runs.model
+    start = _start(name, test0, model)
+    lo, hi = BOUNDS[name]
+    k = len(start)
+    # The stated set-up on the model this parameter needs (the same runs when it keeps the
+    # case's planes).
+    base_values = runs.values([start])[0]
+    base_ho = normalised_error(runs.compare(base_values))
+    r0 = runs.residual(base_values)
+    # 1. The scan: each axis moved by the values of SCAN (one batch of runs).
+    axes = [(i, v) for i in range(k) for v in SCAN[name]]
+    points = [start + v * np.eye(k)[i] for i, v in axes]
+    scanned = runs.values(points)
+    first = [j for j, (i, v) in enumerate(axes) if v == min(u for u in SCAN[name] if u > 0)]
+    change = float(np.sqrt(np.mean([
+        np.mean((scanned[j][t.id] - base_values[t.id]) ** 2) / runs.noise[t.id][0] ** 2
+        for j in first for t in runs.tests])))
+    if change < below:
+        return {"untestable": True, "sensitivity": change,
+                "reason": (f"moving it by {_step_text(name)} changes the simulated tests by "
+                           f"only {change:.2g} × their noise (testable from "
+                           f"{below})")}
+    costs = [float(runs.residual(v) @ runs.residual(v)) for v in scanned]
+    p = start.copy()
+    for i in range(k):  # the best of each axis (the offsets' axes act nearly apart)
+        best = min([(float(r0 @ r0), 0.0)] + [(c, v) for c, (j, v) in zip(costs, axes)
+                                               if j == i])
+        p[i] = start[i] + best[1]
+    say(f"    {name} scan: best start {_show(name, p, test0, model)}")
+    # 2. Gauss-Newton from the best of the scan.
+    h = np.diag(STEP[name]).astype(float)
+    batch = runs.values([p] + [p + h[i] for i in range(k)])
+    r = runs.residual(batch[0])
+    J = np.column_stack([(runs.residual(v) - r) / h[i, i] for i, v in enumerate(batch[1:])])
+    for iteration in range(MAX_ITERATIONS):
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
+        moved = False
+        for attempt in range(2):
+            trial = np.clip(p + step / 2**attempt, lo, hi)
+            if np.abs(trial - p).max() < 0.01 * float(h.diagonal().min()):
+                break
+            batch = runs.values([trial] + [trial + h[i] for i in range(k)])
+            r_new = runs.residual(batch[0])
+            say(f"    {name} fit {iteration + 1}: {_show(name, trial, test0, model)}, cost "
+                f"{r_new @ r_new:.4g} (was {r @ r:.4g})")
+            if r_new @ r_new < r @ r:
+                J = np.column_stack([(runs.residual(v) - r_new) / h[i, i]
+                                     for i, v in enumerate(batch[1:])])
+                p, r, moved = trial, r_new, True
+                break
+        if not moved:
+            break
+    fitted_values = runs.values([p])[0]
+    after = runs.compare(fitted_values)
+    # The fit's uncertainty: residuals per coordinate in noise units (undo the 1/√n).
+    n = sum(3 * t.n_rows for t in runs.tests)
+    scale = np.concatenate([np.full(3 * t.n_rows, math.sqrt(3 * t.n_rows)) for t in runs.tests])
+    Jn, rn = J * scale[:, None], r * scale
+    try:
+        cov = np.linalg.inv(Jn.T @ Jn) * max(1.0, float(rn @ rn) / max(1, n - k))
+        sd = np.sqrt(np.diag(cov))
+    except np.linalg.LinAlgError:
+        sd = np.full(k, math.inf)
+    # 3. Held-out: each fold refits from the full fit without its rows (one Gauss-Newton
+    # step, kept only when it lowers the fold's own cost) and predicts its rows.
+    masks = [{t.id: np.arange(t.n_rows) % FOLDS != b for t in runs.tests} for b in range(FOLDS)]
+    trials = []
+    for rows in masks:
+        keep = np.concatenate([np.repeat(rows[t.id], 3) for t in runs.tests])
+        step = np.linalg.lstsq(J[keep], -r[keep], rcond=None)[0]
+        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
+        trials.append(np.clip(p + step, lo, hi))
+    predicted = {t.id: np.full(3 * t.n_rows, np.nan) for t in runs.tests}
+    for b, values in enumerate(runs.values(trials)):
+        own, full = runs.residual(values, masks[b]), runs.residual(fitted_values, masks[b])
+        chosen = values if own @ own < full @ full else fitted_values
+        for t in runs.tests:
+            held = np.repeat(~masks[b][t.id], 3)
+            predicted[t.id][held] = chosen[t.id][held]
+    heldout = normalised_error(runs.compare(predicted))
+    evidence = base_ho / heldout if heldout > 0 else math.inf
+    return {"untestable": False, "p": p, "sd_internal": sd, "after": after,
+            "heldout_normalised": heldout, "evidence": evidence, "sensitivity": change,
+            "values": fitted_values, "stated_normalised": base_ho}
+
+
+def _step_text(name: str) -> str:
+    v = min(u for u in SCAN[name] if u > 0)
+    return {"ply_angle_deg": f"{v:g}°", "holder_force_N": f"a factor {1 + v:g}",
+            "mu": f"{v:g}"}.get(name, f"{v:g} mm along x and along y")
+
+
+def _fitted(name: str, p: np.ndarray, test: Test, model: Model):
+    """The fitted value in the report's units (and the stated one)."""
+    s = stated(test, name, model)
+    if name == "ply_angle_deg":
+        return s + float(p[0])
+    if name == "holder_force_N":
+        return s * float(p[0])
+    if name == "mu":
+        return float(p[0])
+    return [float(p[0]), float(p[1])]
+
+
+def _sd(name: str, sd: np.ndarray, test: Test, model: Model):
+    if name == "holder_force_N":
+        return float(stated(test, name, model) * sd[0])
+    if name in ("blank_offset_mm", "tool_offset_mm"):
+        return [float(sd[0]), float(sd[1])]
+    return float(sd[0])
+
+
+def _show(name: str, p: np.ndarray, test: Test, model: Model) -> str:
+    v = _fitted(name, p, test, model)
+    return f"[{v[0]:.3g}, {v[1]:.3g}]" if isinstance(v, list) else f"{v:.4g}"
+
+
+# --------------------------------------------------------------------------------------------
+# The set-up stage
+
+
+def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
+              parameters: Sequence[str] | None = None,
+              progress: Progress | None = None) -> dict[str, Any]:
+    """Try every set-up candidate on the bundle's forming tests (module doc).
+
+    Args:
+        bundle: The measurements (only the forming tests count here).
+        model: The model as stated: material as given or coupon-fitted, friction as given.
+        rules: The diagnosis's fixed rules (``diagnose``'s :data:`RULES`).
+        parameters: The set-up parameters to try (default :data:`SETUP_PARAMETERS`).
+        progress: Called with a line of text per stage.
+
+    Returns:
+        ``{"setup": [...], "setup_error": name or None, "untestable": [...],
+        "stated_error": error record, "stated_heldout_normalised", "best": the chosen
+        candidate's internal values, "scheme", "rule"}``.
+    """
+    say = progress or (lambda line: None)
+    names = list(parameters if parameters is not None else SETUP_PARAMETERS)
+    unknown = [n for n in names if n not in SETUP_PARAMETERS]
+    if unknown:
+        raise DrapeInputError(f"set-up parameters {unknown}: not among "
+                              f"{', '.join(SETUP_PARAMETERS)}")
+    tests = forming_tests(bundle)
+    out: dict[str, Any] = {"setup": [], "setup_error": None, "untestable": [], "best": None}
+    if not tests:
+        out["untestable"] = [{"effect": n, "setup": True, "reason": "no forming test in the "
+                              "bundle"} for n in names]
+        return out
+    test0 = tests[0]
+    stated_runs = _Runs(tests, model, None)
+    base_values = stated_runs.values([np.zeros(0)])[0]
+    base_cmp = stated_runs.compare(base_values)
+    base_ho = normalised_error(base_cmp)  # nothing is fitted: held-out = the error
+    say(f"set-up as stated: normalised error {base_ho:.3g} on {len(tests)} forming test(s)")
+    out.update(stated_error=error_record(base_cmp), stated_heldout_normalised=base_ho,
+               scheme=(f"leave-every-{FOLDS}-node-out: {FOLDS} interleaved folds of each "
+                       "forming test's nodes, each predicted by one Gauss-Newton step from "
+                       "the full fit without them; the stated set-up fits nothing (its "
+                       "held-out error is its error)"),
+               rule=(f"significant when evidence (stated held-out / candidate held-out, on "
+                     f"the forming tests) and evidence_on_model (the same with the stated "
+                     f"set-up on the model the candidate needs) are >= {rules.evidence}; "
+                     f"ranked by held-out error, "
+                     f"near-ties ({100 * rules.parsimony:g} %) to fewer parameters, then to the "
+                     f"order {', '.join(SETUP_PARAMETERS)}"))
+    tried = []
+    for name in names:
+        reason = _why_not(name, tests)
+        if reason is not None:
+            out["untestable"].append({"effect": name, "setup": True, "reason": reason})
+            continue
+        runs = _Runs(tests, model, name)
+        # The stated point is the same for every parameter: its values are shared.
+        start = _start(name, test0, model)
+        say(f"set-up candidate {name}: from {_show(name, start, test0, model)}")
+        try:
+            c = _candidate(runs, test0, rules.untestable_below, say)
+        except (SolverError, DrapeInputError) as err:
+            out["untestable"].append({"effect": name, "setup": True,
+                                      "reason": f"the part cannot be formed so: {err}"})
+            continue
+        if c["untestable"]:
+            out["untestable"].append({"effect": name, "setup": True, "reason": c["reason"],
+                                      "sensitivity": c["sensitivity"]})
+            say(f"  untestable: {c['reason']}")
+            continue
+        entry = {"parameter": name, "stated": stated(test0, name, model),
+                 "fitted": _fitted(name, c["p"], test0, model),
+                 "sd": _sd(name, c["sd_internal"], test0, model),
+                 "error_after": error_record(c["after"]),
+                 "heldout_normalised": c["heldout_normalised"],
+                 "evidence": base_ho / c["heldout_normalised"],
+                 "evidence_on_model": c["evidence"],
+                 "significant": bool(min(base_ho / c["heldout_normalised"], c["evidence"])
+                                     >= rules.evidence),
+                 "sensitivity": c["sensitivity"],
+                 "stated_on_model": c["stated_normalised"],
+                 "n_parameters": len(c["p"]),
+                 "model": "full" if not _planes(tests, name, c["p"], model) else
+                          "/".join(_planes(tests, name, c["p"], model)) + " symmetry"}
+        if name in CONFOUNDED:
+            entry["confounded_with"] = CONFOUNDED[name]
+        say(f"  fitted {_show(name, c['p'], test0, model)}, normalised "
+            f"{entry['error_after']['normalised']:.3g}, held-out "
+            f"{c['heldout_normalised']:.3g}, evidence {c['evidence']:.3g}")
+        tried.append((entry, c))
+    order = {n: i for i, n in enumerate(SETUP_PARAMETERS)}
+    tried.sort(key=lambda ec: (ec[0]["heldout_normalised"], order[ec[0]["parameter"]]))
+    if tried:
+        top = tried[0][0]["heldout_normalised"]
+        near = [ec for ec in tried
+                if ec[0]["heldout_normalised"] <= (1 + rules.parsimony) * top]
+        first = min(near, key=lambda ec: (ec[0]["n_parameters"], order[ec[0]["parameter"]]))
+        tried.remove(first)
+        tried.insert(0, first)
+    out["setup"] = [e for e, _ in tried]
+    if tried and tried[0][0]["significant"]:
+        entry, c = tried[0]
+        out["setup_error"] = entry["parameter"]
+        out["best"] = {"parameter": entry["parameter"], "p": [float(v) for v in c["p"]]}
+    return out
+
+
+def _planes(tests: Sequence[Test], name: str, p, model: Model) -> tuple[str, ...]:
+    return fk.forming_case_of(applied(tests[0], name, p, model)[0]).planes
+
+
+def corrected(bundle: Bundle, name: str, p: Sequence[float], model: Model) -> Bundle:
+    """The bundle with a fitted set-up applied to its forming tests.
+
+    Each forming test names its case with the set-up applied (a hemisphere test, its case);
+    for a blank offset the measured grid's flat positions are moved by it (the model is read
+    where the material lay). Other tests are unchanged.
+    """
+    named = {t.id: t for t in forming_tests(bundle)}
+    tests = []
+    for test in bundle.tests:
+        if test.id in named:
+            t, shift = applied(named[test.id], name, p, model)
+            if shift.any():
+                columns = dict(t.columns)
+                columns["x0_mm"] = np.asarray(columns["x0_mm"]) + shift[0]
+                columns["y0_mm"] = np.asarray(columns["y0_mm"]) + shift[1]
+                t = dataclasses.replace(t, columns=columns)
+            test = t
+        tests.append(test)
+    return dataclasses.replace(bundle, tests=tuple(tests))
+
+
+def setup_summary(report: dict[str, Any]) -> list[str]:
+    """Lines of text on the set-up candidates of a report."""
+    lines = []
+    if not report.get("setup"):
+        return lines
+    lines.append(f"{'set-up candidate':<20} {'stated':>12} {'fitted':>18} {'after':>7} "
+                 f"{'held-out':>9} {'evidence':>9}  significant")
+    show = _value_text
+    for s in report["setup"]:
+        fitted = f"{show(s['fitted'])} ± {show(s['sd'])}"
+        lines.append(f"{s['parameter']:<20} {show(s['stated']):>12} {fitted:>18} "
+                     f"{s['error_after']['normalised']:>7.3g} {s['heldout_normalised']:>9.3g} "
+                     f"{s['evidence']:>9.3g}  {'yes' if s['significant'] else 'no'}")
+    lines.append(f"setup_error: {report.get('setup_error')}")
+    return lines
+
+
+def _value_text(v) -> str:
+    return f"[{v[0]:.3g}, {v[1]:.3g}]" if isinstance(v, list) else f"{v:.4g}"
+
+
+def fitted_case(case: FormingCase, entry: dict[str, Any]) -> FormingCase:
+    """A case with a report's fitted set-up applied (``entry``: one of ``report["setup"]``)."""
+    name, value = entry["parameter"], entry["fitted"]
+    key = {"holder_force_N": "holder_force_N", "mu": "holder_mu"}.get(name, name)
+    return with_overrides(case, **{key: value})
+
+
+# --------------------------------------------------------------------------------------------
+# In the diagnosis
+
+
+def setup_stage(bundle: Bundle, model: Model, parameters: Sequence[str] | None, rules: Rules,
+                progress: Progress | None = None) -> tuple[dict[str, Any] | None, Bundle]:
+    """The diagnosis's set-up stage: the candidates, and the bundle with the best applied.
+
+    The model is taken as stated: its material fitted to the bundle's coupon tests (if any),
+    its friction as given. Returns ``(None, bundle)`` when nothing is to be tried (no
+    parameters, or no forming test).
+    """
+    from fenicsx_drape.diagnosis.compare import fit_bundle
+
+    if not parameters or not any(t.kind == "forming" for t in bundle.tests):
+        return None, bundle
+    say = progress or (lambda line: None)
+    stated_model = model
+    coupons = tuple(t for t in bundle.tests if t.kind != "forming")
+    if coupons:
+        say("set-up: the material fitted to the coupon tests first")
+        stated_model = fit_bundle(dataclasses.replace(bundle, tests=coupons), model,
+                                  max_iterations=rules.iterations, from_features=True)
+    stage = fit_setup(bundle, stated_model, rules, parameters=parameters, progress=say)
+    if stage["best"] is None:
+        return stage, bundle
+    best = stage["best"]
+    say(f"set-up error: {best['parameter']}; the physics candidates are tried with it fitted")
+    return stage, corrected(bundle, best["parameter"], best["p"], stated_model)
+
+
+def add_setup(report: dict[str, Any], stage: dict[str, Any] | None) -> None:
+    """The set-up stage's fields in a diagnosis report (spec version 3) and its words."""
+    if stage is None:
+        report.update(setup=[], setup_error=None)
+        return
+    report.update(setup=stage["setup"], setup_error=stage["setup_error"],
+                  setup_stated={"error": stage.get("stated_error"),
+                                "heldout_normalised": stage.get("stated_heldout_normalised")},
+                  setup_scheme=stage.get("scheme"), setup_rule=stage.get("rule"))
+    report["untestable"] = list(report.get("untestable", [])) + stage["untestable"]
+    if stage["setup_error"] is None:
+        return
+    s = stage["setup"][0]
+    show = _value_text
+    also = (f" (equivalently {s['confounded_with']}: the holder's friction acts through μF)"
+            if "confounded_with" in s else "")
+    words = (f"Set-up error: {s['parameter']} fitted {show(s['fitted'])} ± {show(s['sd'])} "
+             f"(stated {show(s['stated'])}){also}, bringing the forming tests' normalised "
+             f"error from {report['setup_stated']['error']['normalised']:.3g} to "
+             f"{s['error_after']['normalised']:.3g} (evidence {s['evidence']:.3g}). "
+             "The physics candidates were tried with it fitted. ")
+    report["conclusion"] = words + report.get("conclusion", "")
+
+
+def record_history(report: dict[str, Any], out_dir, bundle: Bundle | None = None) -> list[dict]:
+    """Record a diagnosis's model versions in ``out_dir``'s ledger (``drape history``).
+
+    In order: the model with the set-up as stated (when set-up candidates were tried), with
+    the set-up error fitted, and with the missing effect added: the error falls version by
+    version as the set-up is corrected, then as the effect is added.
+    """
+    from fenicsx_drape.diagnosis.ledger import record_version
+
+    if "error" not in report.get("baseline", {}) or "noise_floor" not in report:
+        return []
+    base = report["baseline"]
+    model = {k: base[k] for k in ("effects", "plugins", "parameters") if k in base}
+    noise = report["noise_floor"]
+    name = report.get("bundle", bundle.name if bundle else "")
+    entries = []
+    setup = None
+    if report.get("setup"):
+        stated = report["setup_stated"]["error"]
+        entries.append(record_version(out_dir, name, model, stated, noise, bundle=bundle))
+        if report.get("setup_error"):
+            best = report["setup"][0]
+            setup = {best["parameter"]: best["fitted"]}
+    if setup or not entries:
+        entries.append(record_version(out_dir, name, model, base["error"], noise,
+                                      bundle=bundle, setup=setup))
+    if report.get("missing_effect"):
+        c = report["candidates"][0]
+        added = {**model, "effects": list(dict.fromkeys([*model.get("effects", []),
+                                                         *c["effects"]]))}
+        entries.append(record_version(out_dir, name, added, c["error_after"], noise,
+                                      bundle=bundle, setup=setup))
+    return entries

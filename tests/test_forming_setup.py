@@ -1,0 +1,180 @@
+"""Every set-up can be formed (issue 27): a turned ply, an offset blank, a misaligned punch.
+
+Overrides are applied before the case is checked, a set-up that breaks a symmetry plane is
+formed without it, and a failure after the solve still writes what was computed. The runs
+are on a coarse net (Δ = 20 mm, 4 mm steps).
+"""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fenicsx_drape.forming.case import CaseError, broken_planes, load_case, with_overrides
+
+MESHES = Path(__file__).parents[1] / "meshes"
+DOUBLE_DOME = MESHES / "double_dome" / "case.toml"
+COARSE = {"cell_mm": 20.0, "step_mm": 4.0}
+
+
+def test_which_planes_a_set_up_breaks():
+    assert broken_planes({"ply_angle_deg": 4.0}) == {"x", "y"}
+    assert broken_planes({"ply_angle_deg": 90.0}) == set()
+    assert broken_planes({"blank_offset_mm": [8.0, 0.0]}) == {"x"}
+    assert broken_planes({"tool_offset_mm": (0.0, -2.0)}) == {"y"}
+    assert broken_planes({"holder_force_N": 300.0, "blank_offset_mm": [0.0, 0.0]}) == set()
+
+
+def test_a_blank_offset_moves_blank_and_net_and_drops_the_planes_it_breaks():
+    case = load_case(DOUBLE_DOME)
+    moved = with_overrides(case, blank_offset_mm=[8.0, 0.0])
+    assert moved.blank.centre_mm == (8.0, 0.0) and moved.blank.origin_mm == (8.0, 0.0)
+    assert moved.planes == ("y",)  # the x = 0 plane no longer mirrors the blank
+    a, b = case.blank.grid(), moved.blank.grid()
+    # The same net shifted by 8 mm (the half model's nodes, centred again).
+    assert len(b.nodes) == 2 * len(a.nodes) - len(a.nodes[a.nodes[:, 0] == 0.0])
+    np.testing.assert_allclose(np.sort(np.unique(b.nodes[:, 0]))[[0, -1]], [-142.0, 158.0])
+    with pytest.raises(CaseError, match="breaks the symmetry plane"):
+        with_overrides(case, blank_offset_mm=[8.0, 0.0], symmetry=["x", "y"])
+    with pytest.raises(CaseError, match=r"\[x, y\]"):
+        with_overrides(case, blank_offset_mm=[8.0])
+
+
+def test_a_tool_offset_moves_the_punch_only():
+    case = load_case(DOUBLE_DOME)
+    moved = with_overrides(case, tool_offset_mm=[0.0, 3.0], travel_mm=20.0)
+    punch, die = moved.tool("punch"), moved.tool("die")
+    assert punch.motion.y_mm == (3.0, 3.0) and punch.motion.z_mm == (0.0, 20.0)
+    assert die == case.tool("die") and moved.planes == ("x",)
+    assert moved.total_travel_mm == pytest.approx(20.0)
+    from fenicsx_drape.forming.hemisphere import HemisphereCase
+
+    hemi = HemisphereCase(quarter=False, tool_offset_mm=(2.0, 0.0)).to_case()
+    assert hemi.tool("punch").params["punch_x_mm"] == 2.0
+    assert hemi.tool("die").params.get("punch_x_mm", 0.0) == 0.0
+    from fenicsx_drape.forming.case import build_tools
+
+    tools = build_tools(hemi)
+    apex = np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    # The punch's apex sits on its moved axis at t = 0: zero gap there; the origin is 2 mm
+    # off the axis, above the cap of radius 60 mm by √(60² + 2²) − 60.
+    gap = tools["punch"].gap(apex, 0.0).phi
+    assert abs(gap[0]) < 1e-9 and gap[1] == pytest.approx(np.hypot(60.0, 2.0) - 60.0)
+    with pytest.raises(Exception, match="quarter"):
+        HemisphereCase(tool_offset_mm=(2.0, 0.0))
+
+
+def test_overrides_come_before_the_check_of_the_case(tmp_path):
+    text = DOUBLE_DOME.read_text().replace('size_mm = [300.0, 200.0]',
+                                           'size_mm = [300.0, 200.0]\ncentre_mm = [10.0, 0.0]')
+    (tmp_path / "case.toml").write_text(text)
+    for name in ("double_dome.py", "holder.geo"):
+        (tmp_path / name).write_text((DOUBLE_DOME.parent / name).read_text())
+    with pytest.raises(CaseError, match="symmetry 'x'"):
+        load_case(tmp_path / "case.toml")
+    case = load_case(tmp_path / "case.toml", symmetry=[])  # what --full gives
+    assert case.planes == () and case.blank.centre_mm == (10.0, 0.0)
+
+
+def test_sample_outside_the_lattice_is_nan_on_request():
+    from fenicsx_drape.forming.post import FormedGrid
+
+    X = np.stack([*np.meshgrid(np.arange(3.0), np.arange(3.0), indexing="ij"), np.zeros((3, 3))],
+                 axis=-1) * 10.0
+    g = FormedGrid(X, X + np.array([0.0, 0.0, 1.0]), False)
+    out = g.sample(np.array([[5.0, 5.0], [25.0, 5.0]]), outside="nan")
+    np.testing.assert_allclose(out[0], [5.0, 5.0, 1.0])
+    assert np.isnan(out[1]).all()
+    with pytest.raises(ValueError, match="outside the sheet"):
+        g.sample(np.array([[25.0, 5.0]]))
+
+
+def _form(tmp_path, name, **setup):
+    from fenicsx_drape.forming.outputs import form_case
+
+    case = load_case(DOUBLE_DOME, **COARSE, **setup)
+    run, result = form_case(tmp_path / name, case, fields=False)
+    return case, run, result
+
+
+@pytest.mark.slow
+@pytest.mark.skip_in_parallel
+def test_each_set_up_of_the_double_dome_is_formed_with_all_its_outputs(tmp_path):
+    pytest.importorskip("dolfinx")
+    centred = _form(tmp_path, "centred")
+    turned = _form(tmp_path, "turned", ply_angle_deg=4.0)
+    offset = _form(tmp_path, "offset", blank_offset_mm=[8.0, 0.0])
+    punch = _form(tmp_path, "punch", tool_offset_mm=[3.0, 0.0])
+    for name in ("centred", "turned", "offset", "punch"):
+        folder = tmp_path / name
+        for f in ("summary.json", "shear.png", "wrinkling.png", "bundle/bundle.toml",
+                  "bundle/case/case.toml", "provenance.json"):
+            assert (folder / f).is_file(), (name, f)
+    assert centred[0].planes == ("x", "y") and turned[0].planes == ()
+    assert offset[0].planes == ("y",) and punch[0].planes == ("y",)
+    # The written case reproduces the set-up (reloaded, it needs no override).
+    again = load_case(tmp_path / "offset" / "bundle" / "case" / "case.toml")
+    assert again.blank.centre_mm == (8.0, 0.0) and again.planes == ("y",)
+    # The formed part follows the punch: its height-weighted centroid (zero for the centred,
+    # symmetric part) moves towards the punch's offset, by less than the offset (the flange
+    # under the holder stays).
+    def centroid_x(run):
+        g = run.grid.full()
+        x, z = g.x[..., 0], g.x[..., 2]
+        lifted = z > 1.0
+        return float(np.nansum(x[lifted] * z[lifted]) / np.nansum(z[lifted]))
+    assert abs(centroid_x(centred[1])) < 1e-9
+    assert 0.3 < centroid_x(punch[1]) < 3.0
+    # A turned ply: the shear is no longer mirror-symmetric.
+    assert turned[2]["mirror_asymmetry_deg"] > 1.0
+    assert json.loads((tmp_path / "turned" / "summary.json").read_text())["ply_angle_deg"] == 4.0
+
+
+@pytest.mark.skip_in_parallel
+def test_the_command_line_forms_an_off_centre_case_on_the_full_model(tmp_path, capsys):
+    pytest.importorskip("dolfinx")
+    from fenicsx_drape.cli import main
+
+    out = tmp_path / "dd"
+    assert main(["form", str(DOUBLE_DOME), "--out", str(out), "--blank-offset-mm", "0", "6",
+                 "--tool-offset-mm", "2", "0", "--cell-mm", "20", "--step-mm", "4",
+                 "--no-fields", "--quiet"]) == 0
+    assert "modelled without them" in capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["symmetry"] == [] and summary["case"]["blank"]["centre_mm"] == [0.0, 6.0]
+
+
+@pytest.mark.skip_in_parallel
+def test_a_failure_after_the_solve_writes_what_was_computed(tmp_path, monkeypatch):
+    pytest.importorskip("dolfinx")
+    from fenicsx_drape.forming import outputs
+
+    def broken(*args, **kwargs):
+        raise ValueError("no picture today")
+
+    monkeypatch.setattr(outputs, "plot_wrinkling", broken)
+    case = load_case(DOUBLE_DOME, **COARSE, travel_mm=8.0)
+    case = dataclasses.replace(case, duration_s=case.duration_s)
+    with pytest.raises(outputs.FormingOutputError, match=str(tmp_path / "f")) as err:
+        outputs.form_case(tmp_path / "f", case)
+    assert "fields.xdmf" in str(err.value) and "summary.json" in str(err.value)
+    summary = json.loads((tmp_path / "f" / "summary.json").read_text())
+    assert "no picture today" in summary["error"] and summary["max_shear_deg"] > 0
+    assert (tmp_path / "f" / "fields.xdmf").is_file()
+
+
+@pytest.mark.slow
+@pytest.mark.skip_in_parallel
+def test_the_hemisphere_with_every_set_up_is_formed(tmp_path):
+    pytest.importorskip("dolfinx")
+    from fenicsx_drape.forming.hemisphere import HemisphereCase
+    from fenicsx_drape.forming.outputs import form_hemisphere
+
+    case = HemisphereCase(quarter=False, cell_mm=20.0, step_mm=4.0, ply_angle_deg=4.0,
+                          blank_offset_mm=(0.0, 7.0), tool_offset_mm=(2.0, 0.0))
+    _, result = form_hemisphere(tmp_path / "h", case, fields=False)
+    for f in ("summary.json", "shear.png", "paths.png", "bundle/bundle.toml"):
+        assert (tmp_path / "h" / f).is_file()
+    assert result["mirror_asymmetry_deg"] > 1.0

@@ -1,0 +1,146 @@
+"""Set-up candidates of the diagnosis (issue 27, spec version 3 "set-up before physics").
+
+The set-up applied to a test (case, symmetry planes, where the grid is read), the report's
+fields and the ledger's versions; on a coarse double dome (Δ = 20 mm), a turned ply hidden in a
+bundle is named with its angle, and a null bundle stays null.
+"""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fenicsx_drape.diagnosis import forming_kind as fk
+from fenicsx_drape.diagnosis import setup as st
+from fenicsx_drape.forming.case import load_case, with_overrides
+from fenicsx_drape.measurements.bundle import Bundle, Test
+from fenicsx_drape.model import default_model
+
+CASE = Path(__file__).parents[1] / "meshes" / "double_dome" / "case.toml"
+COARSE = {"cell_mm": 20.0, "step_mm": 4.0}
+
+
+def grid_test(case, X0=None) -> Test:
+    """A forming test naming ``case`` with a small grid (positions = flat, unformed)."""
+    X0 = np.array([[0.0, 0.0], [20.0, 0.0], [0.0, 20.0]]) if X0 is None else X0
+    cols = {"i": np.arange(len(X0), dtype=float), "j": np.zeros(len(X0)),
+            "x0_mm": X0[:, 0], "y0_mm": X0[:, 1], "x_mm": X0[:, 0], "y_mm": X0[:, 1],
+            "z_mm": np.zeros(len(X0)), "position_sd_mm": np.full(len(X0), 0.3)}
+    return Test(id="t", kind="forming", file="t.csv", columns=cols, case="case/case.toml",
+                forming_case=case)
+
+
+def test_each_set_up_is_applied_to_the_case_on_the_model_it_needs():
+    case = load_case(CASE, **COARSE)
+    test, model = grid_test(case), default_model()
+    t, shift = st.applied(test, "ply_angle_deg", [4.0], model)
+    assert t.forming_case.blank.ply_angle_deg == 4.0 and t.forming_case.planes == ()
+    t, shift = st.applied(test, "blank_offset_mm", [6.0, 0.0], model)
+    # An offset is fitted in x and y: the whole blank at every value, the stated one too.
+    assert t.forming_case.blank.centre_mm == (6.0, 0.0) and t.forming_case.planes == ()
+    np.testing.assert_array_equal(shift, [6.0, 0.0])
+    t, _ = st.applied(test, "tool_offset_mm", [0.0, 2.0], model)
+    assert t.forming_case.tool("punch").motion.y_mm == (2.0, 2.0)
+    assert t.forming_case.planes == ()
+    t, _ = st.applied(test, "tool_offset_mm", [0.0, 0.0], model)
+    assert t.forming_case.planes == ()
+    t, _ = st.applied(test, "holder_force_N", [2.0], model)
+    assert t.forming_case.holder.force_N == 400.0 and t.forming_case.planes == ("x", "y")
+    t, _ = st.applied(test, "mu", [0.45], model)
+    assert t.forming_case.holder.mu == 0.45
+    assert st.stated(test, "mu", model) == 0.3 and st.stated(test, "holder_force_N", model) == 200
+    assert st.stated(test, "blank_offset_mm", model) == [0.0, 0.0]
+    # The grid of a moved blank is read where the material lay: flat positions + offset.
+    moved = st.corrected(Bundle(name="b", tests=(test,)), "blank_offset_mm", [6.0, -1.0], model)
+    np.testing.assert_allclose(moved.tests[0].columns["x0_mm"], [6.0, 26.0, 6.0])
+    np.testing.assert_allclose(moved.tests[0].columns["y0_mm"], [-1.0, -1.0, 19.0])
+    assert moved.tests[0].forming_case.blank.centre_mm == (6.0, -1.0)
+
+
+def test_a_part_without_holder_cannot_have_a_holder_set_up_error():
+    case = load_case(CASE, **COARSE)
+    free = dataclasses.replace(case, holder=None, tools=tuple(t for t in case.tools
+                                                              if t.role != "holder"))
+    test = grid_test(free)
+    assert "no blank holder" in st._why_not("holder_force_N", [test])
+    assert "no blank holder" in st._why_not("mu", [test])
+    assert st._why_not("ply_angle_deg", [test]) is None
+    assert st._why_not("tool_offset_mm", [test]) is None
+
+
+def test_a_hemisphere_test_gets_its_case():
+    test = Test(
+        id="h", kind="forming", file="h.csv", columns=grid_test(None).columns,
+        geometry="hemisphere", forming={"duration_s": 40.0, "holder_force_N": 133.0})
+    (named,) = st.forming_tests(Bundle(name="b", tests=(test,)))
+    case = fk.forming_case_of(named)
+    assert case.name == "hemisphere" and case.planes == ("x", "y")
+    t, _ = st.applied(named, "tool_offset_mm", [2.0, 0.0], default_model())
+    assert t.forming_case.tool("punch").params["punch_x_mm"] == 2.0
+    assert t.forming_case.planes == ()
+
+
+def test_the_report_and_the_ledger_record_the_set_up(tmp_path):
+    from fenicsx_drape.diagnosis.ledger import history, table
+
+    error = {"rmse_N": 1.0, "normalised": 6.0, "per_test": {"t": 1.8}}
+    noise = {"rmse_N": 0.3, "per_test": {"t": 0.3}}
+    report = {"bundle": "b", "baseline": {"effects": ["holder_friction"], "plugins": [],
+                                          "parameters": {"mu": 0.3},
+                                          "error": {**error, "normalised": 2.5}},
+              "noise_floor": noise, "untestable": [], "conclusion": "Missing effect: x.",
+              "candidates": [{"effects": ["tool_friction"],
+                              "error_after": {**error, "normalised": 1.1}}],
+              "missing_effect": "tool_friction"}
+    stage = {"setup": [{"parameter": "ply_angle_deg", "stated": 0.0, "fitted": 4.1, "sd": 0.3,
+                        "error_after": {"normalised": 2.4}, "evidence": 2.5,
+                        "significant": True}],
+             "setup_error": "ply_angle_deg", "stated_error": error,
+             "stated_heldout_normalised": 6.0,
+             "untestable": [{"effect": "mu", "setup": True, "reason": "r"}]}
+    st.add_setup(report, stage)
+    assert report["setup_error"] == "ply_angle_deg" and report["setup"][0]["fitted"] == 4.1
+    assert report["untestable"][-1]["effect"] == "mu"
+    assert report["conclusion"].startswith("Set-up error: ply_angle_deg fitted 4.1 ± 0.3")
+    st.record_history(report, tmp_path)
+    versions = history([tmp_path])
+    assert [v.entry["normalised"] for v in versions] == [6.0, 2.5, 1.1]
+    assert versions[1].change == "setup ply_angle_deg = 4.1"
+    assert versions[2].change == "+tool_friction"
+    assert "setup ply_angle_deg = 4.1" in table(versions)
+    empty = {"untestable": []}
+    st.add_setup(empty, None)
+    assert empty["setup"] == [] and empty["setup_error"] is None
+    json.dumps(report)
+
+
+def _bundle(model, stated, seed, **setup) -> Bundle:
+    """The coarse double dome formed with a hidden set-up, its test naming the stated case."""
+    truth = with_overrides(stated, **setup)
+    test = fk.synthetic_case_test(model, truth, sd_mm=0.3, seed=seed, full=True)
+    return Bundle(name="hidden", tests=(dataclasses.replace(test, forming_case=stated,
+                                                            case_keys={}),))
+
+
+@pytest.mark.slow
+@pytest.mark.skip_in_parallel
+def test_a_turned_ply_is_named_with_its_angle_and_a_null_bundle_stays_null():
+    pytest.importorskip("dolfinx")
+    model = default_model()
+    stated = load_case(CASE, **COARSE)
+    from fenicsx_drape.diagnosis import diagnose as dg
+
+    rules = st.Rules(dg.EVIDENCE_THRESHOLD, dg.PARSIMONY, dg.UNTESTABLE_BELOW, 1)
+    names = ["ply_angle_deg", "holder_force_N"]
+    out = st.fit_setup(_bundle(model, stated, 41, ply_angle_deg=4.0), model, rules,
+                       parameters=names)
+    assert out["setup_error"] == "ply_angle_deg"
+    best = out["setup"][0]
+    assert abs(best["fitted"] - 4.0) <= max(2 * best["sd"], 1.0)
+    assert best["evidence"] > 1.2 and best["error_after"]["normalised"] < 1.5
+    assert out["stated_error"]["normalised"] > 3.0
+    null = st.fit_setup(_bundle(model, stated, 42), model, rules, parameters=names)
+    assert null["setup_error"] is None
+    assert all(s["evidence"] < 1.2 for s in null["setup"])
