@@ -102,7 +102,7 @@ def null_case():
 def test_null_bundle_gives_no_missing_effect(null_case):
     _, _, report = null_case
     assert set(report) >= CONTRACT_FIELDS
-    assert report["contract"] == 2
+    assert report["contract"] == 3
     assert set(report["baseline"]) >= {"effects", "error"}
     assert set(report["baseline"]["error"]) >= ERROR_FIELDS
     assert set(report["noise_floor"]) >= {"rmse_N", "per_test", "source"}

@@ -81,7 +81,7 @@ if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
-CONTRACT = 2  # version of the diagnosis contract the report follows
+CONTRACT = 3  # version of the diagnosis contract the report follows
 EVIDENCE_THRESHOLD = 1.2  # significant: evidence at least this (fixed for every bundle)
 ADEQUATE = 1.5  # a model within this many times the noise floor explains the data
 UNTESTABLE_BELOW = 0.3  # an effect changing the tests by less (× noise) is untestable
