@@ -11,55 +11,12 @@ stays null (no effect named).
 from pathlib import Path
 
 import pytest
+from test_forming_case_diagnosis import OCTAGON  # the generic small case
 
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
 from fenicsx_drape.measurements.bundle import load_bundle
-from fenicsx_drape.trust import trusting
 
 pytestmark = [pytest.mark.slow, pytest.mark.skip_in_parallel]
-TOOLS = ("punch_radius_mm = 40.0, fillet_radius_mm = 15.0, shoulder_radius_mm = 58.0, "
-         "holder_opening_mm = 120.0, travel_mm = 55.0")
-OCTAGON = f"""[case]
-name = "octagon"
-duration_s = 20.0
-step_mm = 2.0
-
-[blank]
-outline = "polygon"
-points_mm = [[-40.0, -95.0], [40.0, -95.0], [95.0, -40.0], [95.0, 40.0], [40.0, 95.0],
-             [-40.0, 95.0], [-95.0, 40.0], [-95.0, -40.0]]
-cell_mm = 20.0
-symmetry = ["x"]
-
-[holder]
-tool = "holder"
-force_N = 100.0
-
-[[tool]]
-name = "punch"
-role = "punch"
-geometry = "builtin:hemisphere"
-parameters = {{ {TOOLS} }}
-
-[[tool]]
-name = "die"
-role = "die"
-geometry = "builtin:hemisphere"
-parameters = {{ {TOOLS} }}
-
-[[tool]]
-name = "holder"
-role = "holder"
-geometry = "builtin:hemisphere"
-parameters = {{ {TOOLS} }}
-"""
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _trust_our_own_case():
-    """The bundles here name the repository's double dome, whose tools are Python geometry."""
-    with trusting():
-        yield
 
 
 @pytest.fixture(scope="module")
