@@ -2,9 +2,9 @@
 # otherwise in the project's image (built from the Dockerfile on first use).
 DRAPE := ./drape
 # A test that runs 5 min prints the stacks of its threads (a hung collective shows where), and
-# a run stuck for 20 min is stopped (exit status 124), so that CI fails instead of stalling.
+# a run stuck for 30 min is stopped (exit status 124), so that CI fails instead of stalling.
 PYTEST_ARGS := -q -o faulthandler_timeout=300
-LIMIT := timeout 1200
+LIMIT := timeout 1800
 
 .PHONY: test test-serial test-parallel test-fast lint demo docs
 
