@@ -382,9 +382,10 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         progress: Called with a line of text per stage.
 
     Returns:
-        ``{"setup": [...], "setup_error": name or None, "untestable": [...],
-        "stated_error": error record, "stated_heldout_normalised", "best": the chosen
-        candidate's internal values, "scheme", "rule"}``.
+        A dict: ``setup`` (the candidates' report entries), ``setup_error`` (a name or None),
+        ``untestable``, ``stated_error`` (the stated set-up's error record),
+        ``stated_heldout_normalised``, ``best`` (the chosen candidate's internal values),
+        ``scheme`` and ``rule``.
     """
     say = progress or (lambda line: None)
     names = list(parameters if parameters is not None else SETUP_PARAMETERS)
