@@ -7,8 +7,7 @@ import pytest
 
 from fenicsx_drape.diagnosis import forming_kind as fc
 from fenicsx_drape.diagnosis import forming_runs as runs
-from fenicsx_drape.diagnosis.compare import compare_tests, normalised_error
-from fenicsx_drape.diagnosis.kinds import KINDS
+from fenicsx_drape.diagnosis.compare import KINDS, compare_tests, normalised_error
 from fenicsx_drape.forming.post import FormedGrid
 from fenicsx_drape.measurements.bundle import Bundle, Test
 

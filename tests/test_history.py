@@ -7,7 +7,8 @@ import pytest
 
 from fenicsx_drape.cli import main
 from fenicsx_drape.diagnosis import ledger
-from fenicsx_drape.diagnosis.compare import CompareResult, Comparison
+from fenicsx_drape.diagnosis.compare import CompareResult
+from fenicsx_drape.diagnosis.kinds import Comparison
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import Model

@@ -34,7 +34,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.kinds import KINDS, Region, unit_of
+from fenicsx_drape.diagnosis.coupon_kind import COUPON
+from fenicsx_drape.diagnosis.forming_fit import FORMING
+from fenicsx_drape.diagnosis.kinds import Comparison, Region, unit_of
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
@@ -49,50 +51,14 @@ OUTLIER_SD = 5.0
 WHERE_MIN_SHARE = 0.05
 WHERE_MAX_ENTRIES = 12
 
+# The test kinds compare and diagnose know, in the order their fits run: the coupons fix the
+# material before the forming tests fit the friction coefficients with it held.
+KINDS = {"tensile": COUPON, "bias_extension": COUPON, "picture_frame": COUPON,
+         "forming": FORMING}
+
 
 # --------------------------------------------------------------------------------------------
 # Errors and their location
-
-
-@dataclasses.dataclass(frozen=True)
-class Comparison:
-    """A model against one test."""
-
-    id: str
-    kind: str
-    unit: str  # of the compared quantity (N for coupons)
-    measured: np.ndarray
-    simulated: np.ndarray
-    noise: float  # one standard deviation of a row's measurement noise, in ``unit``
-    noise_source: str  # "force_sd_N" | "second_differences" | ...
-    regions: tuple[Region, ...]
-    conditions: Mapping[str, float]  # the conditions that may vary across tests
-
-    @property
-    def residual(self) -> np.ndarray:
-        """Measured minus simulated, per row."""
-        return self.measured - self.simulated
-
-    @property
-    def rmse(self) -> float:
-        """RMS error over the rows, in ``unit``."""
-        return float(np.sqrt(np.mean(self.residual**2)))
-
-    @property
-    def mean_abs(self) -> float:
-        """Mean absolute error (the paper's measure, section 3.2), in ``unit``."""
-        return float(np.mean(np.abs(self.residual)))
-
-    @property
-    def percent(self) -> float:
-        """Mean absolute error in % of the mean absolute measured value (the paper's 7-9 %)."""
-        scale = float(np.mean(np.abs(self.measured)))
-        return 100.0 * self.mean_abs / scale if scale > 0 else math.nan
-
-    @property
-    def normalised(self) -> float:
-        """RMSE over noise: 1.0 is the noise floor."""
-        return self.rmse / self.noise
 
 
 def conditions_of(test: Test) -> dict[str, float]:
@@ -111,7 +77,7 @@ def prepare(bundle: Bundle) -> tuple[list[Test], list[str]]:
             tests.append(test)
         else:
             skipped.append(f"test {test.id!r}: {test.kind} tests cannot be compared yet "
-                           "(no simulation registered for this kind); left out")
+                           "(no simulation for this kind); left out")
     if not tests:
         raise DrapeInputError(f"bundle {bundle.name!r}: no test of a comparable kind "
                               f"({', '.join(KINDS)})")
@@ -501,10 +467,10 @@ def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = No
                details: dict | None = None) -> Model:
     """Fit a model to a bundle that may mix test kinds: each kind's own ``fit`` in turn.
 
-    The fits of the kinds present among the chosen tests run once each, in registration
-    order: the coupons (registered first) fix the material
+    The fits of the kinds present among the chosen tests run once each, in the order
+    of :data:`KINDS`: the coupons fix the material
     (:func:`fenicsx_drape.calibration.fit.fit`), then the forming tests fit the friction
-    coefficients with the material held (:func:`~fenicsx_drape.diagnosis.forming_kind.
+    coefficients with the material held (:func:`~fenicsx_drape.diagnosis.forming_fit.
     fit_forming`). A kind without a fit leaves the model as it is.
 
     Args:

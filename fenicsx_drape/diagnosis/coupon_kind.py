@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.kinds import Kind, Region, register_kind
+from fenicsx_drape.diagnosis.kinds import Kind, Region
 
 if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test
@@ -188,6 +188,3 @@ def _coupon_fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
 COUPON = Kind(unit="N", measured=lambda test: test.force_N, noise=_coupon_noise,
               simulate=_coupon_simulate, regions=_coupon_regions, abscissa=coupon_strain,
               sd_column="force_sd_N", fit=_coupon_fit)
-register_kind("tensile", COUPON)
-register_kind("bias_extension", COUPON)
-register_kind("picture_frame", COUPON)

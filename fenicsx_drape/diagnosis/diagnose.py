@@ -60,7 +60,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fenicsx_drape.diagnosis.compare import (
-    Comparison,
+    KINDS,
     compare_tests,
     error_record,
     find_outliers,
@@ -74,7 +74,8 @@ from fenicsx_drape.diagnosis.compare import (
     trends,
     where,
 )
-from fenicsx_drape.diagnosis.kinds import KINDS, sd_column_of
+from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM
+from fenicsx_drape.diagnosis.kinds import Comparison, sd_column_of
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
@@ -788,3 +789,32 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
                      parameters=report["baseline"]["parameters"],
                      missing_effect=report["missing_effect"], seed=None)
     return path
+
+
+def confirm(bundle: Bundle, report, cell_mm: float = FULL_CELL_MM,
+            progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """The screening's baseline and best candidate again on the full mesh (module doc, cost).
+
+    Each model of a diagnosis :class:`Report` keeps its material;
+    its forming parameters are refitted on cells of ``cell_mm`` and it is compared with the
+    forming tests there.
+
+    Returns:
+        ``{"cell_mm", label: {"error", "metrics", "forming_parameters"}}`` for the baseline
+        and the first-ranked candidate.
+    """
+    from fenicsx_drape.diagnosis.forming_fit import FORMING, fit_forming, forming_parameters
+    from fenicsx_drape.diagnosis.forming_runs import resolution
+
+    tests = [t for t in bundle.tests if t.kind == "forming"]
+    labels = ["baseline"] + [c["effect"] for c in report["candidates"][:1]]
+    out: dict[str, Any] = {"cell_mm": cell_mm}
+    with resolution(cell_mm):
+        for label in labels:
+            model = fit_forming(bundle, report.models[label], progress=progress)
+            values = {t.id: FORMING.simulate(t, model) for t in tests}
+            out[label] = {"error": error_record(compare_tests(tests, values)),
+                          "metrics": {t.id: FORMING.metrics(t, values[t.id], model) for t in tests},
+                          "forming_parameters": {n: float(model.parameters[n])
+                                                 for n in forming_parameters(model)}}
+    return out

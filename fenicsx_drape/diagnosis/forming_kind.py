@@ -1,9 +1,9 @@
 """Forming tests in ``compare`` and ``diagnose``: a simulated sheet against a measured grid.
 
 A forming test (``kind = "forming"``, ``docs/measurements.md``) gives the formed
-positions of the nodes of a grid drawn on the flat sheet. It plugs into
-:mod:`fenicsx_drape.diagnosis.compare` through the registry of test kinds
-(:func:`~fenicsx_drape.diagnosis.kinds.register_kind`; compare never imports it):
+positions of the nodes of a grid drawn on the flat sheet. These are the grid's hooks of the
+forming kind (:data:`~fenicsx_drape.diagnosis.forming_fit.FORMING`, which hands a lab
+measurement to :mod:`~fenicsx_drape.diagnosis.lab_kind`):
 
 - **simulation**: the part the test was formed on, under its conditions. A test with
   ``geometry = "hemisphere"`` forms the paper's hemisphere
@@ -32,7 +32,8 @@ positions of the nodes of a grid drawn on the flat sheet. It plugs into
   node displacement, the paper's 1.57 mm and 4 %), and the shear-angle and wrinkling-strain
   errors when the grid has those columns.
 
-**Fitting.** In a forming test only the forming parameters are fitted (:func:`fit_forming`):
+**Fitting.** In a forming test only the forming parameters are fitted
+(:func:`~fenicsx_drape.diagnosis.forming_fit.fit_forming`):
 the friction coefficients of the model's forming effects (``mu`` of ``holder_friction``,
 ``mu_tool`` of ``tool_friction``), the material parameters staying at their coupon-fitted (or
 given) values. The fit is Gauss-Newton on the per-coordinate residuals in noise units, with
@@ -59,16 +60,15 @@ for both. A coarser screening mesh
 (:data:`~fenicsx_drape.diagnosis.forming_runs.SCREEN_CELL_MM`, 4× cheaper) is only sound
 when its discretisation error is below the noise: against a grid formed on 10 mm cells, the
 20 mm mesh misses by 2.9 × the 0.3 mm noise (at the tow axes over the fillet), which hides a
-tool friction that the 10 mm mesh finds; :func:`confirm` refits the baseline and the winner
-on another mesh to check a verdict.
+tool friction that the 10 mm mesh finds; :func:`~fenicsx_drape.diagnosis.diagnose.confirm`
+refits the baseline and the winner on another mesh to check a verdict.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -80,17 +80,16 @@ from fenicsx_drape.diagnosis.forming_runs import (
     cell_override,
     current_cell_mm,
     form_many,
-    resolution,
     stopped_at,
 )
-from fenicsx_drape.diagnosis.kinds import Kind, Region, register_kind
+from fenicsx_drape.diagnosis.kinds import Region
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case import FormingCase, case_for_test, with_overrides
 
 if TYPE_CHECKING:
-    from fenicsx_drape.diagnosis.compare import Comparison
+    from fenicsx_drape.diagnosis.kinds import Comparison
     from fenicsx_drape.forming.post import FormedGrid
-    from fenicsx_drape.measurements.bundle import Bundle, Test
+    from fenicsx_drape.measurements.bundle import Test
     from fenicsx_drape.model import Model
 
 FORMING_PARAMETERS = ("mu", "mu_tool")  # what a forming test fits (friction coefficients)
@@ -532,32 +531,13 @@ def field_errors(test: Test, sheet: FormedGrid) -> dict[str, float]:
     return out
 
 
-def _abscissa(test: Test) -> tuple[str, np.ndarray]:
+def abscissa(test: Test) -> tuple[str, np.ndarray]:
+    """What a grid's residuals are plotted against: each node's flat distance from the axis."""
     return "r0_mm", np.repeat(np.hypot(*reference_points(test).T), 3)
 
 
 # --------------------------------------------------------------------------------------------
 # Fitting the forming parameters
-
-
-def forming_parameters(model: Model) -> tuple[str, ...]:
-    """The forming parameters the model fits: those of :data:`FORMING_PARAMETERS` it uses."""
-    active = model.active_parameters()
-    return tuple(n for n in FORMING_PARAMETERS if n in active)
-
-
-def _residuals(tests: Sequence[Test], model: Model, names: Sequence[str],
-               sets: np.ndarray) -> np.ndarray:
-    """Residuals in noise units, cost = Σ_tests (RMSE / noise)², one row per parameter set."""
-    vectorised = model.with_parameters(**{n: sets[:, i] for i, n in enumerate(names)})
-    out = []
-    for test in tests:
-        values = np.atleast_2d(FORMING.simulate(test, vectorised))
-        sd = _by_measurement(value_noise, "row_sd")(test)
-        w = 1.0 / sd / math.sqrt(sd.size)
-        r = (values - FORMING.measured(test)) * w
-        out.append(np.where(np.isfinite(r), r, 0.0))
-    return np.concatenate(out, axis=1)
 
 
 def holder_mu_free(test: Test) -> bool:
@@ -566,84 +546,6 @@ def holder_mu_free(test: Test) -> bool:
         return True
     holder = forming_case_of(test).holder
     return holder is not None and holder.mu is None
-
-
-def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
-                max_iterations: int = MAX_ITERATIONS,
-                progress: Callable[[str], None] | None = None) -> Model:
-    """Fit the model's forming parameters to the forming tests of ``bundle`` (module doc).
-
-    Args:
-        bundle: The measurements (coupon tests are ignored here).
-        model: The model, material parameters as fitted to the coupons (or given).
-        tests: Only these test ids; all forming tests when None.
-        max_iterations: Gauss-Newton iterations at most (capped at :data:`MAX_ITERATIONS`).
-        progress: Called with a line of text per iteration.
-
-    Returns:
-        The model with its forming parameters fitted.
-    """
-    from fenicsx_drape.model import parameter_info
-
-    say = progress or (lambda line: None)
-    chosen = [t for t in bundle.tests if t.kind == "forming" and (tests is None or t.id in tests)]
-    names = forming_parameters(model)
-    if not any(holder_mu_free(t) for t in chosen):
-        names = tuple(n for n in names if n != "mu")
-    if not chosen or not names:
-        return model
-    p = np.array([float(model.parameters[n]) for n in names])
-    k = len(names)
-    h = FD_STEP * np.eye(k)
-    cost = {}
-
-    def evaluate(p: np.ndarray, *others: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        R = _residuals(chosen, model, names, np.vstack([p, p + h, *others]))
-        for q, r in zip(others, R[k + 1:]):
-            cost[tuple(q)] = float(r @ r)
-        return R[0], (R[1:k + 1] - R[0]).T / FD_STEP
-
-    # Two starts, judged in the first batch of runs: the model's values and the parameters'
-    # defaults (a warm start from a model without the right physics can sit far off).
-    default = np.clip([parameter_info(n).default for n in names], *MU_BOUNDS)
-    r, J = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
-    if cost.get(tuple(default), math.inf) < r @ r:
-        say(f"  forming fit: starting from the defaults "
-            f"{ {n: round(float(v), 4) for n, v in zip(names, default)} } "
-            f"(cost {cost[tuple(default)]:.4g}, was {r @ r:.4g})")
-        p = default
-        r, J = evaluate(p)
-    for iteration in range(min(max_iterations, MAX_ITERATIONS)):
-        step = np.linalg.lstsq(J, -r, rcond=None)[0]
-        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP)
-        for attempt in range(2):  # the Gauss-Newton step, then half of it
-            trial = np.clip(p + step / 2**attempt, *MU_BOUNDS)
-            if np.abs(trial - p).max() < XTOL:
-                break
-            r_new, J_new = evaluate(trial)
-            say(f"  forming fit {iteration + 1}: "
-                f"{ {n: round(float(v), 4) for n, v in zip(names, trial)} }, "
-                f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
-            if r_new @ r_new < r @ r:
-                break
-        else:
-            break
-        if np.abs(trial - p).max() < XTOL:
-            break
-        p, r, J = trial, r_new, J_new
-    return model.with_parameters(**{n: float(v) for n, v in zip(names, p)})
-
-
-def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
-         parameters: Sequence[str] | None = None, max_iterations: int = MAX_ITERATIONS,
-         from_features: bool = True, progress: Callable[[str], None] | None = None) -> Model:
-    """The forming kind's fit (:class:`~fenicsx_drape.diagnosis.kinds.FitHook`).
-
-    The forming parameters only (:func:`fit_forming`), the material held as the coupons (or
-    the model) left it: ``parameters`` and ``from_features`` concern the material.
-    """
-    return fit_forming(bundle, model, tests=tests, progress=progress,
-                       max_iterations=max_iterations)
 
 
 def synthetic_forming_test(model: Model, *, test_id: str = "hemisphere",
@@ -726,34 +628,6 @@ def write_case_bundle(name: str, tests: Sequence[Test], folder: str | Path, *,
     return write_bundle(Bundle(name=name, tests=tuple(tests)), folder, comment=comment)
 
 
-def confirm(bundle: Bundle, report, cell_mm: float = FULL_CELL_MM,
-            progress: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """The screening's baseline and best candidate again on the full mesh (module doc, cost).
-
-    Each model of a diagnosis :class:`~fenicsx_drape.diagnosis.diagnose.Report` keeps its material;
-    its forming parameters are refitted on cells of ``cell_mm`` and it is compared with the
-    forming tests there.
-
-    Returns:
-        ``{"cell_mm", label: {"error", "metrics", "forming_parameters"}}`` for the baseline
-        and the first-ranked candidate.
-    """
-    from fenicsx_drape.diagnosis.compare import compare_tests, error_record
-
-    tests = [t for t in bundle.tests if t.kind == "forming"]
-    labels = ["baseline"] + [c["effect"] for c in report["candidates"][:1]]
-    out: dict[str, Any] = {"cell_mm": cell_mm}
-    with resolution(cell_mm):
-        for label in labels:
-            model = fit_forming(bundle, report.models[label], progress=progress)
-            values = {t.id: FORMING.simulate(t, model) for t in tests}
-            out[label] = {"error": error_record(compare_tests(tests, values)),
-                          "metrics": {t.id: FORMING.metrics(t, values[t.id], model) for t in tests},
-                          "forming_parameters": {n: float(model.parameters[n])
-                                                 for n in forming_parameters(model)}}
-    return out
-
-
 # --------------------------------------------------------------------------------------------
 # Pictures
 
@@ -799,83 +673,3 @@ def plot_error_map(comparisons: Mapping[str, Comparison], test: Test, path: Path
     axes[n].set_xlabel(f"share of the {next(iter(comparisons))} error (%)")
     fig.suptitle(f"{test.id}: where the formed part misses", fontsize=10)
     return save_figure(fig, path)
-
-
-# The hooks of lab measurements (spec version 3): :mod:`~fenicsx_drape.diagnosis.lab_kind`
-# registers itself here when imported (as :mod:`fenicsx_drape.diagnosis` does).
-_lab_hooks: list[Any] = []
-
-
-def register_lab_hooks(module: Any) -> None:
-    """Hand the forming tests that hold a lab measurement to ``module``'s functions."""
-    _lab_hooks[:] = [module]
-
-
-def _lab(test: Test) -> Any:
-    """The lab hooks' module when ``test`` holds a lab measurement, else None."""
-    if getattr(test, "lab", None) is None or test.lab.measurement == "file":
-        return None
-    if not _lab_hooks:
-        raise DrapeInputError(f"test {test.id!r}: lab measurements need "
-                              "fenicsx_drape.diagnosis.lab_kind (import fenicsx_drape.diagnosis)")
-    return _lab_hooks[0]
-
-
-def _by_measurement(grid_hook: Callable, name: str) -> Callable:
-    """A hook of the forming kind: the grid's, or a lab measurement's.
-
-    A test holding a lab measurement (spec version 3) goes to the registered lab hooks'
-    function ``name`` (:func:`register_lab_hooks`).
-    """
-
-    def hook(test: Test, *args, **kwargs):
-        lab = _lab(test)
-        if lab is not None:
-            return getattr(lab, name)(test, *args, **kwargs)
-        return grid_hook(test, *args, **kwargs)
-
-    hook.__name__ = hook.__qualname__ = getattr(grid_hook, "__name__", name)
-    hook.__doc__ = grid_hook.__doc__
-    return hook
-
-
-def measured_values(test: Test) -> np.ndarray:
-    """The measured values of a forming test: x, y, z of every node (flattened)."""
-    return measured_positions(test).ravel()
-
-
-def value_noise(test: Test) -> np.ndarray:
-    """Per compared value, the noise (``inf``: not fitted).
-
-    The grid's x, y, z of a node share its ``position_sd_mm``.
-    """
-    return np.repeat(row_noise(test), 3)
-
-
-def _sd_column(test: Test) -> str:
-    from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
-
-    return SD_COLUMN.get(measurement_of(test) or "file", "position_sd_mm")
-
-
-FORMING = Kind(unit=_by_measurement(lambda test: "mm", "unit"),
-               measured=_by_measurement(measured_values, "measured"),
-               noise=_by_measurement(noise, "noise"),
-               simulate=_by_measurement(simulate, "simulate"),
-               regions=_by_measurement(part_regions, "regions"),
-               abscissa=_by_measurement(_abscissa, "abscissa"),
-               sd_column=_sd_column, fit=_fit,
-               metrics=_by_measurement(metrics, "metrics"),
-               plot=None)
-
-
-def _plot(comparisons, test: Test, path: Path, shares=()) -> Path:
-    """The forming kind's picture: the grid's error map, or a lab measurement's own."""
-    lab = _lab(test)
-    if lab is not None:
-        return lab.plot(comparisons, test, path, shares)
-    return plot_error_map(comparisons, test, path, shares)
-
-
-FORMING = dataclasses.replace(FORMING, plot=_plot)
-register_kind("forming", FORMING)

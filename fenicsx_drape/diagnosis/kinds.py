@@ -1,15 +1,14 @@
-"""The registry of test kinds: how a kind of test is measured, simulated, fitted and judged.
+"""What a test kind is: how it is measured, simulated, fitted and judged, and a comparison.
 
-``compare`` and ``diagnose`` know no test kind by name: they look each test's kind up in
-:data:`KINDS` and call its hooks. A kind registers itself with :func:`register_kind` when its
-module is imported; :mod:`fenicsx_drape.diagnosis` imports the built-in ones (coupons first,
-then forming), so importing anything of the diagnosis package makes them comparable.
+``compare`` and ``diagnose`` call a test's :class:`Kind` hooks; the kinds they know are the
+table :data:`~fenicsx_drape.diagnosis.compare.KINDS` (the coupons' and the forming kind's).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+import math
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -65,15 +64,12 @@ class Kind:
     # the per-row standard deviation column ("force_sd_N", "position_sd_mm"), or per test
     sd_column: str | Callable[[Test], str]
     # Optional: fitting the parameters the kind's tests determine (kinds sharing one fit run
-    # it once; the kinds' fits run in registration order, so forming fits after the coupons).
+    # it once; the kinds' fits run in the table's order, so forming fits after the coupons).
     fit: FitHook | None = None
     # Optional: the kind's own measures of a comparison (test, simulated values, model) and
     # its own picture (as :func:`fenicsx_drape.diagnosis.compare.plot_residuals`).
     metrics: Callable[[Test, np.ndarray, Model], dict[str, Any]] | None = None
     plot: Callable[..., Path] | None = None
-
-
-KINDS: dict[str, Kind] = {}
 
 
 def unit_of(kind: Kind, test: Test) -> str:
@@ -86,6 +82,42 @@ def sd_column_of(kind: Kind, test: Test) -> str:
     return kind.sd_column(test) if callable(kind.sd_column) else kind.sd_column
 
 
-def register_kind(name: str, kind: Kind) -> None:
-    """Make tests of kind ``name`` comparable (and diagnosable)."""
-    KINDS[name] = kind
+@dataclasses.dataclass(frozen=True)
+class Comparison:
+    """A model against one test."""
+
+    id: str
+    kind: str
+    unit: str  # of the compared quantity (N for coupons)
+    measured: np.ndarray
+    simulated: np.ndarray
+    noise: float  # one standard deviation of a row's measurement noise, in ``unit``
+    noise_source: str  # "force_sd_N" | "second_differences" | ...
+    regions: tuple[Region, ...]
+    conditions: Mapping[str, float]  # the conditions that may vary across tests
+
+    @property
+    def residual(self) -> np.ndarray:
+        """Measured minus simulated, per row."""
+        return self.measured - self.simulated
+
+    @property
+    def rmse(self) -> float:
+        """RMS error over the rows, in ``unit``."""
+        return float(np.sqrt(np.mean(self.residual**2)))
+
+    @property
+    def mean_abs(self) -> float:
+        """Mean absolute error (the paper's measure, section 3.2), in ``unit``."""
+        return float(np.mean(np.abs(self.residual)))
+
+    @property
+    def percent(self) -> float:
+        """Mean absolute error in % of the mean absolute measured value (the paper's 7-9 %)."""
+        scale = float(np.mean(np.abs(self.measured)))
+        return 100.0 * self.mean_abs / scale if scale > 0 else math.nan
+
+    @property
+    def normalised(self) -> float:
+        """RMSE over noise: 1.0 is the noise floor."""
+        return self.rmse / self.noise

@@ -2,7 +2,7 @@
 
 A forming test's lab measurements (:mod:`fenicsx_drape.measurements.lab`) are tests of their
 own for the errors (ids ``"<test id>/<measurement>"``), of kind ``forming``: the forming
-kind (:mod:`~fenicsx_drape.diagnosis.forming_kind`) hands them here. Each is compared with
+kind (:mod:`~fenicsx_drape.diagnosis.forming_fit`) hands them here. Each is compared with
 the same forming run as the test's grid (cached: one run serves all of a test's
 measurements), on the whole formed blank triangulated (:mod:`fenicsx_drape.forming.measure`):
 
@@ -44,7 +44,6 @@ brings within reach (more than half its points unmatched, or an RMS distance abo
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -57,7 +56,7 @@ from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
 
 if TYPE_CHECKING:
-    from fenicsx_drape.diagnosis.compare import Comparison
+    from fenicsx_drape.diagnosis.kinds import Comparison
     from fenicsx_drape.forming.measure import SheetMesh
     from fenicsx_drape.forming.post import FormedGrid
     from fenicsx_drape.measurements.bundle import Test
@@ -644,4 +643,3 @@ def _matched(test: Test, comparison: Comparison) -> dict[str, Any] | None:
     return None
 
 
-fk.register_lab_hooks(sys.modules[__name__])

@@ -1,0 +1,204 @@
+"""The forming kind as ``compare`` and ``diagnose`` see it, and the fit of its parameters.
+
+A forming test holds a measured grid (:mod:`~fenicsx_drape.diagnosis.forming_kind`) or a lab
+measurement (:mod:`~fenicsx_drape.diagnosis.lab_kind`: shear points, a scan, the blank's
+edge, the press force; spec version 3). :data:`FORMING` hands each test to the module that
+knows its measurement; :func:`fit_forming` fits the model's forming parameters (the friction
+coefficients) to all of a bundle's forming tests together, whichever they hold (the method:
+:mod:`~fenicsx_drape.diagnosis.forming_kind`'s module docstring, "Fitting").
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fenicsx_drape.diagnosis import forming_kind as fk
+from fenicsx_drape.diagnosis import lab_kind
+from fenicsx_drape.diagnosis.forming_kind import (
+    FD_STEP,
+    FORMING_PARAMETERS,
+    MAX_ITERATIONS,
+    MAX_STEP,
+    MU_BOUNDS,
+    XTOL,
+    holder_mu_free,
+)
+from fenicsx_drape.diagnosis.kinds import Kind
+
+if TYPE_CHECKING:
+    from fenicsx_drape.measurements.bundle import Bundle, Test
+    from fenicsx_drape.model import Model
+
+
+# --------------------------------------------------------------------------------------------
+# The kind: a grid's hooks or a lab measurement's
+
+
+def _lab(test: Test) -> Any:
+    """The lab module's hooks when ``test`` holds a lab measurement, else None."""
+    if getattr(test, "lab", None) is None or test.lab.measurement == "file":
+        return None
+    return lab_kind
+
+
+def _by_measurement(grid_hook: Callable, name: str) -> Callable:
+    """A hook of the forming kind: the grid's, or a lab measurement's.
+
+    A test holding a lab measurement (spec version 3) goes to the lab module's
+    function ``name`` (:mod:`~fenicsx_drape.diagnosis.lab_kind`).
+    """
+
+    def hook(test: Test, *args, **kwargs):
+        lab = _lab(test)
+        if lab is not None:
+            return getattr(lab, name)(test, *args, **kwargs)
+        return grid_hook(test, *args, **kwargs)
+
+    hook.__name__ = hook.__qualname__ = getattr(grid_hook, "__name__", name)
+    hook.__doc__ = grid_hook.__doc__
+    return hook
+
+
+def measured_values(test: Test) -> np.ndarray:
+    """The measured values of a forming test: x, y, z of every node (flattened)."""
+    return fk.measured_positions(test).ravel()
+
+
+def value_noise(test: Test) -> np.ndarray:
+    """Per compared value, the noise (``inf``: not fitted).
+
+    The grid's x, y, z of a node share its ``position_sd_mm``.
+    """
+    return np.repeat(fk.row_noise(test), 3)
+
+
+def _sd_column(test: Test) -> str:
+    from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
+
+    return SD_COLUMN.get(measurement_of(test) or "file", "position_sd_mm")
+
+
+# --------------------------------------------------------------------------------------------
+# Fitting the forming parameters
+
+
+def forming_parameters(model: Model) -> tuple[str, ...]:
+    """The forming parameters the model fits: those of :data:`FORMING_PARAMETERS` it uses."""
+    active = model.active_parameters()
+    return tuple(n for n in FORMING_PARAMETERS if n in active)
+
+
+def _residuals(tests: Sequence[Test], model: Model, names: Sequence[str],
+               sets: np.ndarray) -> np.ndarray:
+    """Residuals in noise units, cost = Σ_tests (RMSE / noise)², one row per parameter set."""
+    vectorised = model.with_parameters(**{n: sets[:, i] for i, n in enumerate(names)})
+    out = []
+    for test in tests:
+        values = np.atleast_2d(FORMING.simulate(test, vectorised))
+        sd = _by_measurement(value_noise, "row_sd")(test)
+        w = 1.0 / sd / math.sqrt(sd.size)
+        r = (values - FORMING.measured(test)) * w
+        out.append(np.where(np.isfinite(r), r, 0.0))
+    return np.concatenate(out, axis=1)
+
+
+def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
+                max_iterations: int = MAX_ITERATIONS,
+                progress: Callable[[str], None] | None = None) -> Model:
+    """Fit the model's forming parameters to the forming tests of ``bundle`` (module doc).
+
+    Args:
+        bundle: The measurements (coupon tests are ignored here).
+        model: The model, material parameters as fitted to the coupons (or given).
+        tests: Only these test ids; all forming tests when None.
+        max_iterations: Gauss-Newton iterations at most (capped at :data:`MAX_ITERATIONS`).
+        progress: Called with a line of text per iteration.
+
+    Returns:
+        The model with its forming parameters fitted.
+    """
+    from fenicsx_drape.model import parameter_info
+
+    say = progress or (lambda line: None)
+    chosen = [t for t in bundle.tests if t.kind == "forming" and (tests is None or t.id in tests)]
+    names = forming_parameters(model)
+    if not any(holder_mu_free(t) for t in chosen):
+        names = tuple(n for n in names if n != "mu")
+    if not chosen or not names:
+        return model
+    p = np.array([float(model.parameters[n]) for n in names])
+    k = len(names)
+    h = FD_STEP * np.eye(k)
+    cost = {}
+
+    def evaluate(p: np.ndarray, *others: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        R = _residuals(chosen, model, names, np.vstack([p, p + h, *others]))
+        for q, r in zip(others, R[k + 1:]):
+            cost[tuple(q)] = float(r @ r)
+        return R[0], (R[1:k + 1] - R[0]).T / FD_STEP
+
+    # Two starts, judged in the first batch of runs: the model's values and the parameters'
+    # defaults (a warm start from a model without the right physics can sit far off).
+    default = np.clip([parameter_info(n).default for n in names], *MU_BOUNDS)
+    r, J = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
+    if cost.get(tuple(default), math.inf) < r @ r:
+        say(f"  forming fit: starting from the defaults "
+            f"{ {n: round(float(v), 4) for n, v in zip(names, default)} } "
+            f"(cost {cost[tuple(default)]:.4g}, was {r @ r:.4g})")
+        p = default
+        r, J = evaluate(p)
+    for iteration in range(min(max_iterations, MAX_ITERATIONS)):
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP)
+        for attempt in range(2):  # the Gauss-Newton step, then half of it
+            trial = np.clip(p + step / 2**attempt, *MU_BOUNDS)
+            if np.abs(trial - p).max() < XTOL:
+                break
+            r_new, J_new = evaluate(trial)
+            say(f"  forming fit {iteration + 1}: "
+                f"{ {n: round(float(v), 4) for n, v in zip(names, trial)} }, "
+                f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
+            if r_new @ r_new < r @ r:
+                break
+        else:
+            break
+        if np.abs(trial - p).max() < XTOL:
+            break
+        p, r, J = trial, r_new, J_new
+    return model.with_parameters(**{n: float(v) for n, v in zip(names, p)})
+
+
+def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
+         parameters: Sequence[str] | None = None, max_iterations: int = MAX_ITERATIONS,
+         from_features: bool = True, progress: Callable[[str], None] | None = None) -> Model:
+    """The forming kind's fit (:class:`~fenicsx_drape.diagnosis.kinds.FitHook`).
+
+    The forming parameters only (:func:`fit_forming`), the material held as the coupons (or
+    the model) left it: ``parameters`` and ``from_features`` concern the material.
+    """
+    return fit_forming(bundle, model, tests=tests, progress=progress,
+                       max_iterations=max_iterations)
+
+
+def _plot(comparisons, test: Test, path: Path, shares=()) -> Path:
+    """The forming kind's picture: the grid's error map, or a lab measurement's own."""
+    lab = _lab(test)
+    if lab is not None:
+        return lab.plot(comparisons, test, path, shares)
+    return fk.plot_error_map(comparisons, test, path, shares)
+
+
+FORMING = Kind(unit=_by_measurement(lambda test: "mm", "unit"),
+               measured=_by_measurement(measured_values, "measured"),
+               noise=_by_measurement(fk.noise, "noise"),
+               simulate=_by_measurement(fk.simulate, "simulate"),
+               regions=_by_measurement(fk.part_regions, "regions"),
+               abscissa=_by_measurement(fk.abscissa, "abscissa"),
+               sd_column=_sd_column, fit=_fit,
+               metrics=_by_measurement(fk.metrics, "metrics"),
+               plot=_plot)
