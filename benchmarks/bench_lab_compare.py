@@ -43,7 +43,7 @@ def main() -> None:
     from fenicsx_drape.diagnosis.diagnose import diagnose
     from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
     from fenicsx_drape.forming import measure
-    from fenicsx_drape.forming.case import load_case, with_overrides
+    from fenicsx_drape.forming.case import case_for_test, load_case, with_overrides
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model
 
@@ -58,7 +58,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = write_lab_bundle(Path(tmp) / "lab", case, tables,
                                   measurements=["shear_points", "surface", "outline"])
-        bundle = load_bundle(folder)
+        bundle = load_bundle(folder, read_case=case_for_test)
         scan = next(t for t in bundle.tests if t.id.endswith("/surface"))
         mesh = measure.SheetMesh.of(grid)
         P = lab_kind.points(scan)
@@ -89,7 +89,7 @@ def main() -> None:
         runs_lab = len(runs._cache)
         test = fc.synthetic_case_test(truth, case, sd_mm=0.3, seed=1, full=True)
         fc.write_case_bundle("grid", [test], Path(tmp) / "grid")
-        grid_bundle = load_bundle(Path(tmp) / "grid")
+        grid_bundle = load_bundle(Path(tmp) / "grid", read_case=case_for_test)
         runs._cache.clear()
         t = time.perf_counter()
         grid_report = diagnose(grid_bundle, baseline, candidates=["tow_buckling"])

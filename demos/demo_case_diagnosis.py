@@ -44,7 +44,7 @@ from fenicsx_drape.diagnosis import forming_kind as fc
 from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.compare import evaluate, write_compare
 from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
-from fenicsx_drape.forming.case import load_case
+from fenicsx_drape.forming.case import case_for_test, load_case
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import default_model
 from fenicsx_drape.trust import set_trusted
@@ -81,7 +81,7 @@ test = fc.synthetic_case_test(truth, case, sd_mm=SD_MM, seed=2007, full=True)
 fc.write_case_bundle(f"{case.name}-hidden-{HIDDEN}", [test], out / "bundle",
                      comment=f"demo: {case.name} formed with {HIDDEN}, {SD_MM} mm noise per "
                              "coordinate, whole blank")
-bundle = load_bundle(out / "bundle")
+bundle = load_bundle(out / "bundle", read_case=case_for_test)
 (test,) = bundle.tests
 print(f"measured grid: {test.n_rows} nodes (whole blank), its case {test.case}")
 # -

@@ -43,7 +43,7 @@ from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.compare import evaluate, write_compare
 from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
-from fenicsx_drape.forming.case import load_case, with_overrides
+from fenicsx_drape.forming.case import case_for_test, load_case, with_overrides
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import default_model
 from fenicsx_drape.trust import set_trusted
@@ -69,7 +69,7 @@ write_lab_bundle(out / "bundle", case, tables, name=f"double-dome-lab-hidden-{HI
 # The bundle names our own case, whose tools are Python geometry: we trust its code, as
 # `--trust` says on the command line (a bundle is data otherwise).
 set_trusted(True)
-bundle = load_bundle(out / "bundle")
+bundle = load_bundle(out / "bundle", read_case=case_for_test)
 for test in bundle.tests:
     print(f"{test.id}: {test.n_rows} rows from {test.file}")
 # -

@@ -121,11 +121,13 @@ def load_bundle_reported(path):
     """Load a measurement bundle and print what it kept beyond the spec (unknown keys).
 
     The spec's rule: unknown keys are kept and reported, never silently dropped; every
-    command that reads a bundle reads it through here.
+    command that reads a bundle reads it through here. The case files its forming tests
+    name are read and checked with it.
     """
+    from fenicsx_drape.forming.case import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
 
-    bundle = load_bundle(path)
+    bundle = load_bundle(path, read_case=case_for_test)
     for line in bundle.report().splitlines():
         print(f"note: {line}", file=sys.stderr)
     return bundle

@@ -18,7 +18,7 @@ from fenicsx_drape.cli import main
 from fenicsx_drape.diagnosis import forming_kind as fc
 from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case import load_case
+from fenicsx_drape.forming.case import case_for_test, load_case
 from fenicsx_drape.forming.post import FormedGrid
 from fenicsx_drape.measurements.bundle import BundleError, Test, load_bundle, write_bundle
 
@@ -109,7 +109,7 @@ def test_a_bundle_naming_a_case_loads_and_its_keys_override_the_case(tmp_path, m
     write_case(tmp_path / "b" / "part")
     keys = ("duration_s = 10.0\nholder_force_N = 250.0\ntravel_mm = 55.0\ngrid_mm = 20.0\n"
             'temperature_C = 20.0\nholder_force_share = "model"\n')
-    bundle = load_bundle(write_bundle_toml(tmp_path / "b", keys))
+    bundle = load_bundle(write_bundle_toml(tmp_path / "b", keys), read_case=case_for_test)
     (test,) = bundle.tests
     case = test.forming_case
     assert test.case == "part/case.toml"
@@ -146,7 +146,7 @@ def test_a_bundle_naming_a_case_loads_and_its_keys_override_the_case(tmp_path, m
 
     # Written back (with a copy of its case), the bundle loads the same case.
     fc.write_case_bundle("again", bundle.tests, tmp_path / "again")
-    (again,) = load_bundle(tmp_path / "again").tests
+    (again,) = load_bundle(tmp_path / "again", read_case=case_for_test).tests
     assert runs.case_key(again.forming_case) == runs.case_key(case)
     assert again.case == "part/case.toml" and dict(again.forming) == dict(test.forming)
 
@@ -154,14 +154,15 @@ def test_a_bundle_naming_a_case_loads_and_its_keys_override_the_case(tmp_path, m
 def test_a_bundle_naming_the_hemisphere_case_file(tmp_path):
     shutil.copytree(ROOT / "meshes" / "hemisphere", tmp_path / "b" / "hemisphere")
     keys = "travel_mm = 60.0\npunch_radius_mm = 50.0\nduration_s = 30.0\ngrid_mm = 10.0\n"
-    (test,) = load_bundle(write_bundle_toml(tmp_path / "b", keys, "hemisphere/case.toml")).tests
+    (test,) = load_bundle(write_bundle_toml(tmp_path / "b", keys, "hemisphere/case.toml"),
+                          read_case=case_for_test).tests
     case = test.forming_case
     assert case.tool("punch").params["punch_radius_mm"] == 50.0
     assert case.total_travel_mm == pytest.approx(60.0) and case.duration_s == 30.0
     assert fc.case_of(test).blank.cell_mm == 10.0 and fc.model_planes(test) == ("x", "y")
     # The same case read from two copies is the same run (cached by content, not path).
     shutil.copytree(tmp_path / "b", tmp_path / "c")
-    (copy,) = load_bundle(tmp_path / "c").tests
+    (copy,) = load_bundle(tmp_path / "c", read_case=case_for_test).tests
     assert copy.case_path != test.case_path
     assert runs.case_key(copy.forming_case) == runs.case_key(case)
 
@@ -209,7 +210,7 @@ def test_a_malformed_case_named_by_a_bundle_names_the_file_and_key(tmp_path, cap
     (tmp_path / "b" / "part" / "punch.stl").write_text(STL)
     folder = write_bundle_toml(tmp_path / "b", keys)
     with pytest.raises(BundleError) as info:
-        load_bundle(folder)
+        load_bundle(folder, read_case=case_for_test)
     message = str(info.value)
     assert f"{folder / 'bundle.toml'}:8: test 'oct': case 'part/case.toml': " in message
     for fragment in expected:
@@ -224,17 +225,20 @@ def test_a_malformed_case_named_by_a_bundle_names_the_file_and_key(tmp_path, cap
 def test_bundle_problems_of_the_case_key_itself(tmp_path):
     write_case(tmp_path / "b" / "part")
     with pytest.raises(BundleError, match="no such file"):
-        load_bundle(write_bundle_toml(tmp_path / "b", "", "part/nothing.toml"))
+        load_bundle(write_bundle_toml(tmp_path / "b", "", "part/nothing.toml"),
+                    read_case=case_for_test)
     with pytest.raises(BundleError, match="either geometry"):
-        load_bundle(write_bundle_toml(tmp_path / "b", 'geometry = "hemisphere"\n'))
+        load_bundle(write_bundle_toml(tmp_path / "b", 'geometry = "hemisphere"\n'),
+                    read_case=case_for_test)
     with pytest.raises(BundleError, match=r"needs geometry .* or case"):
-        load_bundle(write_bundle_toml(tmp_path / "b", "duration_s = 40.0\n", case=""))
+        load_bundle(write_bundle_toml(tmp_path / "b", "duration_s = 40.0\n", case=""),
+                    read_case=case_for_test)
     folder = write_bundle_toml(tmp_path / "b", "", case="")
     text = (folder / "bundle.toml").read_text()
     (folder / "bundle.toml").write_text(text.replace('kind = "forming"',
                                                      'kind = "forming"\ncase = 3'))
     with pytest.raises(BundleError, match="case must be the path"):
-        load_bundle(folder)
+        load_bundle(folder, read_case=case_for_test)
 
 
 # --------------------------------------------------------------------------------------------
@@ -389,7 +393,7 @@ def test_diagnose_names_a_hidden_effect_on_a_generic_case(tmp_path, dolfinx):
     case = load_case(write_case(tmp_path / "part"))
     test = fc.synthetic_case_test(default_model(), case, sd_mm=0.3, seed=3, full=True)
     fc.write_case_bundle("hidden", [test], tmp_path / "bundle")
-    bundle = load_bundle(tmp_path / "bundle")
+    bundle = load_bundle(tmp_path / "bundle", read_case=case_for_test)
     report = diagnose(bundle, default_model().without_effects("tow_buckling"),
                       candidates=["tow_buckling", "tool_friction"])
     assert report["missing_effect"] == "tow_buckling"

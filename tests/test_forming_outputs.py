@@ -8,6 +8,7 @@ import pytest
 pytest.importorskip("dolfinx")
 
 from fenicsx_drape.cli import main
+from fenicsx_drape.forming.case import case_for_test
 from fenicsx_drape.forming.tools import HemisphereTools
 from fenicsx_drape.measurements.bundle import load_bundle
 
@@ -25,7 +26,7 @@ def test_form_command_writes_summary_bundle_fields_and_pictures(tmp_path):
         assert key in summary
     assert summary["nodes"] == 25 and summary["total_wrinkling_strain"] < 0.0
     assert 0.0 < summary["max_shear_deg"] < 90.0
-    bundle = load_bundle(out / "bundle")
+    bundle = load_bundle(out / "bundle", read_case=case_for_test)
     (test,) = bundle.tests
     assert test.kind == "forming" and test.geometry == "hemisphere"
     assert test.conditions["friction_coefficient"] == 0.25

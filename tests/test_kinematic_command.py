@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.cli import main
+from fenicsx_drape.forming.case import case_for_test
 from fenicsx_drape.measurements.bundle import load_bundle
 
 
@@ -17,7 +18,7 @@ def test_drape_command_writes_summary_bundle_picture(tmp_path, capsys):
     assert summary["max_shear_deg"] == pytest.approx(62.547440, abs=1e-5)
     assert summary["nodes"] == 625 and summary["unplaced_nodes"] == 0
     assert summary["start_mm"] == pytest.approx([0.0, 0.0, 80.0])
-    (test,) = load_bundle(out / "bundle").tests
+    (test,) = load_bundle(out / "bundle", read_case=case_for_test).tests
     assert test.kind == "forming" and test.geometry == "hemisphere"
     assert len(test.columns["i"]) == 625  # the 10 mm drawn grid is the net
     apex = (test.columns["i"] == 0) & (test.columns["j"] == 0)

@@ -14,6 +14,7 @@ import pytest
 
 import fenicsx_drape.forming  # noqa: F401  (registers the case reader)
 from fenicsx_drape.cli import main
+from fenicsx_drape.forming.case import case_for_test
 from fenicsx_drape.measurements.bundle import BundleError, load_bundle
 from fenicsx_drape.measurements.lab import Frame, rotation
 from fenicsx_drape.trust import trusting
@@ -57,7 +58,7 @@ def test_every_measurement_of_one_test_is_read_and_split_by_measurement(tmp_path
                    'position_sd_mm = 0.2\nforce_sd_N = 0.8\nholder_force_N = 250.0\n',
                    {"shear.csv": SHEAR, "edge.csv": EDGE, "force.csv": FORCE})
     stl(folder / "scan.stl", P)
-    bundle = load_bundle(folder)
+    bundle = load_bundle(folder, read_case=case_for_test)
     ids = [t.id for t in bundle.tests]
     assert ids == ["dd/shear_points", "dd/surface", "dd/outline", "dd/punch_force"]
     shear, scan, edge, force = bundle.tests
@@ -75,7 +76,7 @@ def test_a_csv_point_cloud_and_flat_shear_points(tmp_path):
     cloud = "x_mm,y_mm,z_mm\n" + "".join(f"{k},{-k},{0.5 * k}\n" for k in range(10))
     folder = write(tmp_path / "b", 'surface = "scan.csv"\nshear_points = "flat.csv"\n'
                    "shear_magnitude = true\n", {"scan.csv": cloud, "flat.csv": FLAT_SHEAR})
-    shear, scan = load_bundle(folder).tests
+    shear, scan = load_bundle(folder, read_case=case_for_test).tests
     assert shear.lab.flat and shear.lab.shear_magnitude and scan.n_rows == 10
 
 
@@ -83,7 +84,7 @@ def test_a_given_frame_moves_the_measured_positions_into_the_case_frame(tmp_path
     frame = ('[test.frame]\ntranslation_mm = [5.0, -3.0, 2.0]\n'
              'rotation_deg = [0.0, 0.0, 90.0]\n')
     folder = write(tmp_path / "b", 'shear_points = "shear.csv"\n', {"shear.csv": SHEAR}, frame)
-    (shear,) = load_bundle(folder).tests
+    (shear,) = load_bundle(folder, read_case=case_for_test).tests
     # (10 k, 0, 20 + k) turned 90° about z is (0, 10 k, 20 + k); then shifted.
     k = np.arange(6)
     assert np.allclose(shear.columns["x_mm"], 5.0)
@@ -101,9 +102,10 @@ def test_a_grid_with_lab_measurements_is_its_own_test_and_v2_bundles_are_unchang
     grid = "i,j,x0_mm,y0_mm,x_mm,y_mm,z_mm\n0,0,0,0,0,0,40\n1,0,10,0,10,0,39\n"
     folder = write(tmp_path / "b", 'file = "grid.csv"\npunch_force = "force.csv"\n',
                    {"grid.csv": grid, "force.csv": FORCE})
-    assert [t.id for t in load_bundle(folder).tests] == ["dd/file", "dd/punch_force"]
+    ids = [t.id for t in load_bundle(folder, read_case=case_for_test).tests]
+    assert ids == ["dd/file", "dd/punch_force"]
     folder = write(tmp_path / "c", 'file = "grid.csv"\n', {"grid.csv": grid})
-    (test,) = load_bundle(folder).tests
+    (test,) = load_bundle(folder, read_case=case_for_test).tests
     assert test.id == "dd" and test.lab is None
 
 
@@ -134,7 +136,7 @@ def test_bad_lab_input_is_refused_with_file_and_line(tmp_path, capsys, keys, fil
                                                       fragments):
     folder = write(tmp_path / "b", keys, files)
     with pytest.raises(BundleError) as info:
-        load_bundle(folder)
+        load_bundle(folder, read_case=case_for_test)
     message = str(info.value)
     assert all(f in message for f in fragments), message
     assert f":{line}:" in message
@@ -148,6 +150,6 @@ def test_a_grid_alone_takes_the_position_noise_key_and_the_frame(tmp_path):
     grid = "i,j,x0_mm,y0_mm,x_mm,y_mm,z_mm\n0,0,0,0,0,0,40\n1,0,10,0,10,0,39\n"
     folder = write(tmp_path / "b", 'file = "grid.csv"\nposition_sd_mm = 0.4\n',
                    {"grid.csv": grid}, "[test.frame]\ntranslation_mm = [0.0, 0.0, -1.0]\n")
-    (test,) = load_bundle(folder).tests
+    (test,) = load_bundle(folder, read_case=case_for_test).tests
     assert test.id == "dd" and list(test.columns["position_sd_mm"]) == [0.4, 0.4]
     assert list(test.columns["z_mm"]) == [39.0, 38.0]

@@ -14,6 +14,7 @@ import pytest
 
 from fenicsx_drape.diagnosis.compare import OUTLIER_SD, evaluate, write_compare
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
+from fenicsx_drape.forming.case import case_for_test
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.measurements.lab import rotation
 from fenicsx_drape.trust import trusting
@@ -48,7 +49,7 @@ def bundle_of(tmp_path, part, measurements=None, keys=(), frame=None, **options)
     tables = lab_tables(grid, curves, seed=7, holes=[(30.0, 20.0, 15.0)], **options)
     folder = write_lab_bundle(tmp_path / "bundle", case, tables, measurements=measurements,
                               keys=dict(keys), frame=frame)
-    return load_bundle(folder), tables
+    return load_bundle(folder, read_case=case_for_test), tables
 
 
 def test_the_model_reports_its_tools_forces_for_the_whole_part(part):
@@ -91,7 +92,7 @@ def test_one_wild_row_is_listed_with_file_and_line_and_the_error_given_without_i
     cells[3] = str(float(cells[3]) + 40.0)  # a misread angle, 40 noise sd off
     lines[12] = ",".join(cells)
     path.write_text("\n".join(lines) + "\n")
-    bundle = load_bundle(bundle.path)
+    bundle = load_bundle(bundle.path, read_case=case_for_test)
     record = evaluate(bundle, part[1]).to_dict()
     (wild,) = record["outliers"]
     assert wild["test"] == "part" and wild["measurement"] == "shear_points"
@@ -106,11 +107,11 @@ def test_a_scan_in_another_frame_is_registered_with_its_uncertainty(tmp_path, pa
     case, model, grid, curves = part
     tables = lab_tables(grid, curves, seed=3, frame=(R, t))
     folder = write_lab_bundle(tmp_path / "moved", case, tables, measurements=["surface"])
-    unregistered = evaluate(load_bundle(folder), model)
+    unregistered = evaluate(load_bundle(folder, read_case=case_for_test), model)
     assert unregistered.tests[0].normalised > 10.0  # the scan misses the part as it lies
     folder = write_lab_bundle(tmp_path / "registered", case, tables, measurements=["surface"],
                               frame={"register": True})
-    result = evaluate(load_bundle(folder), model)
+    result = evaluate(load_bundle(folder, read_case=case_for_test), model)
     reg = result.metrics["part/surface"]["registration"]
     assert not reg["far"]
     assert result.tests[0].normalised < 1.5
@@ -159,11 +160,12 @@ def test_an_outline_only_sees_the_draw_in(tmp_path, part):
     lines = path.read_text().splitlines()
     path.write_text("\n".join([lines[0] + ",draw_in_mm"] + [
         f"{line},{d:.4f}" for line, d in zip(lines[1:], draw_in)]) + "\n")
-    (test,) = load_bundle(bundle.path).tests
-    result = evaluate(load_bundle(bundle.path), part[1]).tests[0]
+    (test,) = load_bundle(bundle.path, read_case=case_for_test).tests
+    result = evaluate(load_bundle(bundle.path, read_case=case_for_test), part[1]).tests[0]
     assert result.residual.size == 2 * test.n_rows and result.normalised < 1.5
     assert np.allclose(result.measured[1::2], test.columns["draw_in_mm"])
-    gripped = evaluate(load_bundle(bundle.path), part[1].with_parameters(mu=1.5)).tests[0]
+    again = load_bundle(bundle.path, read_case=case_for_test)
+    gripped = evaluate(again, part[1].with_parameters(mu=1.5)).tests[0]
     assert np.mean(gripped.residual[1::2]) > 0.0  # measured draw-in beyond the gripped model's
 
 

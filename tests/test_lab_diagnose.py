@@ -14,6 +14,7 @@ import pytest
 from test_forming_case_diagnosis import OCTAGON  # the generic small case
 
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
+from fenicsx_drape.forming.case import case_for_test
 from fenicsx_drape.measurements.bundle import load_bundle
 
 pytestmark = [pytest.mark.slow, pytest.mark.skip_in_parallel]
@@ -42,7 +43,7 @@ def lab_bundle(tmp_path_factory):
     cells[3] = str(float(cells[3]) - 30.0)  # one misread angle, 30 noise sd off
     lines[8] = ",".join(cells)
     path.write_text("\n".join(lines) + "\n")
-    return load_bundle(folder / "bundle")
+    return load_bundle(folder / "bundle", read_case=case_for_test)
 
 
 def test_a_hidden_effect_is_named_from_lab_data_with_a_wild_row_listed(lab_bundle):

@@ -22,6 +22,7 @@ from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case import (
     CaseError,
     build_tools,
+    case_for_test,
     check_tool_sizes,
     coarse_mesh_problem,
     load_case,
@@ -153,9 +154,9 @@ def test_a_bundles_python_geometry_runs_only_with_trust(tmp_path, surfaces_only)
     with pytest.raises(BundleError, match=r"bundle\.toml:8: test 't': case 'case/case.toml': "
                                           r".*case\.toml: \[\[tool\]\] 1 'geometry': 'punch\.py' "
                                           r"is Python code .* --trust"):
-        load_bundle(tmp_path)
+        load_bundle(tmp_path, read_case=case_for_test)
     with trusting():
-        case = load_bundle(tmp_path).tests[0].forming_case
+        case = load_bundle(tmp_path, read_case=case_for_test).tests[0].forming_case
     with pytest.raises(UntrustedCodeError, match=r"punch\.py: the Python geometry of tool "
                                                  r"'punch' .* --trust"):
         build_tools(case)
@@ -185,9 +186,9 @@ def test_the_plugins_of_a_bundles_model_run_only_with_trust(tmp_path):
     write_bundle(tmp_path, flat_grid(), test_keys='case = "case/case.toml"')
     with pytest.raises(BundleError, match=r"\[case\] 'model': MODEL\.toml has plugins "
                                           r"\['plugin\.py'\] \(Python code\)"):
-        load_bundle(tmp_path)
+        load_bundle(tmp_path, read_case=case_for_test)
     with trusting():
-        case = load_bundle(tmp_path).tests[0].forming_case
+        case = load_bundle(tmp_path, read_case=case_for_test).tests[0].forming_case
     with pytest.raises(UntrustedCodeError, match=r"plugin\.py: a plugin of the model .*"
                                                  r"MODEL\.toml that comes with the case"):
         case_model(case)
@@ -370,7 +371,7 @@ def test_a_position_no_measurement_gives_is_refused_with_file_and_line(tmp_path)
     write_bundle(tmp_path, rows, test_keys=HEMISPHERE_KEYS)
     with pytest.raises(BundleError, match=r"grid\.csv:11: test 't': formed position .*1e\+06"
                                           r".* farther than the blank's size 339\.4 mm"):
-        load_bundle(tmp_path)
+        load_bundle(tmp_path, read_case=case_for_test)
     assert main(["compare", str(tmp_path), "--out", str(tmp_path / "out")]) == 2
 
 
@@ -378,14 +379,14 @@ def test_a_grid_mm_that_disagrees_names_the_key_in_bundle_toml(tmp_path):
     write_bundle(tmp_path, flat_grid(grid_mm=20.0), test_keys=HEMISPHERE_KEYS)
     with pytest.raises(BundleError, match=r"bundle\.toml:16: test 't': grid_mm = 10 disagrees "
                                           r"with the flat positions .* 20 mm"):
-        load_bundle(tmp_path)
+        load_bundle(tmp_path, read_case=case_for_test)
 
 
 def test_a_grid_without_noise_asks_for_position_sd_instead_of_dividing_by_zero(tmp_path):
     from fenicsx_drape.diagnosis import forming_kind
 
     write_bundle(tmp_path, flat_grid(n=6, z=lambda i, j: 0.5 * i * j), test_keys=HEMISPHERE_KEYS)
-    (test,) = load_bundle(tmp_path).tests
+    (test,) = load_bundle(tmp_path, read_case=case_for_test).tests
     with pytest.raises(DrapeInputError, match=r"test 't': the grid's positions show no noise"
                                               r".*give position_sd_mm"):
         forming_kind.noise(test)

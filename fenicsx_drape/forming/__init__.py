@@ -27,10 +27,6 @@ from fenicsx_drape.forming.run import FormingRun, run_case
 from fenicsx_drape.forming.stabilisation import ExtrapolationSpring
 from fenicsx_drape.forming.surfaces import TriangleSurface, load_surface
 from fenicsx_drape.forming.tools import HemisphereTools, MeshedTool, RevolvedTool
-from fenicsx_drape.measurements.bundle import register_case_reader
-
-# A bundle's forming test may name its case file: the bundle loader reads and checks it here.
-register_case_reader(case_for_test)
 
 __all__ = [
     "BlankHolder",

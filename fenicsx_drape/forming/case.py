@@ -996,7 +996,7 @@ def case_for_test(path: str | os.PathLike, keys: Mapping[str, Any]
                   ) -> tuple[FormingCase, dict[str, Any]]:
     """The case a measured forming test names, its keys applied as overrides.
 
-    The reader the bundle loader calls (``measurements.bundle.register_case_reader``; the
+    The reader the bundle loader is given (``load_bundle(path, read_case=case_for_test)``; the
     spec's "forming tests on any part"): a key that names a value of the case
     (:func:`override_names`) overrides it, unless it equals the case's own value (then it
     only repeats it: e.g. ``travel_mm`` of a bundle written by ``form_case``); the other keys

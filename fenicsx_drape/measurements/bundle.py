@@ -8,11 +8,11 @@ not know are kept (as test conditions, or as notes when not numeric) and listed 
 
 A forming test names either the paper's tool set (``geometry = "hemisphere"`` and its keys)
 or the forming case it was made with (``case = "part.toml"``, relative to the bundle folder;
-spec version 2, "forming tests on any part"). This layer does not know forming cases: the
-forming layer registers a reader (:func:`register_case_reader`; importing
-``fenicsx_drape.forming`` does it), which reads and checks the case file with the test's keys
-as overrides, so that a malformed case is reported here as a problem of the bundle, with the
-case file and its key.
+spec version 2, "forming tests on any part"). This layer does not know forming cases: given a
+reader (``load_bundle(path, read_case=case_for_test)``, as every command does), it reads and
+checks the case file with the test's keys as overrides, so that a malformed case is reported
+here as a problem of the bundle, with the case file and its key; without one the case is read
+when the test is simulated.
 
 :func:`write_bundle` writes a bundle back (each file atomically, ``bundle.toml`` last).
 """
@@ -73,23 +73,13 @@ REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
 # test's own keys override it. ``grid_mm`` describes the drawn grid (not a case value).
 CASE_DESCRIPTIVE_KEYS = ("grid_mm",)
 
-# The reader of forming cases, registered by the forming layer (:func:`register_case_reader`):
-# ``reader(case_path, keys) -> (case, used)`` reads and checks the case file, applies those
-# of the test's ``keys`` that name a value of the case as overrides and returns the case with
-# the keys it used; it raises a DrapeInputError (with ``problems``, each naming the case file
-# and key) for a malformed case or a key the case cannot take.
+# A reader of forming cases (the forming layer's ``case_for_test``, passed to
+# :func:`load_bundle`): ``read_case(case_path, keys) -> (case, used)`` reads and checks the
+# case file, applies those of the test's ``keys`` that name a value of the case as overrides
+# and returns the case with the keys it used; it raises a DrapeInputError (with ``problems``,
+# each naming the case file and key) for a malformed case or a key the case cannot take.
 CaseReader = Callable[[Path, Mapping[str, Any]], tuple[Any, Mapping[str, Any]]]
-_case_reader: list[CaseReader] = []
 
-
-def register_case_reader(reader: CaseReader) -> None:
-    """Let :func:`load_bundle` read and check the case files forming tests name."""
-    _case_reader[:] = [reader]
-
-
-def case_reader() -> CaseReader | None:
-    """The registered reader of forming cases, or None (``fenicsx_drape.forming`` not loaded)."""
-    return _case_reader[0] if _case_reader else None
 
 # The unit each physical quantity must carry in a key or column name. A name made of one of
 # these quantities and another unit (``force_kN``, ``length_m``, ``temperature_K``) is an
@@ -317,8 +307,14 @@ def _missing(required: tuple[str, ...], present) -> list[str]:
                                             and m.group(1) in misunited)]
 
 
-def load_bundle(path: str | Path) -> Bundle:
+def load_bundle(path: str | Path, read_case: CaseReader | None = None) -> Bundle:
     """Read and validate a measurement bundle (a folder with ``bundle.toml``, or the file).
+
+    Args:
+        path: The bundle folder, or its ``bundle.toml``.
+        read_case: Reads and checks the case file a forming test names, with the test's keys
+            (:data:`CaseReader`, e.g. ``fenicsx_drape.forming.case_for_test``); None: the
+            case is read when the test is simulated.
 
     Raises:
         BundleError: listing every problem found as ``file:line: problem``: a missing or
@@ -398,7 +394,7 @@ def load_bundle(path: str | Path) -> Bundle:
     seen: dict[str, int] = {}
     for index, raw in enumerate(raw_tests):
         test = _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
-                          notes)
+                          read_case, notes)
         if test is None:
             continue
         if test.kind == "forming" and any(k in raw for k in lab.LAB_KEYS):
@@ -421,7 +417,8 @@ def load_bundle(path: str | Path) -> Bundle:
                   path=folder, unknown_keys=tuple(unknown), notes=tuple(notes), extra=extra)
 
 
-def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown, notes):
+def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown, read_case,
+               notes):
     """One [[test]] table and its CSV; None (with problems added) when it cannot be built."""
     line = where("test", index)
     if not isinstance(raw, dict):
@@ -472,7 +469,7 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
     case_file, case_path, used, forming_case = None, None, {}, None
     if names_case:
         case_file, case_path, used, forming_case = _read_case(
-            folder, fname, raw, index, where, label, known, problems)
+            folder, fname, raw, index, where, label, known, problems, read_case)
     for key, value in raw.items():
         if key in known:
             continue
@@ -628,11 +625,11 @@ def _offered(key: str, value: Any, known) -> bool:
             and _unit_problem(key) is None)
 
 
-def _read_case(folder, fname, raw, index, where, label, known, problems):
+def _read_case(folder, fname, raw, index, where, label, known, problems, reader):
     """The case file a forming test names, read with the test's keys as overrides.
 
     Returns ``(case as written, absolute path, the keys the case used, the case)``; the last
-    two are empty/None when no reader is registered or the case has problems (added to
+    two are empty/None without a reader or when the case has problems (added to
     ``problems``, each with the line of the test's ``case`` key, the case file and its key).
     """
     at = where("test", index, "case")
@@ -647,7 +644,6 @@ def _read_case(folder, fname, raw, index, where, label, known, problems):
                                 "(the path is relative to the bundle folder)")
         return written, path, {}, None
     keys = {k: v for k, v in raw.items() if _offered(k, v, known)}
-    reader = case_reader()
     if reader is None:  # read when the test is simulated: every key is offered to the case
         return written, path, keys, None
     try:
