@@ -350,10 +350,11 @@ def _clockwise(P):
 
 
 def test_a_motion_table_moves_rigidly_and_sets_the_load_steps():
-    from fenicsx_drape.forming.case import Motion
+    from fenicsx_drape.forming.motion import RigidMotion
 
-    m = Motion(time_s=(0.0, 10.0, 20.0), x_mm=(0.0, 0.0, 0.0), y_mm=(0.0, 0.0, 0.0),
-               z_mm=(0.0, 30.0, 40.0), rotation_deg=(0.0, 0.0, 90.0), axis=(0.0, 0.0, 1.0))
+    m = RigidMotion(time_s=(0.0, 10.0, 20.0), x_mm=(0.0, 0.0, 0.0), y_mm=(0.0, 0.0, 0.0),
+                    z_mm=(0.0, 30.0, 40.0), rotation_deg=(0.0, 0.0, 90.0),
+                    axis=(0.0, 0.0, 1.0))
     # Fastest: the second segment, 1 mm/s of translation plus 90° in 10 s at 50 mm from the axis.
     assert m.max_speed_mm_per_s(50.0) == pytest.approx(1.0 + math.radians(9.0) * 50.0)
     assert m.travel_mm(10.0) == pytest.approx(30.0)

@@ -190,15 +190,15 @@ def test_a_case_gives_the_same_sheet_on_any_number_of_ranks(tight_solver):
 def test_a_tool_given_in_python_moves_by_its_motion_table():
     """A spherical punch (not builtin) on a motion table: load steps of 1 mm of its travel,
     the apex node carried to its final height, the sheet clamped by the builtin holder."""
-    from fenicsx_drape.forming.case import Motion
+    from fenicsx_drape.forming.motion import RigidMotion
     from fenicsx_drape.forming.tools import Arc, RevolvedTool, Segment
 
     R, travel, duration = 60.0, 40.0, 8.0
     sphere = RevolvedTool("punch", (Arc((0.0, 0.0), R, math.pi / 2, 0.0),
                                     Segment((R, 0.0), (R, -1e4))),
                           z0_mm=-R, speed_mm_per_s=travel / duration)
-    motion = Motion(time_s=(0.0, duration), x_mm=(0.0, 0.0), y_mm=(0.0, 0.0),
-                    z_mm=(0.0, travel))
+    motion = RigidMotion(time_s=(0.0, duration), x_mm=(0.0, 0.0), y_mm=(0.0, 0.0),
+                         z_mm=(0.0, travel))
     base = load_case(HEMISPHERE, cell_mm=20.0, duration_s=duration)
     punch = ToolSpec("punch", "punch", "python:sphere", motion=motion)
     case = dataclasses.replace(base, tools=(punch, base.tool("holder")))

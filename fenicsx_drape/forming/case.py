@@ -32,6 +32,7 @@ import numpy as np
 from fenicsx_drape.errors import DrapeInputError, ParameterError
 from fenicsx_drape.fe.grid import TrussGrid, outline_grid, polygon_area
 from fenicsx_drape.forming.holder import FORCE_SHARES
+from fenicsx_drape.forming.motion import RigidMotion
 from fenicsx_drape.forming.surfaces import sample_curve_loop
 
 ROLES = ("punch", "die", "holder", "surface")
@@ -67,82 +68,6 @@ class CaseError(DrapeInputError):
 
 
 @dataclasses.dataclass(frozen=True)
-class Motion:
-    """A tool's prescribed rigid motion: a table, linear between rows.
-
-    A point X of the tool's geometry (in the coordinates of its file) is at time t at
-    ``R(t) (X − c) + c + T(t)``: T the translation, R the rotation by ``rotation_deg`` about
-    ``axis`` through ``centre_mm`` = c. Before the first row and after the last the tool
-    rests. The run builds the geometry developer's
-    :class:`~fenicsx_drape.forming.motion.RigidMotion` from it (the same convention).
-    """
-
-    time_s: tuple[float, ...]  # increasing, from 0
-    x_mm: tuple[float, ...]
-    y_mm: tuple[float, ...]
-    z_mm: tuple[float, ...]
-    rotation_deg: tuple[float, ...] | None = None
-    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    centre_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    def translation(self, t: float) -> np.ndarray:
-        """T(t) (mm)."""
-        return np.array([np.interp(t, self.time_s, c) for c in (self.x_mm, self.y_mm, self.z_mm)])
-
-    def angle_deg(self, t: float) -> float:
-        """The rotation angle (deg) at time ``t``."""
-        return 0.0 if self.rotation_deg is None else float(np.interp(t, self.time_s,
-                                                                     self.rotation_deg))
-
-    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(R, T) at time ``t``: x = R (X − c) + c + T."""
-        return _rotation(self.axis, self.angle_deg(t)), self.translation(t)
-
-    def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
-        """How far the material point at ``x`` at ``t1`` moved since ``t0`` (mm, (n, 3))."""
-        x = np.asarray(x, dtype=float).reshape(-1, 3)
-        R0, T0 = self.at(t0)
-        R1, T1 = self.at(t1)
-        c = np.asarray(self.centre_mm)
-        X = (x - c - T1) @ R1  # R1ᵀ (x − c − T1)
-        return x - (X @ R0.T + c + T0)
-
-    def max_speed_mm_per_s(self, reach_mm: float = 0.0) -> float:
-        """Fastest travel (mm/s) of a point within ``reach_mm`` of the rotation centre."""
-        t = np.asarray(self.time_s)
-        dt = np.diff(t)
-        if not len(dt):
-            return 0.0
-        d = np.diff(np.column_stack([self.x_mm, self.y_mm, self.z_mm]), axis=0)
-        v = np.linalg.norm(d, axis=1) / dt
-        if self.rotation_deg is not None:
-            v = v + np.radians(np.abs(np.diff(self.rotation_deg))) / dt * reach_mm
-        return float(v.max(initial=0.0))
-
-    def travel_mm(self, t: float, reach_mm: float = 0.0) -> float:
-        """Distance travelled by the tool since t = 0: |T(t) − T(0)| (+ arc at ``reach_mm``)."""
-        d = float(np.linalg.norm(self.translation(t) - self.translation(0.0)))
-        return d + math.radians(abs(self.angle_deg(t) - self.angle_deg(0.0))) * reach_mm
-
-    def scaled(self, time: float = 1.0, travel: float = 1.0) -> Motion:
-        """The same motion with times × ``time`` and translations and rotations × ``travel``."""
-        rot = None if self.rotation_deg is None else tuple(travel * a for a in self.rotation_deg)
-        return dataclasses.replace(
-            self, time_s=tuple(time * v for v in self.time_s),
-            x_mm=tuple(travel * v for v in self.x_mm), y_mm=tuple(travel * v for v in self.y_mm),
-            z_mm=tuple(travel * v for v in self.z_mm), rotation_deg=rot)
-
-
-def _rotation(axis, angle_deg: float) -> np.ndarray:
-    """The rotation matrix about ``axis`` by ``angle_deg`` (Rodrigues)."""
-    a = np.asarray(axis, dtype=float)
-    a = a / np.linalg.norm(a)
-    θ = math.radians(angle_deg)
-    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + math.sin(θ) * K + (1 - math.cos(θ)) * K @ K
-
-
-@dataclasses.dataclass(frozen=True)
 class ToolSpec:
     """One rigid tool of a case: its geometry source, role and motion."""
 
@@ -154,7 +79,7 @@ class ToolSpec:
     mesh_mm: float | None = None  # tool mesh size for sources Gmsh meshes
     order: int | None = None  # 1 or 2 (second-order triangles split into four)
     sheet_side: str | None = None  # side of the surface the sheet is on (default by role)
-    motion: Motion | None = None  # fixed when None (builtin tools move as the hemisphere's)
+    motion: RigidMotion | None = None  # fixed when None (builtin tools move as the hemisphere's)
 
     @property
     def builtin(self) -> bool:
@@ -702,7 +627,7 @@ def _check_builtin(r: _Reader, at: str, role, params, mesh, order, side, motion)
             r.add(f"{at} 'parameters'", str(err))
 
 
-def _read_motion(r: _Reader, m, at: str, duration: float | None) -> Motion | None:
+def _read_motion(r: _Reader, m, at: str, duration: float | None) -> RigidMotion | None:
     if not isinstance(m, dict):
         r.add(at, "must be a table")
         return None
@@ -744,10 +669,9 @@ def _read_motion(r: _Reader, m, at: str, duration: float | None) -> Motion | Non
                 r.add(f"{at} '{key}'", "applies only with 'rotation_deg'")
     if len(r.problems) > before:
         return None
-    zeros = (0.0,) * len(t)
-    return Motion(time_s=t, x_mm=columns.get("x_mm", zeros), y_mm=columns.get("y_mm", zeros),
-                  z_mm=columns.get("z_mm", zeros), rotation_deg=columns.get("rotation_deg"),
-                  axis=axis, centre_mm=centre)
+    return RigidMotion(time_s=t, x_mm=columns.get("x_mm"), y_mm=columns.get("y_mm"),
+                       z_mm=columns.get("z_mm"), rotation_deg=columns.get("rotation_deg"),
+                       axis=axis, centre_mm=centre, where=at)
 
 
 def sample_outline(path: str | os.PathLike, spacing_mm: float) -> tuple[tuple[float, float], ...]:
@@ -947,7 +871,7 @@ def _offset_punches(tools: list[ToolSpec], d: tuple[float, float], duration: flo
             p["punch_y_mm"] = p.get("punch_y_mm", 0.0) + d[1]
             out.append(dataclasses.replace(t, parameters=tuple(p.items())))
         else:
-            m = t.motion or Motion((0.0, duration), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
+            m = t.motion or RigidMotion(time_s=(0.0, duration))
             # A constant translation added to the motion's table: the same travel and speed.
             out.append(dataclasses.replace(t, motion=dataclasses.replace(
                 m, x_mm=tuple(v + d[0] for v in m.x_mm), y_mm=tuple(v + d[1] for v in m.y_mm))))
@@ -1188,7 +1112,6 @@ def coarse_mesh_problem(surface, cell_mm: float) -> str | None:
 
 def _meshed_tool(case: FormingCase, spec: ToolSpec):
     """A tool from a geometry file: its surface meshed once by Gmsh, moved rigidly."""
-    from fenicsx_drape.forming.motion import RigidMotion
     from fenicsx_drape.forming.surfaces import load_surface
     from fenicsx_drape.forming.tools import MeshedTool
     from fenicsx_drape.trust import require_trust
@@ -1202,11 +1125,7 @@ def _meshed_tool(case: FormingCase, spec: ToolSpec):
     coarse = coarse_mesh_problem(surface, case.blank.cell_mm)
     if coarse:
         warnings.warn(f"{where}: {coarse}", stacklevel=3)
-    m = spec.motion
-    motion = None if m is None else RigidMotion(
-        time_s=m.time_s, x_mm=m.x_mm, y_mm=m.y_mm, z_mm=m.z_mm, rotation_deg=m.rotation_deg,
-        axis=m.axis, centre_mm=m.centre_mm, where=f"{where} [tool.motion]")
-    return MeshedTool(spec.name, surface, motion)
+    return MeshedTool(spec.name, surface, spec.motion)
 
 
 # --------------------------------------------------------------------------------------------

@@ -159,6 +159,34 @@ class RigidMotion:
         c = np.asarray(self.centre_mm)
         return (x - c - T) @ R + c  # Rᵀ (x − c − T) + c, row by row
 
+    def translation(self, t: float) -> np.ndarray:
+        """T(t) (mm)."""
+        return self.at(t)[1]
+
+    def max_speed_mm_per_s(self, reach_mm: float = 0.0) -> float:
+        """Fastest travel (mm/s) of a point within ``reach_mm`` of the rotation centre."""
+        dt = np.diff(self.time_s)
+        if not len(dt):
+            return 0.0
+        d = np.diff(np.column_stack([self.x_mm, self.y_mm, self.z_mm]), axis=0)
+        v = np.linalg.norm(d, axis=1) / dt
+        if self.rotation_deg is not None:
+            v = v + np.radians(np.abs(np.diff(self.rotation_deg))) / dt * reach_mm
+        return float(v.max(initial=0.0))
+
+    def travel_mm(self, t: float, reach_mm: float = 0.0) -> float:
+        """Distance travelled since t = 0: |T(t) − T(0)| (+ the arc at ``reach_mm``)."""
+        d = float(np.linalg.norm(self.translation(t) - self.translation(0.0)))
+        return d + math.radians(abs(self.angle_deg(t) - self.angle_deg(0.0))) * reach_mm
+
+    def scaled(self, time: float = 1.0, travel: float = 1.0) -> RigidMotion:
+        """The same motion with times × ``time`` and translations and rotations × ``travel``."""
+        rot = None if self.rotation_deg is None else tuple(travel * a for a in self.rotation_deg)
+        return dataclasses.replace(
+            self, time_s=tuple(time * v for v in self.time_s),
+            x_mm=tuple(travel * v for v in self.x_mm), y_mm=tuple(travel * v for v in self.y_mm),
+            z_mm=tuple(travel * v for v in self.z_mm), rotation_deg=rot)
+
     def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
         """How far (n, 3) the tool's material point at ``x`` at time ``t1`` moved since ``t0``."""
         x = np.asarray(x, dtype=float).reshape(-1, 3)
