@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.distance import build_field, default_spacing
-from fenicsx_drape.forming.motion import RigidMotion
-from fenicsx_drape.forming.surfaces import load_surface
-from fenicsx_drape.forming.tools import HemisphereTools, MeshedTool
+from fenicsx_drape.forming.tools.distance import build_field, default_spacing
+from fenicsx_drape.forming.tools.motion import RigidMotion
+from fenicsx_drape.forming.tools.shapes import HemisphereTools, MeshedTool
+from fenicsx_drape.forming.tools.surfaces import load_surface
 
 FOLDER = Path(__file__).resolve().parent.parent / "meshes" / "hemisphere"
 TOOLS = HemisphereTools()

@@ -29,7 +29,7 @@ import numpy as np
 
 from fenicsx_drape.fe.solver import SINGLE_PRECISION_FACTOR, SolverOptions
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
-from fenicsx_drape.forming.run import NODE_ATOL_N
+from fenicsx_drape.forming.running.run import NODE_ATOL_N
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--full", action="store_true", help="also the full sheet at 2.5 mm")
@@ -62,7 +62,7 @@ if args.single_factor:
 if args.node_atol_N is not None:
     options["node_atol_N"] = args.node_atol_N
 if args.before:
-    from fenicsx_drape.forming.contact import PenaltyContact
+    from fenicsx_drape.forming.terms.contact import PenaltyContact
 
     options.update(line_search="bt", limit_geometric_stiffness=False, node_atol_N=0.0)
 

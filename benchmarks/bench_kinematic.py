@@ -8,7 +8,7 @@ Cases: the paper's hemisphere on its closed-form formed part and on the punch at
 position united with the holder plane (240 mm square blank, start at the apex), a bumpy
 analytic height field (a Gaussian dome with a superposed sine ripple, the same blank), and the
 forming cases of ``meshes/*/case*.toml`` (``--case`` to choose): their whole blank on their
-formed surface (:func:`~fenicsx_drape.forming.kinematic.drape_case`), meshed tools included.
+formed surface (:func:`~fenicsx_drape.forming.running.kinematic.drape_case`), meshed tools included.
 A case's tools are built first (their distance fields cached on disk) and not timed. Each
 time is the best of ``--repeat`` runs; the Newton work is the number of surface evaluations.
 """
@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.case import build_tools, load_case
-from fenicsx_drape.forming.kinematic import (
+from fenicsx_drape.forming.case.format import build_tools, load_case
+from fenicsx_drape.forming.running.kinematic import (
     HeightField,
     Plane,
     case_surface,
@@ -28,7 +28,7 @@ from fenicsx_drape.forming.kinematic import (
     kinematic_drape,
     rectangle,
 )
-from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--cells", type=float, nargs="*", default=[10.0, 5.0, 2.5],

@@ -42,8 +42,8 @@ def main() -> None:
     from fenicsx_drape.diagnosis.compare import evaluate
     from fenicsx_drape.diagnosis.diagnose import diagnose
     from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
-    from fenicsx_drape.forming import measure
-    from fenicsx_drape.forming.case import case_for_test, load_case, with_overrides
+    from fenicsx_drape.forming.case.format import case_for_test, load_case, with_overrides
+    from fenicsx_drape.forming.running import measure
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model
 

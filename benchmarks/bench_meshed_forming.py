@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape.forming import load_case, run_case
-from fenicsx_drape.forming.case import build_tools
-from fenicsx_drape.forming.contact import PenaltyContact
-from fenicsx_drape.forming.holder import BlankHolder
+from fenicsx_drape.forming.case.format import build_tools
+from fenicsx_drape.forming.terms.contact import PenaltyContact
+from fenicsx_drape.forming.terms.holder import BlankHolder
 
 HERE = Path(__file__).resolve().parent.parent / "meshes" / "hemisphere"
 

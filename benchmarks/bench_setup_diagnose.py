@@ -27,7 +27,7 @@ from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.diagnose import diagnose
 from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS
-from fenicsx_drape.forming.case import load_case, with_overrides
+from fenicsx_drape.forming.case.format import load_case, with_overrides
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model
 

@@ -42,10 +42,10 @@ import numpy as np
 from fenicsx_drape.fe.grid import SYMMETRY_X, SYMMETRY_Y
 from fenicsx_drape.fe.newton import Newton
 from fenicsx_drape.fe.solver import SolverOptions, monitoring
-from fenicsx_drape.forming.contact import PenaltyContact
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
-from fenicsx_drape.forming.holder import BlankHolder
-from fenicsx_drape.forming.run import NODE_ATOL_N
+from fenicsx_drape.forming.running.run import NODE_ATOL_N
+from fenicsx_drape.forming.terms.contact import PenaltyContact
+from fenicsx_drape.forming.terms.holder import BlankHolder
 
 CAUSES = {
     "tow": "tow buckled ↔ taut (eq. 4)",

@@ -37,8 +37,8 @@ import numpy as np
 from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.diagnose import diagnose
 from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS, setup_summary
-from fenicsx_drape.forming.case import load_case, with_overrides
-from fenicsx_drape.forming.run import NODE_ATOL_N, forming_options, run_case
+from fenicsx_drape.forming.case.format import load_case, with_overrides
+from fenicsx_drape.forming.running.run import NODE_ATOL_N, forming_options, run_case
 from fenicsx_drape.measurements.bundle import Test, load_bundle
 from fenicsx_drape.model import default_model
 

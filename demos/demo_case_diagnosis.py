@@ -44,7 +44,7 @@ from fenicsx_drape.diagnosis import forming_kind as fc
 from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.compare import evaluate, write_compare
 from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
-from fenicsx_drape.forming.case import case_for_test, load_case
+from fenicsx_drape.forming.case.format import case_for_test, load_case
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import default_model
 from fenicsx_drape.trust import set_trusted

@@ -27,7 +27,7 @@ from mpi4py import MPI
 
 from fenicsx_drape.forming import HemisphereTools
 from fenicsx_drape.forming.hemisphere import HemisphereCase
-from fenicsx_drape.forming.outputs import form_hemisphere
+from fenicsx_drape.forming.running.outputs import form_hemisphere
 from fenicsx_drape.model import default_model
 
 # As a page of the docs the demo is a notebook run in demos/, without arguments.
@@ -60,11 +60,11 @@ run, summary = form_hemisphere(out, case, model,
 # ## Compare with the paper and with the kinematic drape (Fig. 11)
 #
 # `paper_comparison` sets the run's numbers beside the paper's model and experiment (all the
-# paper's hemisphere numbers are in `fenicsx_drape.forming.paper`; the studies that compare
+# paper's hemisphere numbers are in `fenicsx_drape.forming.paper.numbers`; the studies that compare
 # them all are `demos/study_*.py`).
 
 if MPI.COMM_WORLD.rank == 0:
-    from fenicsx_drape.forming.paper import paper_comparison
+    from fenicsx_drape.forming.paper.numbers import paper_comparison
 
     print(paper_comparison(summary))  # the kinematic drape's maximum shear included
     print(f"pictures in {out}: shear.png, wrinkling.png, paths.png")

@@ -43,7 +43,7 @@ from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.compare import evaluate, write_compare
 from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
-from fenicsx_drape.forming.case import case_for_test, load_case, with_overrides
+from fenicsx_drape.forming.case.format import case_for_test, load_case, with_overrides
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import default_model
 from fenicsx_drape.trust import set_trusted

@@ -1,7 +1,7 @@
 # # Forming speed: durations 8 to 240 s at 133 N (the paper's Fig. 12a)
 #
 # The 10 mm quarter model formed over the 80 mm travel in 8 s (10 mm/s) to 240 s (0.33 mm/s),
-# under both readings of eq. 1's force share (`fenicsx_drape.forming.studies.READINGS`). The
+# under both readings of eq. 1's force share (`fenicsx_drape.forming.paper.studies.READINGS`). The
 # paper finds less wrinkling when forming slowly (1.1 % at high speed to 0.3 % at low speed,
 # plateaus beyond 100 s) and a maximum shear that varies within about 3°.
 # Writes `duration.csv` and `duration.png`.
@@ -11,8 +11,8 @@
 import argparse
 from pathlib import Path
 
-from fenicsx_drape.forming import paper
-from fenicsx_drape.forming.studies import (
+from fenicsx_drape.forming.paper import numbers as paper
+from fenicsx_drape.forming.paper.studies import (
     DURATIONS_S,
     READINGS,
     Variant,

@@ -6,10 +6,10 @@
 # n_s nodes, four times the force per node). μ is not given either (prepreg on steel: 0.1-0.4
 # in the literature). For every reading × μ this study runs the default case, the Fig. 9 mesh
 # sweep and the Fig. 12 duration and force sweeps (quarter, 10 mm cells), reduces them to
-# every number the paper states (`fenicsx_drape.forming.studies.paper_numbers`) and writes
+# every number the paper states (`fenicsx_drape.forming.paper.studies.paper_numbers`) and writes
 #
 # - `paper_table.csv` / `paper_table.md`: the numbers beside the paper's, with the misfit
-#   (mean |ln(ours/paper's)|, `fenicsx_drape.forming.paper.misfit`) of each column;
+#   (mean |ln(ours/paper's)|, `fenicsx_drape.forming.paper.numbers.misfit`) of each column;
 # - `geometry.csv`: the kinematic drape's maximum shear for the cap's centre 0-20 mm above the
 #   base (the paper's Fig. 11a: 61°), the geometric reading of the tools;
 # - `runs/`: the raw rows of every sweep.
@@ -24,9 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming import paper
-from fenicsx_drape.forming.kinematic import kinematic_drape
-from fenicsx_drape.forming.studies import (
+from fenicsx_drape.forming.paper import numbers as paper
+from fenicsx_drape.forming.paper.studies import (
     DURATIONS_S,
     FORCES_N,
     MESH_CELLS_MM,
@@ -39,7 +38,8 @@ from fenicsx_drape.forming.studies import (
     run_variants,
     write_rows,
 )
-from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.forming.running.kinematic import kinematic_drape
+from fenicsx_drape.forming.tools.shapes import HemisphereTools
 from fenicsx_drape.model import default_model
 from fenicsx_drape.provenance import atomic_write_text, write_provenance
 

@@ -1,7 +1,7 @@
 # # The out-of-plane stabilisation: halve it and see what moves
 #
 # The flat, slack sheet needs a small out-of-plane spring to the extrapolated motion
-# (fenicsx_drape/forming/stabilisation.py); it is part of the model. This study halves its
+# (fenicsx_drape/forming/terms/stabilisation.py); it is part of the model. This study halves its
 # stiffness from the default (1.25 N/mm) twice and doubles it once, and reports the change of
 # the maximum shear angle, the wrinkling and the node positions against the default.
 # Writes `stabilisation.csv` and `stabilisation.png`.
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape.forming.hemisphere import HemisphereCase
-from fenicsx_drape.forming.post import mean_distance
-from fenicsx_drape.forming.studies import sweep, write_rows
+from fenicsx_drape.forming.paper.studies import sweep, write_rows
+from fenicsx_drape.forming.running.post import mean_distance
 from fenicsx_drape.provenance import save_figure, write_provenance
 
 parser = argparse.ArgumentParser(description=__doc__)

@@ -2,9 +2,9 @@
 #
 # `meshes/hemisphere/case_meshed.toml` forms the paper's hemisphere with its punch and die
 # meshed by Gmsh from `punch.geo` and `die.geo` and held as a smooth signed distance
-# (`fenicsx_drape.forming.distance`: a cubic B-spline on a grid of spacing h, the flat triangle
-# size). Here the punch and die are meshed at several sizes and orders (the holder, a plane, is
-# exact at any size and stays as in the case file), the quarter is formed at Δ = 10 mm
+# (`fenicsx_drape.forming.tools.distance`: a cubic B-spline on a grid of spacing h, the flat
+# triangle size). Here the punch and die are meshed at several sizes and orders (the holder,
+# a plane, is exact at any size and stays as in the case file), the quarter is formed at Δ = 10 mm
 # and compared with `meshes/hemisphere/case.toml` (the exact closed-form tools): max shear,
 # its difference, the largest and mean distance between the formed nodes, the steps,
 # cut-backs, Newton iterations and the run's wall time (tools built beforehand; the field's
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape.forming import load_case, run_case
-from fenicsx_drape.forming.case import build_tools
+from fenicsx_drape.forming.case.format import build_tools
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--out", type=Path, default=Path("results/study_tool_mesh"))

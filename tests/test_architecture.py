@@ -348,19 +348,19 @@ def test_layer_violations_are_found(graph):
     injected = {k: set(v) for k, v in edges.items()}
     injected["fenicsx_drape.materials.tow"].add("fenicsx_drape.fe.grid")
     injected["fenicsx_drape.fe.output"].add("fenicsx_drape.measurements.bundle")
-    injected["fenicsx_drape.measurements.bundle"].add("fenicsx_drape.forming.post")
-    injected["fenicsx_drape.forming.outputs"].add("fenicsx_drape.calibration.fit")
+    injected["fenicsx_drape.measurements.bundle"].add("fenicsx_drape.forming.running.post")
+    injected["fenicsx_drape.forming.running.outputs"].add("fenicsx_drape.calibration.fit")
     injected["fenicsx_drape.calibration.fit"].add("fenicsx_drape.diagnosis.compare")
     injected["fenicsx_drape.model"].add("fenicsx_drape.commands.fit")
     assert layer_violations(injected) == [
         "fenicsx_drape.calibration.fit (calibration) imports fenicsx_drape.diagnosis.compare "
         "(diagnosis)",
         "fenicsx_drape.fe.output (fe) imports fenicsx_drape.measurements.bundle (measurements)",
-        "fenicsx_drape.forming.outputs (forming) imports fenicsx_drape.calibration.fit "
+        "fenicsx_drape.forming.running.outputs (forming) imports fenicsx_drape.calibration.fit "
         "(calibration)",
         "fenicsx_drape.materials.tow (materials) imports fenicsx_drape.fe.grid (fe)",
-        "fenicsx_drape.measurements.bundle (measurements) imports fenicsx_drape.forming.post "
-        "(forming)",
+        "fenicsx_drape.measurements.bundle (measurements) imports "
+        "fenicsx_drape.forming.running.post (forming)",
         "fenicsx_drape.model (model) imports fenicsx_drape.commands.fit (cli)",
     ]
 

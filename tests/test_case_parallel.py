@@ -9,8 +9,8 @@ from mpi4py import MPI
 
 import numpy as np
 
-from fenicsx_drape.forming.case import load_case
-from fenicsx_drape.forming.run import run_case
+from fenicsx_drape.forming.case.format import load_case
+from fenicsx_drape.forming.running.run import run_case
 
 MESHES = Path(__file__).resolve().parents[1] / "meshes"
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.errors import ParameterError
-from fenicsx_drape.forming.contact import PenaltyContact
-from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.forming.terms.contact import PenaltyContact
+from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
 TOOLS = HemisphereTools()
 RNG = np.random.default_rng(7)

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from fenicsx_drape.forming.contact import PenaltyContact
-from fenicsx_drape.forming.motion import RigidMotion
-from fenicsx_drape.forming.surfaces import TriangleSurface, load_surface
-from fenicsx_drape.forming.tools import HemisphereTools, MeshedTool
+from fenicsx_drape.forming.terms.contact import PenaltyContact
+from fenicsx_drape.forming.tools.motion import RigidMotion
+from fenicsx_drape.forming.tools.shapes import HemisphereTools, MeshedTool
+from fenicsx_drape.forming.tools.surfaces import TriangleSurface, load_surface
 
 RNG = np.random.default_rng(23)
 
@@ -201,7 +201,7 @@ def _fe():
 
     from fenicsx_drape.fe.mesh import truss_mesh, truss_sheet
     from fenicsx_drape.fe.solver import SolverOptions, TrussProblem
-    from fenicsx_drape.forming.stabilisation import ExtrapolationSpring
+    from fenicsx_drape.forming.terms.stabilisation import ExtrapolationSpring
     from fenicsx_drape.model import default_model
 
     return (MPI, truss_mesh, truss_sheet, SolverOptions, TrussProblem, ExtrapolationSpring,

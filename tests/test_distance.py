@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.errors import ParameterError
-from fenicsx_drape.forming import distance
-from fenicsx_drape.forming.distance import DistanceField, build_field, distance_field
-from fenicsx_drape.forming.surfaces import TriangleSurface, load_surface
+from fenicsx_drape.forming.tools import distance
+from fenicsx_drape.forming.tools.distance import DistanceField, build_field, distance_field
+from fenicsx_drape.forming.tools.surfaces import TriangleSurface, load_surface
 
 RNG = np.random.default_rng(17)
 

@@ -8,8 +8,8 @@ import pytest
 pytest.importorskip("dolfinx")
 from mpi4py import MPI
 
-from fenicsx_drape.forming.case import load_case
-from fenicsx_drape.forming.run import run_case
+from fenicsx_drape.forming.case.format import load_case
+from fenicsx_drape.forming.running.run import run_case
 from fenicsx_drape.model import default_model
 
 DOUBLE_DOME = Path(__file__).resolve().parents[1] / "meshes" / "double_dome" / "case.toml"
@@ -22,8 +22,8 @@ def quarter():
 
 
 def test_the_case_file_builds_meshed_tools_from_gmsh():
-    from fenicsx_drape.forming.case import build_tools
-    from fenicsx_drape.forming.tools import MeshedTool
+    from fenicsx_drape.forming.case.format import build_tools
+    from fenicsx_drape.forming.tools.shapes import MeshedTool
 
     case = load_case(DOUBLE_DOME)
     tools = build_tools(case)

@@ -17,9 +17,9 @@ import numpy as np
 
 from fenicsx_drape.fe import SolverOptions, TrussProblem, truss_sheet
 from fenicsx_drape.fe.solver import SINGLE_PRECISION_FACTOR, monitoring
-from fenicsx_drape.forming.contact import PenaltyContact
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
-from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.forming.terms.contact import PenaltyContact
+from fenicsx_drape.forming.tools.shapes import HemisphereTools
 from fenicsx_drape.model import default_model
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,7 +11,7 @@ import pytest
 
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.fe.grid import BORDER, SYMMETRY_X, SYMMETRY_Y, outline_grid, sheet_grid
-from fenicsx_drape.forming.case import CaseError, load_case, with_overrides, write_case
+from fenicsx_drape.forming.case.format import CaseError, load_case, with_overrides, write_case
 
 HEMISPHERE = Path(__file__).parents[1] / "meshes" / "hemisphere" / "case.toml"
 
@@ -350,7 +350,7 @@ def _clockwise(P):
 
 
 def test_a_motion_table_moves_rigidly_and_sets_the_load_steps():
-    from fenicsx_drape.forming.motion import RigidMotion
+    from fenicsx_drape.forming.tools.motion import RigidMotion
 
     m = RigidMotion(time_s=(0.0, 10.0, 20.0), x_mm=(0.0, 0.0, 0.0), y_mm=(0.0, 0.0, 0.0),
                     z_mm=(0.0, 30.0, 40.0), rotation_deg=(0.0, 0.0, 90.0),
@@ -373,9 +373,9 @@ def test_a_motion_table_moves_rigidly_and_sets_the_load_steps():
 
 def test_tools_are_built_by_role(tmp_path):
     """Builtin tools are the hemisphere's by role; file tools need the meshed surfaces."""
-    from fenicsx_drape.forming.case import build_tools
-    from fenicsx_drape.forming.holder import FlatHolder
-    from fenicsx_drape.forming.tools import HemisphereTools
+    from fenicsx_drape.forming.case.format import build_tools
+    from fenicsx_drape.forming.terms.holder import FlatHolder
+    from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
     tools = build_tools(load_case(HEMISPHERE, duration_s=20.0))
     reference = HemisphereTools()

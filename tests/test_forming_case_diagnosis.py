@@ -18,8 +18,8 @@ from fenicsx_drape.cli import main
 from fenicsx_drape.diagnosis import forming_kind as fc
 from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case import case_for_test, load_case
-from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.forming.case.format import case_for_test, load_case
+from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.measurements.bundle import BundleError, Test, load_bundle, write_bundle
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -329,7 +329,7 @@ def dolfinx():
 @pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_compare_on_the_bundle_form_case_writes(tmp_path, capsys, dolfinx):
-    from fenicsx_drape.forming.outputs import form_case
+    from fenicsx_drape.forming.running.outputs import form_case
 
     case = load_case(write_case(tmp_path / "part"))
     form_case(tmp_path / "formed", case, fields=False, pictures=False)

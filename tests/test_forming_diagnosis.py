@@ -8,7 +8,7 @@ import pytest
 from fenicsx_drape.diagnosis import forming_kind as fc
 from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.compare import KINDS, compare_tests, normalised_error
-from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.measurements.bundle import Bundle, Test
 
 SETUP = {"punch_radius_mm": 60.0, "fillet_radius_mm": 20.0, "holder_opening_mm": 170.0,

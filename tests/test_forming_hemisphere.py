@@ -9,10 +9,10 @@ from mpi4py import MPI
 
 from fenicsx_drape.fe.mesh import truss_sheet
 from fenicsx_drape.fe.solver import SolverOptions, TrussProblem
-from fenicsx_drape.forming.contact import PenaltyContact
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
-from fenicsx_drape.forming.stabilisation import ExtrapolationSpring
-from fenicsx_drape.forming.tools import RevolvedTool, Segment
+from fenicsx_drape.forming.terms.contact import PenaltyContact
+from fenicsx_drape.forming.terms.stabilisation import ExtrapolationSpring
+from fenicsx_drape.forming.tools.shapes import RevolvedTool, Segment
 from fenicsx_drape.model import default_model
 
 # A coarse case: 20 mm cells, 8 s of forming; coarser still for the parallel comparison.

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fenicsx_drape.forming.holder import BlankHolder
+from fenicsx_drape.forming.terms.holder import BlankHolder
 from fenicsx_drape.materials import FrictionLaw
 
 
@@ -15,14 +15,15 @@ def sheet(cell=10.0, half=120.0, quarter=True):
 
 def holder(force, axes, slip=0.05, friction=True):
     law = FrictionLaw(mu=0.3, holder_slip_mm=slip, holder_friction=friction)
-    return BlankHolder(law, opening_radius_mm=85.0, force_N=force,
+    return BlankHolder(law, opening_radius_mm=85.0, force_N=force, force_share="symmetric_part",
                        clamp_stiffness_N_per_mm=2.4e3, symmetry_axes=axes)
 
 
 def test_quarter_and_full_share_the_force_alike():
-    """A quarter with F/4 gives every node the full sheet's yield force F μ / n_s."""
+    """A quarter carrying F/4 gives every node the full sheet's yield force F μ / n_s."""
     Xq, Xf = sheet(), sheet(quarter=False)
-    hq, hf = holder(133.0 / 4, (0, 1)), holder(133.0, ())
+    hq, hf = holder(133.0, (0, 1)), holder(133.0, ())
+    assert hq.part_force_N == 133.0 / 4 and hf.part_force_N == 133.0
     hq.bind(Xq, np.ones(len(Xq), bool), None)
     hf.bind(Xf, np.ones(len(Xf), bool), None)
     n_full = np.count_nonzero(np.hypot(Xf[:, 0], Xf[:, 1]) > 85.0)
@@ -75,7 +76,7 @@ def test_elastic_stick_then_perfectly_plastic_sliding():
 def test_clamping_and_jacobian_are_consistent():
     rng = np.random.default_rng(3)
     X = sheet()
-    h = holder(33.25, (0, 1))
+    h = holder(133.0, (0, 1))
     h.bind(X, np.ones(len(X), bool), None)
     x = X + rng.uniform(-0.3, 0.3, X.shape) * [1, 1, 0.05]
     f, K = h.forces(x, 1.0, 1.0)
@@ -124,7 +125,7 @@ class SquareOpening:
         self.v = np.asarray(velocity, float)
 
     def gap(self, x, t):
-        from fenicsx_drape.forming.holder import Gap
+        from fenicsx_drape.forming.terms.holder import Gap
 
         n = np.zeros_like(x)
         n[:, 2] = 1.0
@@ -145,7 +146,7 @@ class Cylinder:
         self.R, self.a = R, a
 
     def gap(self, x, t):
-        from fenicsx_drape.forming.holder import Gap
+        from fenicsx_drape.forming.terms.holder import Gap
 
         c = np.column_stack([np.zeros(len(x)), x[:, 1], x[:, 2] - self.R])
         ρ = np.linalg.norm(c, axis=1)
@@ -188,10 +189,10 @@ def test_a_square_opening_clamps_exactly_the_nodes_under_it():
 
 def test_the_flat_holder_is_the_circular_opening():
     """surface=FlatHolder(R) and opening_radius_mm=R are one and the same holder."""
-    from fenicsx_drape.forming.holder import FlatHolder
+    from fenicsx_drape.forming.terms.holder import FlatHolder
 
     X = sheet()
-    a, b = holder(33.25, (0, 1)), generic(FlatHolder(85.0), 33.25, (0, 1))
+    a, b = holder(133.0, (0, 1)), generic(FlatHolder(85.0), 133.0, (0, 1))
     for h in (a, b):
         h.bind(X, np.ones(len(X), bool), None)
     rng = np.random.default_rng(1)
@@ -204,15 +205,14 @@ def test_the_flat_holder_is_the_circular_opening():
 def test_force_share_changes_the_yield_force_per_node_by_the_expected_factor(planes):
     """symmetric_part: the part carries F/2^k, symmetry-plane nodes count ½ in n_s = Σ w;
     model: the whole F over the model's own n nodes. Ratio per node: 2^k Σw / n."""
-    from fenicsx_drape.forming.holder import part_force_N
-
     F = 133.0
     quarter = len(planes) == 2
     X = sheet(quarter=quarter)
     if not quarter:
         X = X[X[:, 0] >= 0]  # the half x >= 0
-    hs = generic(SquareOpening(65.0), part_force_N(F, len(planes), "symmetric_part"), planes)
-    hm = generic(SquareOpening(65.0), part_force_N(F, len(planes), "model"), planes, "model")
+    hs = generic(SquareOpening(65.0), F, planes)
+    hm = generic(SquareOpening(65.0), F, planes, "model")
+    assert hs.part_force_N == F / 2 ** len(planes) and hm.part_force_N == F
     for h in (hs, hm):
         h.bind(X, np.ones(len(X), bool), None)
     under = hs.under
@@ -231,19 +231,21 @@ def test_force_share_changes_the_yield_force_per_node_by_the_expected_factor(pla
     assert hs.yield_force_N.sum() == pytest.approx(F * 0.3 / 2 ** len(planes))
 
 
-def test_hemisphere_force_share_option():
-    from fenicsx_drape.errors import ParameterError
-    from fenicsx_drape.forming.hemisphere import HemisphereCase
+def test_the_hemisphere_case_shares_the_whole_force_over_its_quarter():
+    from fenicsx_drape.errors import DrapeInputError
+    from fenicsx_drape.forming.case.format import load_case
+    from fenicsx_drape.forming.terms.holder import part_force_N
 
     # The reading docs/paper.md's table chose (issue 15): the paper's numbers are reproduced best
-    # when the quarter's own nodes share the whole 133 N.
-    assert HemisphereCase().holder_force_share == "model"
-    assert HemisphereCase().part_force_N == 133.0
-    assert HemisphereCase(holder_force_share="symmetric_part").part_force_N == 133.0 / 4
-    assert HemisphereCase(quarter=False).part_force_N == 133.0
-    assert HemisphereCase(holder_force_share="model").to_case().holder.force_share == "model"
-    with pytest.raises(ParameterError, match="holder_force_share"):
-        HemisphereCase(holder_force_share="quarter")
+    # when the quarter's own nodes share the whole 133 N. A case file's default is the other.
+    case = load_case("hemisphere")
+    assert (case.holder.force_N, case.holder.force_share) == (133.0, "model")
+    assert part_force_N(133.0, 2, "model") == 133.0
+    assert part_force_N(133.0, 2, "symmetric_part") == 133.0 / 4
+    assert load_case("hemisphere", holder_force_share="symmetric_part").holder.force_share \
+        == "symmetric_part"
+    with pytest.raises(DrapeInputError, match="force_share"):
+        load_case("hemisphere", holder_force_share="quarter")
 
 
 @pytest.mark.parametrize("u_mm", [0.01, 3.0])  # sticking and sliding bars

@@ -8,8 +8,8 @@ import pytest
 pytest.importorskip("dolfinx")
 
 from fenicsx_drape.cli import main
-from fenicsx_drape.forming.case import case_for_test
-from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.forming.case.format import case_for_test
+from fenicsx_drape.forming.tools.shapes import HemisphereTools
 from fenicsx_drape.measurements.bundle import load_bundle
 
 
@@ -49,7 +49,7 @@ def test_bad_options_are_input_errors(tmp_path, capsys):
 @pytest.mark.skip_in_parallel
 def test_tool_meshes_lie_on_the_exact_surfaces(tmp_path):
     meshio = pytest.importorskip("meshio")
-    from fenicsx_drape.forming.tool_models import write_tool_meshes
+    from fenicsx_drape.forming.tools.drawing import write_tool_meshes
 
     tools = HemisphereTools()
     files = write_tool_meshes(tools, tmp_path, travel_mm=30.0, size_mm=6.0)

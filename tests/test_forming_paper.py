@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.errors import DrapeInputError, ParameterError
-from fenicsx_drape.forming import paper
-from fenicsx_drape.forming.kinematic import kinematic_drape
-from fenicsx_drape.forming.post import FormedGrid
-from fenicsx_drape.forming.tools import Arc, HemisphereTools
+from fenicsx_drape.forming.paper import numbers as paper
+from fenicsx_drape.forming.running.kinematic import kinematic_drape
+from fenicsx_drape.forming.running.post import FormedGrid
+from fenicsx_drape.forming.tools.shapes import Arc, HemisphereTools
 
 
 def flat_grid(n=3, cell=10.0):

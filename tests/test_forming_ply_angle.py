@@ -36,7 +36,7 @@ def same_grid(a: TrussGrid, b: TrussGrid) -> bool:
 
 def formed(grid: TrussGrid, deform):
     """The FormedGrid of a (clipped) grid, NaN at absent nodes, formed by ``deform``."""
-    from fenicsx_drape.forming.post import FormedGrid
+    from fenicsx_drape.forming.running.post import FormedGrid
 
     X = np.full((grid.nx + 1, grid.ny + 1, 3), np.nan)
     i, j = grid.ij.T
@@ -323,8 +323,8 @@ def test_the_formed_net_turns_with_the_tows(runs):
 @pytest.mark.skip_in_parallel
 @pytest.mark.slow
 def test_summary_pictures_and_bundle_of_a_turned_ply(runs, tmp_path):
-    from fenicsx_drape.forming.outputs import forming_bundle, summary
-    from fenicsx_drape.forming.plots import plot_paths, plot_shear, plot_wrinkling
+    from fenicsx_drape.forming.running.outputs import forming_bundle, summary
+    from fenicsx_drape.forming.running.plots import plot_paths, plot_shear, plot_wrinkling
 
     run = runs[5.0]
     out = summary(run)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fenicsx_drape.forming.post import FormedGrid, mean_distance
+from fenicsx_drape.forming.running.post import FormedGrid, mean_distance
 
 
 def flat(cell=10.0, half=120.0, quarter=True):

@@ -12,10 +12,10 @@ pytest.importorskip("dolfinx")
 
 from mpi4py import MPI
 
-from fenicsx_drape.forming.case import BlankSpec, ToolSpec, load_case
+from fenicsx_drape.forming.case.format import BlankSpec, ToolSpec, load_case
 from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
-from fenicsx_drape.forming.run import forming_options, free_edge, run_case
-from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.forming.running.run import forming_options, free_edge, run_case
+from fenicsx_drape.forming.tools.shapes import HemisphereTools
 from fenicsx_drape.model import default_model
 
 HEMISPHERE = Path(__file__).parents[1] / "meshes" / "hemisphere" / "case.toml"
@@ -35,7 +35,7 @@ class SquareOpening:
         self.a = a_mm
 
     def gap(self, x, t):
-        from fenicsx_drape.forming.holder import Gap
+        from fenicsx_drape.forming.terms.holder import Gap
 
         n = np.zeros_like(x)
         n[:, 2] = 1.0
@@ -142,7 +142,7 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
     assert summary["max_shear_deg"] == np.abs(reference.grid.shear_deg()).max()
     assert summary["snes_iterations"] == reference.iterations
     # The kinematic drape beside it, on the same tools: the hemisphere's net at 30 mm.
-    from fenicsx_drape.forming.kinematic import kinematic_drape
+    from fenicsx_drape.forming.running.kinematic import kinematic_drape
 
     net = kinematic_drape(HemisphereTools(), 30.0)
     assert summary["kinematic_max_shear_deg"] == pytest.approx(
@@ -190,8 +190,8 @@ def test_a_case_gives_the_same_sheet_on_any_number_of_ranks(tight_solver):
 def test_a_tool_given_in_python_moves_by_its_motion_table():
     """A spherical punch (not builtin) on a motion table: load steps of 1 mm of its travel,
     the apex node carried to its final height, the sheet clamped by the builtin holder."""
-    from fenicsx_drape.forming.motion import RigidMotion
-    from fenicsx_drape.forming.tools import Arc, RevolvedTool, Segment
+    from fenicsx_drape.forming.tools.motion import RigidMotion
+    from fenicsx_drape.forming.tools.shapes import Arc, RevolvedTool, Segment
 
     R, travel, duration = 60.0, 40.0, 8.0
     sphere = RevolvedTool("punch", (Arc((0.0, 0.0), R, math.pi / 2, 0.0),
@@ -213,7 +213,7 @@ def test_a_tool_given_in_python_moves_by_its_motion_table():
 @pytest.mark.skip_in_parallel
 def test_a_punch_that_never_reaches_the_blank_is_reported():
     """A punch started 100 mm too low passes under the blank: the run says so."""
-    from fenicsx_drape.forming.case import build_tools
+    from fenicsx_drape.forming.case.format import build_tools
 
     case = load_case(HEMISPHERE, **COARSE)
     punch = build_tools(case)["punch"]

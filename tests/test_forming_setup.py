@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fenicsx_drape.forming.case import CaseError, broken_planes, load_case, with_overrides
+from fenicsx_drape.forming.case.format import CaseError, broken_planes, load_case, with_overrides
 
 MESHES = Path(__file__).parents[1] / "meshes"
 DOUBLE_DOME = MESHES / "double_dome" / "case.toml"
@@ -54,7 +54,7 @@ def test_a_tool_offset_moves_the_punch_only():
     hemi = HemisphereCase(quarter=False, tool_offset_mm=(2.0, 0.0)).to_case()
     assert hemi.tool("punch").params["punch_x_mm"] == 2.0
     assert hemi.tool("die").params.get("punch_x_mm", 0.0) == 0.0
-    from fenicsx_drape.forming.case import build_tools
+    from fenicsx_drape.forming.case.format import build_tools
 
     tools = build_tools(hemi)
     apex = np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
@@ -79,7 +79,7 @@ def test_overrides_come_before_the_check_of_the_case(tmp_path):
 
 
 def test_sample_outside_the_lattice_is_nan_on_request():
-    from fenicsx_drape.forming.post import FormedGrid
+    from fenicsx_drape.forming.running.post import FormedGrid
 
     X = np.stack([*np.meshgrid(np.arange(3.0), np.arange(3.0), indexing="ij"), np.zeros((3, 3))],
                  axis=-1) * 10.0
@@ -92,7 +92,7 @@ def test_sample_outside_the_lattice_is_nan_on_request():
 
 
 def _form(tmp_path, name, **setup):
-    from fenicsx_drape.forming.outputs import form_case
+    from fenicsx_drape.forming.running.outputs import form_case
 
     case = load_case(DOUBLE_DOME, **COARSE, **setup)
     run, result = form_case(tmp_path / name, case, fields=False)
@@ -149,7 +149,7 @@ def test_the_command_line_forms_an_off_centre_case_on_the_full_model(tmp_path, c
 @pytest.mark.skip_in_parallel
 def test_a_failure_after_the_solve_writes_what_was_computed(tmp_path, monkeypatch):
     pytest.importorskip("dolfinx")
-    from fenicsx_drape.forming import outputs
+    from fenicsx_drape.forming.running import outputs
 
     def broken(*args, **kwargs):
         raise ValueError("no picture today")
@@ -170,7 +170,7 @@ def test_a_failure_after_the_solve_writes_what_was_computed(tmp_path, monkeypatc
 def test_the_hemisphere_with_every_set_up_is_formed(tmp_path):
     pytest.importorskip("dolfinx")
     from fenicsx_drape.forming.hemisphere import HemisphereCase
-    from fenicsx_drape.forming.outputs import form_hemisphere
+    from fenicsx_drape.forming.running.outputs import form_hemisphere
 
     case = HemisphereCase(quarter=False, cell_mm=20.0, step_mm=4.0, ply_angle_deg=4.0,
                           blank_offset_mm=(0.0, 7.0), tool_offset_mm=(2.0, 0.0))

@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from fenicsx_drape.forming.kinematic import (
+from fenicsx_drape.forming.running.kinematic import (
     GENERATORS,
     Plane,
     formed_surface,
     kinematic_drape,
     rectangle,
 )
-from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
 TOOLS = HemisphereTools()
 # Today's (PR before issue 13) net, built from a mirrored quadrant: max shear at Δ = 10, 5, 2.5.

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.cli import main
-from fenicsx_drape.forming.case import load_case, with_overrides
-from fenicsx_drape.forming.kinematic import case_surface, drape_case, kinematic_drape
-from fenicsx_drape.forming.tools import HemisphereTools
+from fenicsx_drape.forming.case.format import load_case, with_overrides
+from fenicsx_drape.forming.running.kinematic import case_surface, drape_case, kinematic_drape
+from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
 CASE = Path(__file__).resolve().parents[1] / "meshes" / "hemisphere" / "case.toml"
 

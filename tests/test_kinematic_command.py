@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.cli import main
-from fenicsx_drape.forming.case import case_for_test
+from fenicsx_drape.forming.case.format import case_for_test
 from fenicsx_drape.measurements.bundle import load_bundle
 
 

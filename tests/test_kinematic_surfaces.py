@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.errors import DrapeInputError, ParameterError
-from fenicsx_drape.forming.kinematic import (
+from fenicsx_drape.forming.running.kinematic import (
     GENERATORS,
     HeightField,
     Plane,
@@ -17,7 +17,7 @@ from fenicsx_drape.forming.kinematic import (
     kinematic_drape,
     rectangle,
 )
-from fenicsx_drape.forming.tools import Arc, HemisphereTools, RevolvedTool, Segment
+from fenicsx_drape.forming.tools.shapes import Arc, HemisphereTools, RevolvedTool, Segment
 
 R_MM = 50.0
 SPHERE = RevolvedTool("sphere", (Arc((0.0, 0.0), R_MM, math.pi / 2, 0.0),))  # the cap z ≥ 0

@@ -14,7 +14,7 @@ import pytest
 
 import fenicsx_drape.forming  # noqa: F401  (registers the case reader)
 from fenicsx_drape.cli import main
-from fenicsx_drape.forming.case import case_for_test
+from fenicsx_drape.forming.case.format import case_for_test
 from fenicsx_drape.measurements.bundle import BundleError, load_bundle
 from fenicsx_drape.measurements.lab import Frame, rotation
 from fenicsx_drape.trust import trusting

@@ -14,7 +14,7 @@ import pytest
 
 from fenicsx_drape.diagnosis.compare import OUTLIER_SD, evaluate, write_compare
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
-from fenicsx_drape.forming.case import case_for_test
+from fenicsx_drape.forming.case.format import case_for_test
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.measurements.lab import rotation
 from fenicsx_drape.trust import trusting
@@ -35,7 +35,7 @@ def part():
     """The double dome (quarter model, 20 mm cells) formed by the paper's model."""
     pytest.importorskip("dolfinx")
     from fenicsx_drape.diagnosis import forming_runs as runs
-    from fenicsx_drape.forming.case import load_case, with_overrides
+    from fenicsx_drape.forming.case.format import load_case, with_overrides
     from fenicsx_drape.model import default_model
 
     case = with_overrides(load_case(ROOT / "meshes/double_dome/case.toml"), cell_mm=20.0)
@@ -149,7 +149,7 @@ def test_an_outline_only_sees_the_draw_in(tmp_path, part):
     assert np.mean(gripped.residual) < 0.0
     # With the measured draw-in (here the model's own at each edge point, plus 0.3 mm
     # noise), each row gives two values: its distance to the edge and its draw-in.
-    from fenicsx_drape.forming import measure
+    from fenicsx_drape.forming.running import measure
 
     path = bundle.path / "edge.csv"
     table = np.genfromtxt(path, delimiter=",", names=True)

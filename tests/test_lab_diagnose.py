@@ -14,7 +14,7 @@ import pytest
 from test_forming_case_diagnosis import OCTAGON  # the generic small case
 
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
-from fenicsx_drape.forming.case import case_for_test
+from fenicsx_drape.forming.case.format import case_for_test
 from fenicsx_drape.measurements.bundle import load_bundle
 
 pytestmark = [pytest.mark.slow, pytest.mark.skip_in_parallel]
@@ -25,7 +25,7 @@ def lab_bundle(tmp_path_factory):
     """The octagon's lab bundle (one wild shear row), formed by the paper's model."""
     pytest.importorskip("dolfinx")
     from fenicsx_drape.diagnosis import forming_runs as runs
-    from fenicsx_drape.forming.case import load_case
+    from fenicsx_drape.forming.case.format import load_case
     from fenicsx_drape.model import default_model
 
     folder = tmp_path_factory.mktemp("lab")

@@ -1,4 +1,4 @@
-"""What a lab measures, taken from a formed sheet (fenicsx_drape.forming.measure): closest
+"""What a lab measures, taken from a formed sheet (fenicsx_drape.forming.running.measure): closest
 points, shear within the cell, the blank's edge and draw-in, on sheets with known answers."""
 
 import math
@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from fenicsx_drape.forming import measure
-from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.forming.running import measure
+from fenicsx_drape.forming.running.post import FormedGrid
 
 
 def sheet(shear_deg: float = 0.0, lift_mm: float = 0.0, cell_mm: float = 10.0,
@@ -80,7 +80,7 @@ def test_coverage_of_a_scan_of_a_third_of_the_sheet():
 def test_the_tool_forces_are_written_as_a_table_a_picture_and_peaks(tmp_path):
     from types import SimpleNamespace
 
-    from fenicsx_drape.forming.outputs import write_tool_forces
+    from fenicsx_drape.forming.running.outputs import write_tool_forces
 
     rows = [{"time_s": t, "travel_mm": 2.0 * t, "punch": 3.0 * t, "die": -4.0 * t}
             for t in (1.0, 2.0, 3.0)]

@@ -16,10 +16,10 @@ import pytest
 pytest.importorskip("gmsh")
 
 from fenicsx_drape.forming import load_case, run_case
-from fenicsx_drape.forming.kinematic import drape_case
-from fenicsx_drape.forming.motion import RigidMotion
-from fenicsx_drape.forming.surfaces import load_surface
-from fenicsx_drape.forming.tools import HemisphereTools, MeshedTool
+from fenicsx_drape.forming.running.kinematic import drape_case
+from fenicsx_drape.forming.tools.motion import RigidMotion
+from fenicsx_drape.forming.tools.shapes import HemisphereTools, MeshedTool
+from fenicsx_drape.forming.tools.surfaces import load_surface
 
 FOLDER = Path(__file__).resolve().parent.parent / "meshes" / "hemisphere"
 TOOLS = HemisphereTools()

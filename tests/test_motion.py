@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.errors import ParameterError
-from fenicsx_drape.forming.motion import RigidMotion, rotation_matrix
+from fenicsx_drape.forming.tools.motion import RigidMotion, rotation_matrix
 
 RNG = np.random.default_rng(11)
 

@@ -14,7 +14,7 @@ import pytest
 
 from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis import setup as st
-from fenicsx_drape.forming.case import load_case, with_overrides
+from fenicsx_drape.forming.case.format import load_case, with_overrides
 from fenicsx_drape.measurements.bundle import Bundle, Test
 from fenicsx_drape.model import default_model
 

@@ -8,8 +8,8 @@ import pytest
 pytest.importorskip("dolfinx")
 from mpi4py import MPI
 
-from fenicsx_drape.forming.case import load_case
-from fenicsx_drape.forming.run import run_case
+from fenicsx_drape.forming.case.format import load_case
+from fenicsx_drape.forming.running.run import run_case
 
 SQUARE_BOX = Path(__file__).resolve().parents[1] / "meshes" / "square_box" / "case.toml"
 COARSE = {"cell_mm": 20.0}
@@ -26,8 +26,8 @@ def quarter():
 
 
 def test_the_case_file_builds_the_box_tools_from_gmsh():
-    from fenicsx_drape.forming.case import build_tools
-    from fenicsx_drape.forming.tools import MeshedTool
+    from fenicsx_drape.forming.case.format import build_tools
+    from fenicsx_drape.forming.tools.shapes import MeshedTool
 
     tools = build_tools(load_case(SQUARE_BOX))
     assert all(isinstance(t, MeshedTool) for t in tools.values())

@@ -10,7 +10,7 @@ pytest.importorskip("gmsh")
 import gmsh
 
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.surfaces import (
+from fenicsx_drape.forming.tools.surfaces import (
     TriangleSurface,
     closest_on_triangles,
     load_surface,

@@ -19,7 +19,7 @@ import pytest
 import fenicsx_drape.forming  # noqa: F401  (registers the bundle's case reader)
 from fenicsx_drape.cli import load_bundle_reported, main
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case import (
+from fenicsx_drape.forming.case.format import (
     CaseError,
     build_tools,
     case_for_test,
@@ -27,8 +27,8 @@ from fenicsx_drape.forming.case import (
     coarse_mesh_problem,
     load_case,
 )
-from fenicsx_drape.forming.run import case_model
-from fenicsx_drape.forming.surfaces import load_surface
+from fenicsx_drape.forming.running.run import case_model
+from fenicsx_drape.forming.tools.surfaces import load_surface
 from fenicsx_drape.measurements.bundle import BundleError, load_bundle
 from fenicsx_drape.measurements.plausible import (
     Reach,
@@ -144,7 +144,7 @@ grid_mm = 10.0"""
 @pytest.fixture
 def surfaces_only(monkeypatch):
     """Tools as their bare surfaces (no distance field: seconds saved, nothing else tested)."""
-    monkeypatch.setattr("fenicsx_drape.forming.tools.MeshedTool",
+    monkeypatch.setattr("fenicsx_drape.forming.tools.shapes.MeshedTool",
                         lambda name, surface, motion: surface)
 
 

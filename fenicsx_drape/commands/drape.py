@@ -7,38 +7,36 @@ Example::
     ./drape drape hemisphere --out out --ply-angle-deg 30 --generator normal_section
 
 The surface is the case's formed surface: the tools the sheet lies on at the end of their
-motion, united (:func:`~fenicsx_drape.forming.kinematic.case_surface`); the blank, Δ, ply
-angle and start (the net's origin) are the case's unless given. ``hemisphere`` is the paper's
-(the same as ``meshes/hemisphere/case.toml``).
+motion, united (:func:`~fenicsx_drape.forming.running.kinematic.case_surface`); the blank, Δ, ply
+angle and start (the net's origin) are the case's unless given. A named case is a case of
+the repository: ``hemisphere`` is ``meshes/hemisphere/case.toml``.
 
 It writes into ``--out``: ``summary.json`` (max shear, nodes, unplaced nodes, the options),
 ``shear.png`` (the net coloured by shear angle), ``bundle/`` (the net on the drawn grid as a
 forming bundle, so it compares like a measured part) and ``provenance.json``. The same in
-Python: :func:`~fenicsx_drape.forming.kinematic.drape_case` (or ``kinematic_drape``) and
-:func:`~fenicsx_drape.forming.kinematic.write_drape`.
+Python: :func:`~fenicsx_drape.forming.running.kinematic.drape_case` (or ``kinematic_drape``) and
+:func:`~fenicsx_drape.forming.running.kinematic.write_drape`.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 
 from fenicsx_drape.cli import positive_float
 from fenicsx_drape.errors import DrapeInputError
 
-CASES = ("hemisphere",)
-
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Options of ``drape drape``."""
-    from fenicsx_drape.forming.kinematic import GENERATORS
+    from fenicsx_drape.forming.running.kinematic import GENERATORS
 
     parser.add_argument("case", metavar="CASE",
-                        help="a case file (case.toml) or 'hemisphere' (the paper's)")
+                        help="a case file (case.toml) or a named case: hemisphere (the "
+                        "paper's), double_dome, square_box")
     parser.add_argument("--out", required=True, type=Path, help="output folder")
     parser.add_argument("--cell-mm", type=float, default=None,
-                        help="cell size Δ (mm; default: the case's, hemisphere 10)")
+                        help="cell size Δ (mm; default: the case's)")
     parser.add_argument("--start-mm", type=float, nargs=2, default=None,
                         metavar=("X", "Y"), help="start node on the flat sheet (mm), placed on "
                         "the highest surface point above it (default: the net's origin)")
@@ -60,7 +58,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``drape drape``."""
-    from fenicsx_drape.forming.kinematic import drape_case, kinematic_drape, write_drape
+    from fenicsx_drape.forming.running.kinematic import drape_case, write_drape
 
     if not args.grid_mm > 0:
         raise DrapeInputError(f"--grid-mm {args.grid_mm}: must be positive")
@@ -68,34 +66,16 @@ def run(args: argparse.Namespace) -> int:
                "direction_deg": args.direction_deg, "ply_angle_deg": args.ply_angle_deg,
                "generator": args.generator, "locking_angle_deg": args.locking_angle_deg,
                "warn": False}
-    if args.case in CASES:
-        from fenicsx_drape.forming.hemisphere import HemisphereCase
-        from fenicsx_drape.forming.tools import HemisphereTools
+    from fenicsx_drape.forming.case.format import case_dict, case_file, load_case
 
-        tools = HemisphereTools()
-        given = {k: v for k, v in options.items() if v is not None}
-        net = kinematic_drape(tools, 10.0 if args.cell_mm is None else args.cell_mm, **given)
-        nominal = HemisphereCase()
-        setup = {"geometry": "hemisphere", "punch_radius_mm": tools.punch_radius_mm,
-                 "fillet_radius_mm": tools.fillet_radius_mm,
-                 "holder_opening_mm": tools.holder_opening_mm, "sheet_mm": tools.sheet_mm,
-                 "travel_mm": tools.travel_mm, "duration_s": nominal.duration_s,
-                 "holder_force_N": nominal.holder_force_N}
-        summary = write_drape(args.out, net, grid_mm=args.grid_mm, setup=setup,
-                              pictures=not args.no_pictures,
-                              case={"name": "hemisphere", "tools": dataclasses.asdict(tools)})
-    else:
-        from fenicsx_drape.forming.case import case_dict, load_case
-
-        path = Path(args.case)
-        if path.suffix.lower() != ".toml":
-            raise DrapeInputError(f"{args.case!r}: not a case file (.toml) nor one of "
-                                  f"{', '.join(CASES)}")
-        case = load_case(path)
-        net = drape_case(case, cell_mm=args.cell_mm, **options)
-        summary = write_drape(args.out, net, grid_mm=args.grid_mm, forming_case=case,
-                              pictures=not args.no_pictures,
-                              case=case_dict(case, relative_to=path.parent))
+    path = case_file(args.case)
+    if path.suffix.lower() != ".toml":
+        raise DrapeInputError(f"{args.case!r}: not a case file (.toml) nor a named case")
+    case = load_case(path)
+    net = drape_case(case, cell_mm=args.cell_mm, **options)
+    summary = write_drape(args.out, net, grid_mm=args.grid_mm, forming_case=case,
+                          pictures=not args.no_pictures,
+                          case=case_dict(case, relative_to=path.parent))
     print(f"kinematic drape: max shear {summary['max_shear_deg']:.1f}°, {summary['nodes']} "
           f"nodes" + (f", {summary['unplaced_nodes']} could not be placed (absent)"
                       if summary["unplaced_nodes"] else ""))

@@ -1,4 +1,4 @@
-"""``drape form``: form a case (a ``case.toml``, or the paper's hemisphere) and write its outputs.
+"""``drape form``: form a case (a ``case.toml``, or a named one) and write its outputs.
 
 Example::
 
@@ -9,10 +9,11 @@ Example::
     ./drape form hemisphere --out results/ply3 --full --ply-angle-deg 3
     ./drape form meshes/double_dome/case.toml --out out --blank-offset-mm 8 0 --tool-offset-mm 0 2
 
-The outputs are listed in :mod:`fenicsx_drape.forming.outputs`; the same is one call in
-Python: :func:`~fenicsx_drape.forming.outputs.form_case` (any case) or
-:func:`~fenicsx_drape.forming.outputs.form_hemisphere`. Options given on the command line
-override the case file's values (:func:`~fenicsx_drape.forming.case.with_overrides`) before
+``hemisphere`` is the paper's, ``meshes/hemisphere/case.toml``, formed like any case (and
+``double_dome``, ``square_box``: every folder of ``meshes/`` with a ``case.toml``). The
+outputs are listed in :mod:`fenicsx_drape.forming.running.outputs`; the same is one call in Python:
+``form_case(out, load_case("hemisphere", cell_mm=5))``. Options given on the command line
+override the case file's values (:func:`~fenicsx_drape.forming.case.format.with_overrides`) before
 the case is checked. A set-up that breaks a symmetry plane of the case (a turned ply, an
 offset blank or punch) is formed without that plane, and the command says so.
 """
@@ -26,28 +27,26 @@ from pathlib import Path
 from fenicsx_drape.cli import petsc_option_argument, positive_float
 from fenicsx_drape.errors import DrapeInputError, SolverError
 
-CASES = ("hemisphere",)
-
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Options of ``drape form``."""
     parser.add_argument("case", metavar="CASE",
-                        help="a case file (case.toml, see docs/case-format.md) or "
-                        "'hemisphere' (the paper's, with the options below)")
+                        help="a case file (case.toml, see docs/case-format.md) or a named "
+                        "case: hemisphere (the paper's), double_dome, square_box")
     parser.add_argument("--out", required=True, type=Path, help="output folder")
     parser.add_argument("--cell-mm", type=float, default=None,
-                        help="unit-cell size Δ (mm; hemisphere default 10)")
+                        help="unit-cell size Δ (mm; default: the case's)")
     parser.add_argument("--duration-s", type=float, default=None,
-                        help="forming time of the whole motion (s; hemisphere default 40)")
+                        help="forming time of the whole motion (s; default: the case's)")
     parser.add_argument("--holder-force-N", type=float, default=None,
-                        help="total blank-holder force on the whole part (N; hemisphere "
-                        "default 133)")
+                        help="total blank-holder force on the whole part (N; default: the "
+                        "case's)")
     parser.add_argument("--holder-force-share", choices=("symmetric_part", "model"),
                         default=None,
                         help="eq. 1's reading: a symmetric model carries its share of the "
                         "force, symmetry-plane nodes counting ½ (symmetric_part, a case file's "
-                        "default), or the whole force over the model's own nodes (model, the "
-                        "hemisphere's default: docs/paper.md, issue 15)")
+                        "default), or the whole force over the model's own nodes (model, as "
+                        "the hemisphere's file says: docs/paper.md, issue 15)")
     parser.add_argument("--mu", type=float, default=None,
                         help="textile-tool friction coefficient of eq. 1 (default: the case's "
                         "holder mu, else the model's)")
@@ -59,8 +58,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--without", dest="without_effects", action="append", default=[],
                         metavar="EFFECT", help="switch an effect off (repeatable)")
     parser.add_argument("--full", action="store_true",
-                        help="model the whole blank, without symmetry planes (hemisphere "
-                        "default: a symmetric quarter)")
+                        help="model the whole blank, without the case's symmetry planes")
     parser.add_argument("--ply-angle-deg", type=float, default=None, metavar="THETA",
                         help="initial ply angle: the tows at THETA to x (degrees; needs a "
                         "model without symmetry planes, --full)")
@@ -72,11 +70,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         "the die and holder")
     parser.add_argument("--no-die", action="store_true", help="leave the die(s) out")
     parser.add_argument("--penalty-factor", type=float, default=None,
-                        help="contact stiffness in units of l_t E_o (hemisphere default 0.3)")
+                        help="contact stiffness in units of l_t E_o (default: the case's)")
     parser.add_argument("--stabilisation", type=float, default=None, metavar="N_PER_MM",
-                        help="out-of-plane stabilisation stiffness (default 1.25 N/mm)")
+                        help="out-of-plane stabilisation stiffness (N/mm; default: the case's)")
     parser.add_argument("--step-mm", type=float, default=None,
-                        help="travel of the fastest tool per load step (mm; default 1)")
+                        help="travel of the fastest tool per load step (mm; default: the case's)")
     parser.add_argument("--grid-mm", type=positive_float, default=10.0,
                         help="spacing of the drawn grid written to the bundle (mm)")
     parser.add_argument("--no-fields", action="store_true",
@@ -100,23 +98,6 @@ def _model(args: argparse.Namespace, default):
     return model
 
 
-def _hemisphere(args: argparse.Namespace):
-    from fenicsx_drape.forming.case import broken_planes
-    from fenicsx_drape.forming.hemisphere import HemisphereCase
-
-    given = {"cell_mm": args.cell_mm, "duration_s": args.duration_s,
-             "holder_force_N": args.holder_force_N, "penalty_factor": args.penalty_factor,
-             "stabilisation_N_per_mm": args.stabilisation, "step_mm": args.step_mm,
-             "ply_angle_deg": args.ply_angle_deg,
-             "holder_force_share": args.holder_force_share}
-    given.update(_offsets(args))
-    given = {k: v for k, v in given.items() if v is not None}
-    quarter = not (args.full or broken_planes(given))
-    if not args.full and not quarter:
-        _note_full(given, ("x", "y"))
-    return HemisphereCase(quarter=quarter, die=not args.no_die, **given)
-
-
 def _offsets(args: argparse.Namespace) -> dict:
     return {k: tuple(v) for k, v in (("blank_offset_mm", args.blank_offset_mm),
                                      ("tool_offset_mm", args.tool_offset_mm)) if v is not None}
@@ -125,7 +106,7 @@ def _offsets(args: argparse.Namespace) -> dict:
 def _note_full(setup: dict, planes) -> None:
     from mpi4py import MPI
 
-    from fenicsx_drape.forming.case import SETUP_OVERRIDES, broken_planes
+    from fenicsx_drape.forming.case.format import SETUP_OVERRIDES, broken_planes
 
     broken = sorted(broken_planes(setup) & set(planes))
     if broken and MPI.COMM_WORLD.rank == 0:
@@ -139,28 +120,22 @@ def _note_full(setup: dict, planes) -> None:
 def _case(args: argparse.Namespace):
     import dataclasses
 
-    from fenicsx_drape.forming.case import CaseError, load_case
+    from fenicsx_drape.forming.case.format import case_file, load_case
 
-    path = Path(args.case)
+    path = case_file(args.case)
     if path.suffix.lower() != ".toml":
-        raise DrapeInputError(f"{args.case!r}: not a case file (.toml) nor one of "
-                              f"{', '.join(CASES)}")
+        raise DrapeInputError(f"{args.case!r}: not a case file (.toml) nor a named case")
     case = load_case(path, cell_mm=args.cell_mm, duration_s=args.duration_s,
                      holder_force_N=args.holder_force_N,
                      holder_force_share=args.holder_force_share,
                      penalty_factor=args.penalty_factor,
                      stabilisation_N_per_mm=args.stabilisation, step_mm=args.step_mm,
                      ply_angle_deg=args.ply_angle_deg, symmetry=[] if args.full else None,
-                     **_offsets(args))
+                     die=False if args.no_die else None, **_offsets(args))
     if not args.full:
         setup = {"ply_angle_deg": args.ply_angle_deg, **_offsets(args)}
         _note_full({k: v for k, v in setup.items() if v is not None},
                    _file_planes(path))
-    if args.no_die:
-        dies = [t.name for t in case.tools if t.role == "die"]
-        if not dies:
-            raise CaseError([f"{path}: --no-die: the case has no tool of role 'die'"])
-        case = dataclasses.replace(case, tools=tuple(t for t in case.tools if t.role != "die"))
     if args.mu is not None and case.holder is not None and case.holder.mu is not None:
         # The command line wins over the case file's holder mu.
         case = dataclasses.replace(case, holder=dataclasses.replace(case.holder, mu=None))
@@ -181,32 +156,20 @@ def run(args: argparse.Namespace) -> int:
     """Run ``drape form``."""
     from mpi4py import MPI
 
-    from fenicsx_drape.model import default_model
 
     rank0 = MPI.COMM_WORLD.rank == 0
 
     def progress(line: str) -> None:
         print(line, flush=True)
 
-    from fenicsx_drape.forming.outputs import FormingOutputError
+    from fenicsx_drape.forming.running.outputs import FormingOutputError, form_case
+    from fenicsx_drape.forming.running.run import case_model
 
-    hemisphere = args.case in CASES
     try:
-        if hemisphere:
-            from fenicsx_drape.forming.outputs import form_hemisphere
-
-            case = _hemisphere(args)
-            _, result = form_hemisphere(args.out, case, _model(args, default_model()),
-                                        grid_mm=args.grid_mm, fields=not args.no_fields,
-                                        progress=None if args.quiet else progress)
-        else:
-            from fenicsx_drape.forming.outputs import form_case
-            from fenicsx_drape.forming.run import case_model
-
-            case = _case(args)
-            _, result = form_case(args.out, case, _model(args, case_model(case)),
-                                  grid_mm=args.grid_mm, fields=not args.no_fields,
-                                  progress=None if args.quiet else progress)
+        case = _case(args)
+        _, result = form_case(args.out, case, _model(args, case_model(case)),
+                              grid_mm=args.grid_mm, fields=not args.no_fields,
+                              progress=None if args.quiet else progress)
     except SolverError as err:
         if rank0:
             print(f"drape form: the forming solve failed: {err}", file=sys.stderr)
@@ -221,15 +184,15 @@ def run(args: argparse.Namespace) -> int:
               f"{result['min_wrinkling_strain']:.3f}, {result['steps']} steps, "
               f"{result['snes_iterations']} Newton iterations, {result['wall_time_s']:.1f} s",
               file=sys.stderr if args.quiet else sys.stdout)
-        if hemisphere and not args.quiet:
-            from fenicsx_drape.forming.paper import paper_comparison
+        if "paper" in result and not args.quiet:
+            from fenicsx_drape.forming.paper.numbers import paper_comparison
 
             print(paper_comparison(result))
-        if not hemisphere and result.get("kinematic_max_shear_deg") is not None:
+        if result.get("kinematic_max_shear_deg") is not None:
             print(f"kinematic drape (pin-jointed net) on the same tools: max shear "
                   f"{result['kinematic_max_shear_deg']:.1f}°")
-        pictures = ["shear.png", "wrinkling.png",
-                    "paths.png" if hemisphere else "kinematic_shear.png"]
+        pictures = ["shear.png", "wrinkling.png", "kinematic_shear.png",
+                    *(["paths.png"] if "paper" in result else [])]
         print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "
               f"{args.out / 'summary.json'}")
     return 0

@@ -6,15 +6,15 @@ forming kind (:data:`~fenicsx_drape.diagnosis.forming_fit.FORMING`, which hands 
 measurement to :mod:`~fenicsx_drape.diagnosis.lab_kind`):
 
 - **simulation**: the part the test was formed on, under its conditions. A test with
-  ``geometry = "hemisphere"`` forms the paper's hemisphere
-  (:func:`~fenicsx_drape.forming.hemisphere.run_hemisphere`, tool sizes, travel, duration and
-  holding force from the test) on a symmetric quarter; a test that names its case file
-  (``case = "part.toml"``) forms that case (:func:`~fenicsx_drape.forming.run.run_case`) with
-  the test's keys as overrides (the bundle loader applied them,
-  :func:`~fenicsx_drape.forming.case.case_for_test`), in the case's frame. The modelled part
-  (quarter, half or whole blank, by the case's symmetry planes) is compared as it is when the
-  measured grid lies in it, else mirrored through the planes to the whole sheet
-  (:func:`sheet_for`); it is interpolated bilinearly in the reference coordinates at the
+  ``geometry = "hemisphere"`` forms the paper's hemisphere (``meshes/hemisphere/case.toml``,
+  a symmetric quarter, with the tool sizes, travel, duration and holding force of the test:
+  :func:`forming_case_of`) as any case; a test that names its case file
+  (``case = "part.toml"``) forms that case
+  (:func:`~fenicsx_drape.forming.running.run.run_case`) with the test's keys as overrides
+  (the bundle loader applied them, :func:`~fenicsx_drape.forming.case.format.case_for_test`),
+  in the case's frame. The modelled part (quarter, half or whole blank, by the case's
+  symmetry planes) is compared as it is when the measured grid lies in it, else mirrored
+  through the planes to the whole sheet (:func:`sheet_for`); it is interpolated bilinearly in the reference coordinates at the
   measured grid's ``(x0_mm, y0_mm)``, so the measured grid may be coarser than the mesh
   (section 4.2). A measured node in a cell the model's net does not keep (the ragged edge of a
   polygon blank, coarser cells than the data's) takes the bilinear map of the nearest kept
@@ -78,17 +78,16 @@ from fenicsx_drape.diagnosis.forming_runs import (
     FULL_CELL_MM,
     case_key,
     cell_override,
-    current_cell_mm,
     form_many,
     stopped_at,
 )
 from fenicsx_drape.diagnosis.kinds import Region
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case import FormingCase, case_for_test, with_overrides
+from fenicsx_drape.forming.case.format import FormingCase, case_file, case_for_test, with_overrides
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds import Comparison
-    from fenicsx_drape.forming.post import FormedGrid
+    from fenicsx_drape.forming.running.post import FormedGrid
     from fenicsx_drape.measurements.bundle import Test
     from fenicsx_drape.model import Model
 
@@ -98,8 +97,6 @@ XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
 MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
 MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
 MU_BOUNDS = (0.0, 2.0)  # friction coefficients fitted within (prepreg on steel: 0.1-0.5)
-TOOL_KEYS = ("punch_radius_mm", "fillet_radius_mm", "holder_opening_mm", "sheet_mm",
-             "travel_mm")
 # A measured node outside the cells of the model's net (a ragged edge) takes the nearest kept
 # cell's bilinear map up to this many cells away; farther, the grid does not fit the blank.
 EXTRAPOLATE_CELLS = 1.5
@@ -118,18 +115,26 @@ _read_cases: dict[tuple, FormingCase] = {}
 
 
 def forming_case_of(test: Test) -> FormingCase:
-    """The case a test names, with the test's keys applied (as the bundle loader read it).
+    """The case a test forms, with the test's keys applied.
 
-    A bundle loaded before ``fenicsx_drape.forming`` was imported carries the case file but
-    not the case: it is read here, once per file and keys.
+    A test that names its case file: that case (as the bundle loader read it, else read here);
+    a test with ``geometry = "hemisphere"``: the paper's, ``meshes/hemisphere/case.toml`` (a
+    symmetric quarter), with the test's tool sizes, travel, duration and holding force. Read
+    once per file and keys.
     """
     if test.forming_case is not None:
         return test.forming_case
-    if test.case_path is None:
-        raise DrapeInputError(f"test {test.id!r}: names no case file")
-    key = (str(test.case_path), tuple(sorted((k, str(v)) for k, v in test.case_keys.items())))
+    if test.case_path is not None:
+        path, keys = test.case_path, test.case_keys
+    elif test.geometry == "hemisphere":
+        path, keys = case_file("hemisphere"), test.forming
+    else:
+        raise DrapeInputError(f"test {test.id!r}: forming geometry {test.geometry!r} cannot be "
+                              "simulated (known: hemisphere; or name the forming case with "
+                              "case = \"case.toml\")")
+    key = (str(path), tuple(sorted((k, str(v)) for k, v in keys.items())))
     if key not in _read_cases:
-        _read_cases[key] = case_for_test(test.case_path, test.case_keys)[0]
+        _read_cases[key] = case_for_test(path, keys)[0]
     return _read_cases[key]
 
 
@@ -138,35 +143,20 @@ def _with_cell(case: FormingCase, cell_mm: float) -> FormingCase:
     return case if case.blank.cell_mm == cell_mm else with_overrides(case, cell_mm=cell_mm)
 
 
-def case_of(test: Test, cell_mm: float | None = None):
-    """The case a forming test is simulated with, on the cells of the runs now.
+def case_of(test: Test, cell_mm: float | None = None) -> FormingCase:
+    """The case a forming test is simulated with (:func:`forming_case_of`), on its cells.
 
-    A test that names its case: that :class:`~fenicsx_drape.forming.case.FormingCase` (cells
-    ``cell_mm``, else the :func:`~fenicsx_drape.diagnosis.forming_runs.resolution`'s, else
-    its own); a hemisphere test: its :class:`~fenicsx_drape.forming.hemisphere.HemisphereCase`
-    (quarter model; cells ``cell_mm``, else the resolution's, else the paper's 10 mm).
+    The cells are ``cell_mm``, else the :func:`~fenicsx_drape.diagnosis.forming_runs.
+    resolution`'s, else the case's own (the hemisphere's: the paper's 10 mm).
     """
-    from fenicsx_drape.forming.hemisphere import HemisphereCase
-    from fenicsx_drape.forming.tools import HemisphereTools
-
-    if names_case(test):
-        case = forming_case_of(test)
-        cell = cell_mm or cell_override()
-        return _with_cell(case, float(cell)) if cell else case
-    if test.geometry != "hemisphere":
-        raise DrapeInputError(f"test {test.id!r}: forming geometry {test.geometry!r} cannot be "
-                              "simulated (known: hemisphere; or name the forming case with "
-                              "case = \"case.toml\")")
-    f = test.forming
-    tools = HemisphereTools(**{k: float(f[k]) for k in TOOL_KEYS if k in f})
-    return HemisphereCase(cell_mm=cell_mm or current_cell_mm(),
-                          duration_s=float(f["duration_s"]),
-                          holder_force_N=float(f["holder_force_N"]), quarter=True, tools=tools)
+    case = forming_case_of(test)
+    cell = cell_mm or cell_override()
+    return _with_cell(case, float(cell)) if cell else case
 
 
 def model_planes(test: Test) -> tuple[str, ...]:
     """The symmetry planes of the part the test's runs model (the hemisphere: a quarter)."""
-    return forming_case_of(test).planes if names_case(test) else ("x", "y")
+    return forming_case_of(test).planes
 
 
 def in_part(test: Test, planes: Sequence[str]) -> bool:
@@ -205,7 +195,7 @@ def sample(sheet: FormedGrid, points_mm: np.ndarray, test_id: str = "") -> np.nd
 
     A point in a cell the net does not keep (beyond a ragged edge) takes the bilinear map of
     the nearest kept cell, extended, up to :data:`EXTRAPOLATE_CELLS` cells away
-    (:meth:`~fenicsx_drape.forming.post.FormedGrid.sample` gives NaN there).
+    (:meth:`~fenicsx_drape.forming.running.post.FormedGrid.sample` gives NaN there).
 
     Raises:
         DrapeInputError: a point farther from the net: the grid does not fit the blank.
@@ -277,7 +267,7 @@ def simulate(test: Test, model: Model) -> np.ndarray:
 
 def interpolate(sheet: FormedGrid, field: np.ndarray, points_mm: np.ndarray) -> np.ndarray:
     """A nodal scalar field of a sheet (n_i, n_j), bilinear at flat-sheet points (m, 2)."""
-    from fenicsx_drape.forming.post import FormedGrid
+    from fenicsx_drape.forming.running.post import FormedGrid
 
     stacked = np.repeat(np.asarray(field, float)[..., None], 3, axis=-1)
     return sample(FormedGrid(sheet.X, stacked, sheet.quarter, sheet.symmetry), points_mm)[:, 0]
@@ -365,7 +355,7 @@ _built_tools: dict[str, dict[str, Any]] = {}
 
 def _tools_of(case: FormingCase) -> dict[str, Any]:
     """The built tools of a case (cached by the case's content: meshing costs seconds)."""
-    from fenicsx_drape.forming.case import build_tools
+    from fenicsx_drape.forming.case.format import build_tools
 
     key = case_key(case)
     if key not in _built_tools:
@@ -558,11 +548,12 @@ def synthetic_forming_test(model: Model, *, test_id: str = "hemisphere",
     ``grid_mm`` (default: the cell), with noise of ``sd_mm`` per coordinate written as the
     ``position_sd_mm`` column; the quarter grid, or the full sheet by symmetry.
     """
-    from fenicsx_drape.forming.hemisphere import HemisphereCase
+    from fenicsx_drape.forming.case.format import load_case
+    from fenicsx_drape.forming.tools.shapes import HemisphereTools
     from fenicsx_drape.measurements.bundle import Test
 
-    case = HemisphereCase(cell_mm=cell_mm, duration_s=duration_s,
-                          holder_force_N=holder_force_N)
+    case = load_case("hemisphere", cell_mm=cell_mm, duration_s=duration_s,
+                     holder_force_N=holder_force_N)
     (sheet,) = form_many([(case, model)])
     table = (sheet if quarter else sheet.full()).drawn_grid(grid_mm or cell_mm)
     rng = np.random.default_rng(seed)
@@ -570,7 +561,7 @@ def synthetic_forming_test(model: Model, *, test_id: str = "hemisphere",
     for c in ("x_mm", "y_mm", "z_mm"):
         columns[c] = np.round(columns[c] + rng.normal(0.0, sd_mm, columns[c].size), 4)
     columns["position_sd_mm"] = np.full(columns["i"].size, sd_mm)
-    t = case.tools
+    t = HemisphereTools(**case.tool("punch").params)
     setup = {"punch_radius_mm": t.punch_radius_mm, "fillet_radius_mm": t.fillet_radius_mm,
              "holder_opening_mm": t.holder_opening_mm, "sheet_mm": t.sheet_mm,
              "travel_mm": t.travel_mm, "duration_s": duration_s,
@@ -617,7 +608,7 @@ def write_case_bundle(name: str, tests: Sequence[Test], folder: str | Path, *,
     Each test's case is written (with its geometry files) at its ``case`` path inside the
     folder; the tests that name no case are written as they are.
     """
-    from fenicsx_drape.forming.case import write_case
+    from fenicsx_drape.forming.case.format import write_case
     from fenicsx_drape.measurements.bundle import Bundle, write_bundle
 
     folder = Path(folder)

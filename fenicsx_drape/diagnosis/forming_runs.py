@@ -1,17 +1,15 @@
 """The forming runs of compare and diagnose: cached, and in worker processes.
 
-A forming test is simulated by forming its part for a model: the paper's hemisphere
-(:func:`~fenicsx_drape.forming.hemisphere.run_hemisphere` of a
-:class:`~fenicsx_drape.forming.hemisphere.HemisphereCase`) or any forming case
-(:func:`~fenicsx_drape.forming.run.run_case` of a
-:class:`~fenicsx_drape.forming.case.FormingCase`). A diagnosis asks for a few dozen such
+A forming test is simulated by forming its part for a model: its forming case (the paper's
+hemisphere is ``meshes/hemisphere/case.toml``) run by
+:func:`~fenicsx_drape.forming.running.run.run_case`. A diagnosis asks for a few dozen such
 runs, many of them the same. :func:`form_many` forms ``(case, model)`` jobs: every run is
 cached by the case's content (its tables and the bytes of its geometry files, not the path
 it was read from) and the model (the :data:`_CACHE_SIZE` latest), and the new runs of one call
 go to :data:`WORKERS` persistent worker processes at once (under ``mpirun`` they run one
 after the other on all ranks). The cells of the runs are set with :func:`resolution`: by
-default the hemisphere runs on :data:`FULL_CELL_MM` (the paper's Δ) and a case on its own
-blank's ``cell_mm``; a resolution replaces both. A run that stops short of full travel is
+default a case runs on its own blank's ``cell_mm`` (the hemisphere's: :data:`FULL_CELL_MM`,
+the paper's Δ); a resolution replaces it. A run that stops short of full travel is
 kept as far as it got, and :func:`stopped_at` tells the travel it reached.
 
 This module knows forming cases and models, not tests: the forming kind
@@ -32,11 +30,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case import FormingCase, case_dict
+from fenicsx_drape.forming.case.format import case_dict
 from fenicsx_drape.trust import set_trusted, trusted
 
 if TYPE_CHECKING:
-    from fenicsx_drape.forming.post import FormedGrid
+    from fenicsx_drape.forming.running.post import FormedGrid
     from fenicsx_drape.model import Model
 
 FULL_CELL_MM = 10.0  # unit cell of the forming runs (mm), the paper's Δ
@@ -55,7 +53,7 @@ _digests: dict[tuple, str] = {}  # file digests by (path, size, mtime)
 def resolution(cell_mm: float | None) -> Iterator[None]:
     """Run the forming simulations of compare/diagnose on cells of ``cell_mm`` (mm) inside.
 
-    None: the hemisphere on :data:`FULL_CELL_MM`, a case on its own blank's ``cell_mm``.
+    None: each case on its own blank's ``cell_mm`` (the hemisphere's: :data:`FULL_CELL_MM`).
     """
     if cell_mm is not None and not cell_mm > 0:
         raise DrapeInputError(f"forming cell size {cell_mm} mm must be > 0")
@@ -65,11 +63,6 @@ def resolution(cell_mm: float | None) -> Iterator[None]:
         yield
     finally:
         _settings["cell_mm"] = old
-
-
-def current_cell_mm() -> float:
-    """The unit cell (mm) of the hemisphere runs now (:data:`FULL_CELL_MM` or the resolution)."""
-    return _settings["cell_mm"] or FULL_CELL_MM
 
 
 def cell_override() -> float | None:
@@ -89,13 +82,11 @@ def _digest(path: Path) -> str:
 def case_key(case) -> str:
     """What a forming run of ``case`` depends on, as text.
 
-    A :class:`~fenicsx_drape.forming.case.FormingCase` by content: its tables (paths relative
+    A :class:`~fenicsx_drape.forming.case.format.FormingCase` by content: its tables (paths relative
     to its folder, the model file left out: the run's model is given) and the digests of the
     geometry files it reads, so that the same case read from two copies (a bundle's and the
-    mesh folder's) shares its runs. Other cases (the hemisphere's) by their ``repr``.
+    mesh folder's) shares its runs.
     """
-    if not isinstance(case, FormingCase):
-        return repr(case)
     tables = case_dict(case, case.folder)
     tables["case"].pop("model", None)
     files = [t.path for t in case.tools if t.path is not None]
@@ -121,14 +112,10 @@ def _form(case, model: Model, comm=None) -> tuple[FormedGrid, float | None, dict
     """
     from mpi4py import MPI
 
-    from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
-    from fenicsx_drape.forming.run import run_case
+    from fenicsx_drape.forming.running.run import run_case
 
     comm = comm or MPI.COMM_SELF
-    if isinstance(case, HemisphereCase):
-        run = run_hemisphere(case, model, comm=comm, allow_incomplete=True)
-    else:
-        run = run_case(case, model, comm=comm, allow_incomplete=True)
+    run = run_case(case, model, comm=comm, allow_incomplete=True)
     rows = run.tool_forces
     curves = {k: np.array([r[k] for r in rows]) for k in (rows[0] if rows else {})}
     return run.grid, (run.travel_mm if run.stopped else None), curves
@@ -250,7 +237,7 @@ def tool_forces(case, model: Model) -> dict[str, np.ndarray]:
     """The force curves of a cached run of ``(case, model)`` (run :func:`form_many` first).
 
     ``time_s``, ``travel_mm`` and each tool's force along its motion (N, the whole part;
-    :func:`~fenicsx_drape.forming.run.record_tool_forces`), one value per converged step.
+    :func:`~fenicsx_drape.forming.running.run.record_tool_forces`), one value per converged step.
     """
     key = _key(case, model)
     if key not in _forces:

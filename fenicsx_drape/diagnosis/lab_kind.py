@@ -4,7 +4,8 @@ A forming test's lab measurements (:mod:`fenicsx_drape.measurements.lab`) are te
 own for the errors (ids ``"<test id>/<measurement>"``), of kind ``forming``: the forming
 kind (:mod:`~fenicsx_drape.diagnosis.forming_fit`) hands them here. Each is compared with
 the same forming run as the test's grid (cached: one run serves all of a test's
-measurements), on the whole formed blank triangulated (:mod:`fenicsx_drape.forming.measure`):
+measurements), on the whole formed blank triangulated
+(:mod:`fenicsx_drape.forming.running.measure`):
 
 - **shear_points**: the model's shear angle at the same material point: by its flat position
   (``x0_mm, y0_mm``), or for a formed position at the closest point of the formed sheet,
@@ -57,8 +58,8 @@ from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds import Comparison
-    from fenicsx_drape.forming.measure import SheetMesh
-    from fenicsx_drape.forming.post import FormedGrid
+    from fenicsx_drape.forming.running.measure import SheetMesh
+    from fenicsx_drape.forming.running.post import FormedGrid
     from fenicsx_drape.measurements.bundle import Test
     from fenicsx_drape.model import Model
 
@@ -203,7 +204,7 @@ _meshes: dict[int, tuple[Any, Any]] = {}
 
 def sheet_mesh(grid: FormedGrid) -> SheetMesh:
     """The whole blank's triangulation of a formed sheet (cached with the sheet)."""
-    from fenicsx_drape.forming.measure import SheetMesh
+    from fenicsx_drape.forming.running.measure import SheetMesh
 
     hit = _meshes.get(id(grid))
     if hit is None or hit[0] is not grid:
@@ -240,7 +241,7 @@ def register(mesh: SheetMesh, P: np.ndarray, noise_mm: float) -> dict[str, Any]:
     ``matched`` (share of the points within :data:`UNMATCHED_CELLS` cells after the fit),
     ``far`` and ``points``. The registration is relative to a given frame, if any.
     """
-    from fenicsx_drape.forming.measure import closest_points
+    from fenicsx_drape.forming.running.measure import closest_points
     from fenicsx_drape.measurements.lab import rotation
 
     centre = P.mean(axis=0)
@@ -332,7 +333,7 @@ def match(test: Test, grid: FormedGrid, model: Model | None = None) -> dict[str,
     if hit is not None and hit["_grid"] is grid:
         return hit
     from fenicsx_drape.diagnosis.forming_runs import tool_forces
-    from fenicsx_drape.forming import measure
+    from fenicsx_drape.forming.running import measure
 
     m, c = measurement_of(test), test.columns
     mesh = sheet_mesh(grid)
@@ -599,7 +600,7 @@ def plot(comparisons: Mapping[str, Comparison], test: Test, path: Path,
             fig.colorbar(art, ax=ax, shrink=0.8)
         axes[0, 0].set_ylabel("y (mm)")
     elif m == "outline":
-        from fenicsx_drape.forming.measure import edge_segments
+        from fenicsx_drape.forming.running.measure import edge_segments
 
         fig, ax = plt.subplots(figsize=(6.5, 5.5))
         P = points(test)

@@ -45,7 +45,7 @@ def lab_tables(grid, curves: Mapping[str, np.ndarray], *, seed: int = 0,
     """Measurements of a formed sheet with lab-like noise (module doc).
 
     Args:
-        grid: The formed sheet (:class:`~fenicsx_drape.forming.post.FormedGrid`, any part).
+        grid: The formed sheet (:class:`~fenicsx_drape.forming.running.post.FormedGrid`, any part).
         curves: The run's tool forces (``travel_mm`` and ``force_tool``).
         seed: Of the noise.
         lines: Measuring lines by name: (start, end) on the flat blank (mm); default two,
@@ -64,7 +64,7 @@ def lab_tables(grid, curves: Mapping[str, np.ndarray], *, seed: int = 0,
         The columns of each measurement, by name: ``shear_points``, ``surface``,
         ``outline`` and ``punch_force``.
     """
-    from fenicsx_drape.forming import measure
+    from fenicsx_drape.forming.running import measure
 
     rng = np.random.default_rng(seed)
     g = grid.full()
@@ -140,7 +140,7 @@ def write_lab_bundle(folder: str | Path, case, tables: Mapping[str, Mapping[str,
     ``measurements`` picks some of the tables (default all); ``keys`` are added to the test
     (process overrides, ``shear_magnitude``, noise keys); ``frame`` is its [test.frame].
     """
-    from fenicsx_drape.forming.case import write_case
+    from fenicsx_drape.forming.case.format import write_case
 
     folder = Path(folder)
     write_case(case, folder / "case", comment=comment)

@@ -17,7 +17,7 @@ All start from the test's stated value (the case's, with the test's keys; offset
 shared by the bundle's forming tests. The model's material and friction stay as stated (as
 given, or as the coupons fitted them): the reference is the **stated set-up**, fitted to
 nothing. A set-up that breaks a symmetry plane of the case is formed without it
-(:func:`~fenicsx_drape.forming.case.with_overrides` drops the plane): the full or half model
+(:func:`~fenicsx_drape.forming.case.format.with_overrides` drops the plane): the full or half model
 is chosen by the set-up, not by the user.
 
 Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
@@ -66,7 +66,7 @@ from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.compare import compare_tests, error_record, normalised_error
 from fenicsx_drape.diagnosis.forming_runs import form_many
 from fenicsx_drape.errors import DrapeInputError, SolverError
-from fenicsx_drape.forming.case import FormingCase, broken_planes, with_overrides
+from fenicsx_drape.forming.case.format import FormingCase, broken_planes, with_overrides
 
 if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test
@@ -117,8 +117,7 @@ def forming_tests(bundle: Bundle) -> list[Test]:
         if test.kind != "forming":
             continue
         if not fk.names_case(test):
-            hemi = fk.case_of(test)
-            test = dataclasses.replace(test, forming_case=hemi.to_case())
+            test = dataclasses.replace(test, forming_case=fk.case_of(test))
         out.append(test)
     return out
 

@@ -18,7 +18,7 @@ Two choices make the Newton iteration of forming robust without changing its sol
   no bar exceeds the limit and the Jacobian is exact: Newton converges quadratically. On the
   hemisphere it saves 12 % of the iterations at Δ = 10 mm, 22 % at 5 mm.
 - **The predictor** extrapolates the last increment and lets the nodal terms project it
-  (contact keeps pressed nodes on their gap, :mod:`~fenicsx_drape.forming.contact`).
+  (contact keeps pressed nodes on their gap, :mod:`~fenicsx_drape.forming.terms.contact`).
 
 Nodes are the blocks of the vector P1 space in its local order (owned nodes first, then
 ghosts); that is the order of every nodal array this module hands out or takes.
@@ -61,10 +61,10 @@ def monitoring(monitor: Callable[[TrussProblem, Iterate], None]):
     """Hand ``monitor(problem, iterate)`` every Newton iterate of the problems built inside.
 
     A diagnostic hook (``benchmarks/diagnose_stepping.py``) that needs no change where the
-    problem is built (the hemisphere, a forming case)::
+    problem is built (a forming case)::
 
         with monitoring(probe):
-            run_hemisphere(case)
+            run_case(load_case("hemisphere"))
     """
     _default_monitors.append(monitor)
     try:
@@ -77,7 +77,7 @@ SINGLE_PRECISION_FACTOR = {
     "pc_precision": "single", "ksp_type": "gmres", "ksp_pc_side": "right",
     "ksp_norm_type": "unpreconditioned", "ksp_rtol": 1e-3, "ksp_atol": 0.0, "ksp_max_it": 30}
 """``petsc_options`` that factorise the Jacobian in single precision (PETSc's mixed-precision
-MUMPS) and solve to 10⁻³ with GMRES on that factor: 7-15 % faster on the hemisphere (README,
+MUMPS) and solve to 10⁻³ with GMRES on that factor: 7-15 % faster on the hemisphere (docs/solver-notes.md,
 issue 17). Alone the single factor solves the forming Jacobians to about 10⁻¹."""
 
 

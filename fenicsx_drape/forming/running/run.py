@@ -1,18 +1,18 @@
 """Run any forming case: the blank's truss, the tools, the holder, the load steps.
 
-:func:`run_case` sets a :class:`~fenicsx_drape.forming.case.FormingCase` up on the FE core and
-steps it to the end of its motion; :func:`~fenicsx_drape.forming.hemisphere.run_hemisphere`
-is the paper's hemisphere on top of it. The terms of the model, for any case:
+:func:`run_case` sets a :class:`~fenicsx_drape.forming.case.format.FormingCase` up on the FE
+core and steps it to the end of its motion (the paper's hemisphere is the case
+``meshes/hemisphere/case.toml``). The terms of the model, for any case:
 
-- the blank's structured net (:meth:`~fenicsx_drape.forming.case.BlankSpec.grid`), with the
+- the blank's structured net (:meth:`~fenicsx_drape.forming.case.format.BlankSpec.grid`), with the
   symmetry conditions u_x = 0 on x = 0 and/or u_y = 0 on y = 0 of a half or quarter model;
-- penalty contact with every punch, die and surface (:mod:`~fenicsx_drape.forming.contact`)
+- penalty contact with every punch, die and surface (:mod:`~fenicsx_drape.forming.terms.contact`)
   of stiffness k = ``penalty_factor`` · l_t E_o (l_t E_o: the axial stiffness of one tow bar),
   with ``tool_friction`` when the model has it;
-- the blank holder (:mod:`~fenicsx_drape.forming.holder`) on the clamping tool's surface:
+- the blank holder (:mod:`~fenicsx_drape.forming.terms.holder`) on the clamping tool's surface:
   clamping with the same k and eq. 1 friction bars, the force shared as ``force_share`` says;
-- the out-of-plane stabilisation of the slack net (:mod:`~fenicsx_drape.forming.stabilisation`)
-  along the nearest tool's normal.
+- the out-of-plane stabilisation of the slack net
+  (:mod:`~fenicsx_drape.forming.terms.stabilisation`) along the nearest tool's normal.
 
 Load steps move the fastest tool ``step_mm``; a step whose Newton solve fails is halved, and
 steps grow back (×1.5, up to ``step_mm``) after solves of at most 15 iterations. A step has
@@ -32,11 +32,11 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from fenicsx_drape.errors import SolverError
-from fenicsx_drape.forming.case import CaseError, FormingCase, build_tools
-from fenicsx_drape.forming.contact import PenaltyContact
-from fenicsx_drape.forming.holder import BlankHolder, part_force_N
-from fenicsx_drape.forming.post import FormedGrid
-from fenicsx_drape.forming.stabilisation import ExtrapolationSpring
+from fenicsx_drape.forming.case.format import CaseError, FormingCase, build_tools
+from fenicsx_drape.forming.running.post import FormedGrid
+from fenicsx_drape.forming.terms.contact import PenaltyContact
+from fenicsx_drape.forming.terms.holder import BlankHolder
+from fenicsx_drape.forming.terms.stabilisation import ExtrapolationSpring
 
 CONTACT_ROLES = ("punch", "die", "surface")
 
@@ -124,7 +124,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
     """Form a case: build the blank's truss, tools and terms, then step to the end.
 
     Args:
-        case: The forming case (:func:`~fenicsx_drape.forming.case.load_case`).
+        case: The forming case (:func:`~fenicsx_drape.forming.case.format.load_case`).
         model: The material :class:`~fenicsx_drape.model.Model` (default: the case's
             ``model``, else the paper's); the holder's ``mu``, if given, replaces its μ.
         options: :class:`~fenicsx_drape.fe.solver.SolverOptions` of the truss (default: the
@@ -174,8 +174,8 @@ def run_case(case: FormingCase, model=None, options=None, *,
     if case.holder is not None:
         h = case.holder
         holder = BlankHolder(model.laws()["friction"], surface=holder_surface,
-                             force_N=part_force_N(h.force_N, len(planes), h.force_share),
-                             clamp_stiffness_N_per_mm=k, force_share=h.force_share,
+                             force_N=h.force_N, force_share=h.force_share,
+                             clamp_stiffness_N_per_mm=k,
                              symmetry_axes=tuple({"x": 0, "y": 1}[p] for p in planes))
     grid = case.blank.grid()  # the same on every rank (plain NumPy)
     sheet = grid_to_sheet(grid, comm)

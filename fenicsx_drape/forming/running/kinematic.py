@@ -52,8 +52,8 @@ from typing import Protocol
 import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError, ParameterError
-from fenicsx_drape.forming.post import FormedGrid
-from fenicsx_drape.forming.tools import Gap, HemisphereTools
+from fenicsx_drape.forming.running.post import FormedGrid
+from fenicsx_drape.forming.tools.shapes import Gap, HemisphereTools
 
 GENERATORS = ("geodesic", "normal_section")
 ON_SURFACE_MM = 0.01  # a 3D start point further than this from the surface is an error
@@ -63,7 +63,7 @@ _ITERATIONS = 40
 
 
 class Surface(Protocol):
-    """A rigid surface: the zero level set of a signed distance (a tool of forming/tools.py)."""
+    """A rigid surface: the zero level set of a signed distance (a tool of ``tools.shapes``)."""
 
     def gap(self, x: np.ndarray, t: float) -> Gap:
         """Signed distance φ (n,), its gradient (n, 3) and Hessian (n, 3, 3) at ``x`` (n, 3)."""
@@ -610,12 +610,12 @@ def case_surface(case, tools: dict | None = None, *, time_s: float | None = None
     plane, i.e. :meth:`HemisphereTools.formed_part`.
 
     Args:
-        case: The forming case (:func:`~fenicsx_drape.forming.case.load_case`).
-        tools: Built tools by name (default :func:`~fenicsx_drape.forming.case.build_tools`).
+        case: The forming case (:func:`~fenicsx_drape.forming.case.format.load_case`).
+        tools: Built tools by name (default :func:`~fenicsx_drape.forming.case.format.build_tools`).
         time_s: When (default: the end of the motion, ``case.duration_s``).
         blend_mm: See :class:`UnionSurface`.
     """
-    from fenicsx_drape.forming.case import build_tools
+    from fenicsx_drape.forming.case.format import build_tools
 
     for side in ("+z", "-z"):
         names = [t.name for t in case.tools if t.side == side]
@@ -665,22 +665,22 @@ def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float
 
     Args:
         out_dir: The output folder (created).
-        net: The net (:class:`~fenicsx_drape.forming.kinematic.KinematicNet`).
+        net: The net (:class:`~fenicsx_drape.forming.running.kinematic.KinematicNet`).
         grid_mm: Spacing of the bundle's drawn grid (mm).
         setup: The forming test's keys of the bundle (geometry, sheet_mm, ...); no bundle
             when None (nor ``forming_case``).
         pictures: Write ``shear.png``.
         case: What was draped, for ``summary.json`` and ``provenance.json``.
-        forming_case: A forming case (:class:`~fenicsx_drape.forming.case.FormingCase`):
+        forming_case: A forming case (:class:`~fenicsx_drape.forming.case.format.FormingCase`):
             the bundle's test names a copy of it (``case = "case/case.toml"``), as
-            :func:`~fenicsx_drape.forming.outputs.form_case` writes it.
+            :func:`~fenicsx_drape.forming.running.outputs.form_case` writes it.
 
     Returns:
         The summary.
     """
     from pathlib import Path
 
-    from fenicsx_drape.forming.plots import plot_shear
+    from fenicsx_drape.forming.running.plots import plot_shear
     from fenicsx_drape.measurements.bundle import Bundle, Test, write_bundle
     from fenicsx_drape.provenance import write_json, write_provenance
 
@@ -689,7 +689,7 @@ def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float
     write_json(out / "summary.json", summary)
     notes = {"simulation": "kinematic drape (pin-jointed net)", "generator": net.generator}
     if forming_case is not None:
-        from fenicsx_drape.forming.case import write_case
+        from fenicsx_drape.forming.case.format import write_case
 
         write_case(forming_case, out / "bundle" / "case")
         notes["case"] = "case/case.toml"

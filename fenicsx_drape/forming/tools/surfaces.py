@@ -1,6 +1,6 @@
 """Tool surfaces as triangle meshes: read from Gmsh scripts, CAD files, STL or Gmsh meshes.
 
-A rigid tool that is not a closed-form surface (:mod:`~fenicsx_drape.forming.tools`) is a
+A rigid tool that is not a closed-form surface (:mod:`~fenicsx_drape.forming.tools.shapes`) is a
 :class:`TriangleSurface`: points (mm) and flat triangles. :func:`load_surface` makes one from
 
 - a Gmsh script ``.geo``: numbers of ``parameters`` are handed to Gmsh's parser before the
@@ -865,7 +865,7 @@ def _nodes_of(etype: int) -> int:
 def sample_curve_loop(path: Path, spacing_mm: float) -> tuple[tuple[float, float], ...]:
     """The closed curve loop of a Gmsh file as a polygon, in this process.
 
-    See :func:`~fenicsx_drape.forming.case.sample_outline` (which checks a script first and
+    See :func:`~fenicsx_drape.forming.case.format.sample_outline` (which checks a script first and
     runs this in a child process).
     """
     import gmsh

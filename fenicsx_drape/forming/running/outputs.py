@@ -1,7 +1,7 @@
 """Everything a forming run writes: summary, fields, forming bundle, tools, pictures.
 
 :func:`form_case` is the Python twin of ``drape form CASE.toml``: it runs any case
-(:func:`~fenicsx_drape.forming.run.run_case`) and writes into one folder
+(:func:`~fenicsx_drape.forming.running.run.run_case`) and writes into one folder
 
 - ``summary.json``: max shear angle, total and minimum wrinkling strain, the free edge's
   in-plane displacement (and a rectangle's mid-side and corner draw-in), nodes, steps,
@@ -20,29 +20,14 @@
   against the travel, for the whole part (the press's force curve; ``summary.json`` gives
   each tool's peak, ``max_tool_force_N``; :func:`write_tool_forces`).
 
-:func:`form_hemisphere` is the Python twin of ``drape form hemisphere``: it runs the case
-(:func:`~fenicsx_drape.forming.hemisphere.run_hemisphere`) and writes into one folder
-
-- ``summary.json``: max shear angle, total wrinkling strain (Green-Lagrange, as the FE
-  results; and ``total_wrinkling_engineering``, the paper's literal length change over tow
-  length), minimum wrinkling strain, largest tow strain, draw-in, the ply
-  angle and the shear's asymmetry under the mirror x → −x, nodes, steps, Newton (SNES)
-  iterations, wall time, penetration, and the kinematic drape's max shear;
-- ``fields.xdmf`` (+ ``.h5``): displacement, bar strain and stress, wrinkling strain and
-  shear angle every 5 mm of travel, for ParaView; ``tools/*.vtk``: the tools at full travel;
-- ``bundle/``: the formed sheet as a forming bundle (``bundle.toml`` and the node positions on
-  the 10 mm drawn grid, ``docs/measurements.md``), to compare with a measured part;
-  for a ply at an angle θ the drawn grid follows the tows (``i, j`` in the tow frame, turned
-  by θ; :meth:`~fenicsx_drape.forming.post.FormedGrid.drawn_grid`);
-- ``shear.png``, ``wrinkling.png``, ``paths.png``: the formed sheet coloured by shear angle,
-  the wrinkled tows, shear along the diagonal path and wrinkling along the normal path
-  (the paper's Figs. 10-11), the last with the kinematic drape beside the FE result;
-- ``provenance.json``.
+The paper's hemisphere (``drape form hemisphere``, ``meshes/hemisphere/case.toml``: tools that
+are all builtin) is a case like any other; its summary also gives the paper's numbers
+(``paper``) and its folder ``paths.png``: shear along the diagonal path and wrinkling along
+the normal path (the paper's Figs. 10-11), with the kinematic drape beside the FE result.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import tempfile
 from collections.abc import Callable
@@ -50,153 +35,22 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming import paper
-from fenicsx_drape.forming.case import FormingCase, case_dict, write_case
-from fenicsx_drape.forming.hemisphere import HemisphereCase, HemisphereRun, run_hemisphere
-from fenicsx_drape.forming.kinematic import kinematic_drape
-from fenicsx_drape.forming.plots import plot_paths, plot_shear, plot_wrinkling
-from fenicsx_drape.forming.post import FormedGrid
-from fenicsx_drape.forming.run import FormingRun, run_case
+from fenicsx_drape.forming.case.format import FormingCase, case_dict, write_case
+from fenicsx_drape.forming.paper import numbers as paper
+from fenicsx_drape.forming.running.plots import plot_paths, plot_shear, plot_wrinkling
+from fenicsx_drape.forming.running.run import FormingRun, run_case
 from fenicsx_drape.measurements.bundle import Bundle, Test, write_bundle
 from fenicsx_drape.provenance import write_json, write_provenance
 
 FRAME_MM = 5.0  # punch travel between two frames of the field output
 
-# The paper's numbers for the default case (section 4.3; all of them: forming/paper.py).
+# The paper's numbers for its hemisphere (section 4.3; all of them: forming/paper/numbers.py).
 PAPER = {"max_shear_deg": {"model": paper.MAX_SHEAR_MODEL_DEG,
                            "experiment": paper.MAX_SHEAR_EXPERIMENT_DEG,
                            "kinematic": paper.MAX_SHEAR_KINEMATIC_DEG},
          "total_wrinkling_strain": {"model": paper.TOTAL_WRINKLING_MODEL},
          "min_wrinkling_strain": {"model": paper.MIN_WRINKLING_MODEL,
                                   "experiment": paper.MIN_WRINKLING_EXPERIMENT}}
-
-
-def summary(run: HemisphereRun, kinematic: FormedGrid | None = None) -> dict:
-    """The numbers of a run (the content of ``summary.json``)."""
-    g = run.grid
-    warp, weft = g.tow_strains()
-    out = {
-        "max_shear_deg": float(np.nanmax(np.abs(g.shear_deg()))),
-        "total_wrinkling_strain": g.total_wrinkling_strain(),
-        # The paper's literal measure: length change of the compressed tows over the length
-        # of all tow bars (issue 15; FormedGrid.total_wrinkling_strain).
-        "total_wrinkling_engineering": g.total_wrinkling_strain("engineering", "bars"),
-        "min_wrinkling_strain": float(min(np.nanmin(warp), np.nanmin(weft), 0.0)),
-        "max_tow_strain": float(max(np.nanmax(warp), np.nanmax(weft))),
-        "draw_in_mm": run.draw_in_mm,
-        "ply_angle_deg": run.case.ply_angle_deg,
-        "mirror_asymmetry_deg": g.mirror_asymmetry_deg(),
-        "nodes": int(g.present.sum()),
-        "steps": run.steps,
-        "cutbacks": run.cutbacks,
-        "snes_iterations": run.iterations,
-        "wall_time_s": run.wall_time_s,
-        "ranks": run.problem.comm.size,
-        "max_penetration_mm": run.max_penetration_mm,
-        "case": dataclasses.asdict(run.case),
-        "paper": PAPER,
-    }
-    if kinematic is not None:
-        out["kinematic_max_shear_deg"] = float(np.abs(kinematic.shear_deg()).max())
-    return out
-
-
-def forming_bundle(run: HemisphereRun, friction: float, grid_mm: float = 10.0,
-                   name: str = "") -> Bundle:
-    """The formed sheet as a one-test forming bundle (node positions on the drawn grid).
-
-    The friction coefficient μ of the run is written as the test condition
-    ``friction_coefficient``.
-    """
-    case, tools = run.case, run.case.tools
-    table = run.grid.drawn_grid(grid_mm)
-    columns = {k: np.asarray(v, dtype=float) for k, v in table.items()}
-    setup = {"punch_radius_mm": tools.punch_radius_mm, "fillet_radius_mm": tools.fillet_radius_mm,
-             "holder_opening_mm": tools.holder_opening_mm, "sheet_mm": tools.sheet_mm,
-             "travel_mm": tools.travel_mm, "duration_s": case.duration_s,
-             "holder_force_N": case.holder_force_N, "grid_mm": grid_mm}
-    test_id = f"hemisphere-{case.holder_force_N:g}N-{case.duration_s:g}s"
-    test = Test(id=test_id, kind="forming", file="hemisphere_grid.csv", columns=columns,
-                geometry="hemisphere", forming=setup,
-                conditions={"friction_coefficient": friction})
-    return Bundle(name=name or f"simulated-{test_id}", tests=(test,),
-                  material="4x4 twill 3k carbon/epoxy (Table 2), simulated")
-
-
-def form_hemisphere(out_dir: str | os.PathLike, case: HemisphereCase | None = None, model=None,
-                    options=None, *, grid_mm: float = 10.0, fields: bool = True,
-                    pictures: bool = True, progress: Callable[[str], None] | None = None,
-                    comm=None) -> tuple[HemisphereRun, dict]:
-    """Run the hemisphere case and write all its outputs into ``out_dir``.
-
-    Args:
-        out_dir: Output folder (created).
-        case: The forming conditions (default: the paper's, quarter model, Δ = 10 mm).
-        model: The material model (default: the paper's).
-        options: Solver options of the truss.
-        grid_mm: Spacing of the drawn grid of the bundle.
-        fields: Write the XDMF fields and the tool meshes.
-        pictures: Write the PNG pictures.
-        progress: Called with a line per load step (rank 0).
-        comm: MPI communicator (default ``COMM_WORLD``).
-
-    Returns:
-        The run and its summary.
-    """
-    from mpi4py import MPI
-
-    from fenicsx_drape.model import default_model
-
-    comm = comm or MPI.COMM_WORLD
-    case = case or HemisphereCase()
-    model = model or default_model()
-    out = Path(out_dir)
-    writer = {}
-
-    def frame(problem) -> None:
-        from fenicsx_drape.fe.output import FieldWriter
-
-        if "file" not in writer:
-            writer["file"] = FieldWriter(problem, out / "fields.xdmf")
-            writer["next"] = 0.0
-        travel = case.speed_mm_per_s * problem.t
-        if travel >= writer["next"] - 1e-9 or travel >= case.tools.travel_mm - 1e-9:
-            writer["file"].write()
-            writer["next"] = (np.floor(travel / FRAME_MM + 1e-9) + 1.0) * FRAME_MM
-
-    try:
-        run = run_hemisphere(case, model, options, progress=progress,
-                             on_step=frame if fields else None, comm=comm, failure_dir=out)
-    finally:
-        if "file" in writer:
-            writer["file"].close()
-    with _WrittenOnFailure(out, run, comm, "drape form hemisphere") as partial:
-        kin = kinematic_drape(case.tools, grid_mm)
-        result = partial.update(summary(run, kin))
-        if comm.rank == 0:
-            result.update(write_tool_forces(run, out, "hemisphere", pictures=pictures))
-            write_json(out / "summary.json", result)
-            μ = float(np.max(model.parameters.get("mu", 0.0)))
-            write_bundle(forming_bundle(run, μ, grid_mm), out / "bundle",
-                         comment=f"simulated by fenicsx_drape (drape form hemisphere): "
-                                 f"{'quarter' if case.quarter else 'full sheet'}, "
-                                 f"cell {case.cell_mm:g} mm, ply angle {case.ply_angle_deg:g}°"
-                                 f"{' (drawn grid along the tows)' if case.ply_angle_deg else ''}")
-            if pictures:
-                plot_shear(run.grid, out / "shear.png",
-                           f"formed sheet, shear angle (max {result['max_shear_deg']:.1f}°)")
-                plot_wrinkling(run.grid, out / "wrinkling.png")
-                plot_paths({"FE truss": run.grid, "kinematic (PjN)": kin}, out / "paths.png")
-            if fields:
-                from fenicsx_drape.forming.tool_models import write_tool_meshes
-
-                write_tool_meshes(case.tools, out / "tools")
-            write_provenance(out, model={"effects": list(model.effects),
-                                         "parameters": _plain(model.parameters)},
-                             case=dataclasses.asdict(case),
-                             solver=_plain(vars(run.problem.options)))
-    comm.Barrier()
-    return run, result
 
 
 class FormingOutputError(RuntimeError):
@@ -251,6 +105,11 @@ def _plain(d: dict) -> dict:
 # Any case
 
 
+def is_paper_hemisphere(case: FormingCase) -> bool:
+    """Whether the case is the paper's hemisphere: its tools are all the builtin ones."""
+    return bool(case.tools) and all(t.builtin for t in case.tools)
+
+
 def case_summary(run: FormingRun) -> dict:
     """The numbers of a run of any case (the content of its ``summary.json``)."""
     g, case = run.grid, run.case
@@ -259,7 +118,11 @@ def case_summary(run: FormingRun) -> dict:
         "case_name": case.name,
         "max_shear_deg": float(np.nanmax(np.abs(g.shear_deg()))),
         "total_wrinkling_strain": g.total_wrinkling_strain(),
+        # The paper's literal measure: length change of the compressed tows over the length
+        # of all tow bars (issue 15; FormedGrid.total_wrinkling_strain).
+        "total_wrinkling_engineering": g.total_wrinkling_strain("engineering", "bars"),
         "min_wrinkling_strain": float(min(np.nanmin(warp), np.nanmin(weft), 0.0)),
+        "max_tow_strain": float(max(np.nanmax(warp), np.nanmax(weft))),
         "edge_displacement_mm": run.edge_displacement_mm,
     }
     if run.draw_in_mm is not None:
@@ -285,6 +148,8 @@ def case_summary(run: FormingRun) -> dict:
         out["holder_force_share"] = case.holder.force_share
         out["holder_nodes"] = float(run.holder.n_s)
     out["case"] = case_dict(case, case.folder)
+    if is_paper_hemisphere(case):
+        out["paper"] = PAPER
     return out
 
 
@@ -294,7 +159,7 @@ def case_bundle(run: FormingRun, friction: float, grid_mm: float = 10.0,
 
     The test's keys (``duration_s``, ``holder_force_N``, ``travel_mm``, ``grid_mm``) repeat
     the case's values; ``case_file`` is relative to the bundle folder (write the case there
-    with :func:`~fenicsx_drape.forming.case.write_case`). μ is the condition
+    with :func:`~fenicsx_drape.forming.case.format.write_case`). μ is the condition
     ``friction_coefficient``.
     """
     case = run.case
@@ -321,7 +186,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
 
     Args:
         out_dir: Output folder (created).
-        case: The forming case (:func:`~fenicsx_drape.forming.case.load_case`).
+        case: The forming case (:func:`~fenicsx_drape.forming.case.format.load_case`).
         model: The material model (default: the case's, else the paper's).
         options: Solver options of the truss.
         tools: Built tools by name replacing the case's (see :func:`run_case`).
@@ -336,7 +201,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
     """
     from mpi4py import MPI
 
-    from fenicsx_drape.forming.run import case_model
+    from fenicsx_drape.forming.running.run import case_model
 
     comm = comm or MPI.COMM_WORLD
     model = model or case_model(case)
@@ -365,7 +230,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
         result = partial.update(case_summary(run))
         if comm.rank == 0:
             kinematic = _kinematic_beside(case, run, out if pictures else None)
-            result.update(kinematic)
+            result.update({k: v for k, v in kinematic.items() if k != "net"})
             result.update(write_tool_forces(run, out, case.name, pictures=pictures))
             write_json(out / "summary.json", result)
             given = case.holder.mu if case.holder is not None else None
@@ -378,6 +243,9 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
                 plot_shear(run.grid, out / "shear.png",
                            f"{case.name}: shear angle (max {result['max_shear_deg']:.1f}°)")
                 plot_wrinkling(run.grid, out / "wrinkling.png")
+                if is_paper_hemisphere(case) and kinematic.get("net") is not None:
+                    plot_paths({"FE truss": run.grid, "kinematic (PjN)": kinematic["net"]},
+                               out / "paths.png")
             if fields:
                 result["tool_files"] = [str(p.relative_to(out)) for p in
                                         write_case_tools(run, out / "tools")]
@@ -396,7 +264,7 @@ def write_tool_forces(run: FormingRun, out: str | os.PathLike, part: str, *,
     """Write the run's tool forces (``tool_forces.csv``, ``tool_forces.png``).
 
     One row per converged step: ``time_s``, ``travel_mm`` and each tool's force along its
-    motion (N, the whole part; :func:`~fenicsx_drape.forming.run.record_tool_forces`).
+    motion (N, the whole part; :func:`~fenicsx_drape.forming.running.run.record_tool_forces`).
 
     Args:
         run: The forming run.
@@ -408,7 +276,7 @@ def write_tool_forces(run: FormingRun, out: str | os.PathLike, part: str, *,
         For ``summary.json``: ``max_tool_force_N`` (each tool's largest force in magnitude,
         signed) and ``tool_forces_file``.
     """
-    from fenicsx_drape.forming.plots import plot_tool_forces
+    from fenicsx_drape.forming.running.plots import plot_tool_forces
     from fenicsx_drape.provenance import atomic_write_text
 
     rows = run.tool_forces
@@ -428,12 +296,12 @@ def write_tool_forces(run: FormingRun, out: str | os.PathLike, part: str, *,
 
 
 def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None) -> dict:
-    """The kinematic drape of the case on its formed tools, for the summary (and its picture).
+    """The kinematic drape on the formed tools: the ``net``, its numbers and its picture.
 
     A net that cannot be draped (a surface the generators leave) is reported, not raised: the
     mechanical result it stands beside is kept.
     """
-    from fenicsx_drape.forming.kinematic import drape_case
+    from fenicsx_drape.forming.running.kinematic import drape_case
 
     try:
         net = drape_case(case, tools=run.tools)
@@ -446,20 +314,20 @@ def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None)
                    f"{case.name}: kinematic drape (pin-jointed net), shear angle "
                    f"(max {numbers['max_shear_deg']:.1f}°)")
     return {"kinematic_max_shear_deg": numbers["max_shear_deg"],
-            "kinematic_unplaced_nodes": numbers["unplaced_nodes"]}
+            "kinematic_unplaced_nodes": numbers["unplaced_nodes"], "net": net}
 
 
 def write_case_tools(run: FormingRun, folder: str | os.PathLike) -> list[Path]:
     """Write the tools at the end of their motion as VTK surfaces into ``folder``.
 
     Builtin hemisphere tools are drawn with Gmsh
-    (:func:`~fenicsx_drape.forming.tool_models.write_tool_meshes`); a meshed tool with a
+    (:func:`~fenicsx_drape.forming.tools.drawing.write_tool_meshes`); a meshed tool with a
     triangle ``surface`` and a ``motion`` is written moved to the end. Other tools (e.g. an
     analytic surface given in Python) are not drawn.
     """
     import meshio
 
-    from fenicsx_drape.forming.case import _builtin_tools
+    from fenicsx_drape.forming.case.format import _builtin_tools
     from fenicsx_drape.provenance import atomic_write_bytes
 
     folder = Path(folder)
@@ -467,7 +335,7 @@ def write_case_tools(run: FormingRun, folder: str | os.PathLike) -> list[Path]:
     written = []
     builtin = [s for s in case.tools if s.builtin]
     if builtin:
-        from fenicsx_drape.forming.tool_models import write_tool_meshes
+        from fenicsx_drape.forming.tools.drawing import write_tool_meshes
 
         tools = _builtin_tools(next((s for s in builtin if s.role == "punch"), builtin[0]))
         written += write_tool_meshes(tools, folder, travel_mm=case.travel_mm(t))

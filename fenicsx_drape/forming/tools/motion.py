@@ -12,7 +12,7 @@ rotation row by row is a turn at constant angular speed) and constant before the
 after the last row: the tool rests there. A tool without a table does not move
 (:meth:`RigidMotion.fixed`).
 
-The tool friction of :mod:`~fenicsx_drape.forming.contact` measures the slip of a node
+The tool friction of :mod:`~fenicsx_drape.forming.terms.contact` measures the slip of a node
 relative to the tool's material point under it, :meth:`RigidMotion.displacement`; for a rigid
 motion this displacement is an affine function of x.
 """

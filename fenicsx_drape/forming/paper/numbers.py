@@ -5,7 +5,7 @@ and ``make demo`` print the paper beside this model. Wrinkling strains are Green
 as everywhere in this package, negative (the paper quotes magnitudes).
 
 :func:`paper_comparison` formats a run's summary (``summary.json`` of
-:func:`~fenicsx_drape.forming.outputs.form_hemisphere`) against them.
+:func:`~fenicsx_drape.forming.running.outputs.form_case` of the hemisphere) against them.
 """
 
 from __future__ import annotations
@@ -41,8 +41,9 @@ FORCE_WRINKLING = (-0.007, -0.0025)
 FORCE_SHEAR_PEAK_N = 200.0
 TOW_STRAIN_800N = 0.005
 
-# Every number the paper states, as (key of :func:`~fenicsx_drape.forming.studies.paper_numbers`,
-# value, what and where). Strains are negative, as here.
+# Every number the paper states, as (key of
+# :func:`~fenicsx_drape.forming.paper.studies.paper_numbers`, value, what and where).
+# Strains are negative, as here.
 TARGETS = (
     ("max_shear_deg", MAX_SHEAR_MODEL_DEG, "maximum shear, paper's model (Fig. 10)"),
     ("max_shear_deg", MAX_SHEAR_EXPERIMENT_DEG, "maximum shear, experiment (Fig. 10)"),
@@ -101,7 +102,7 @@ def paper_comparison(summary: Mapping) -> str:
         summary: A run's summary (``summary.json``): ``max_shear_deg``,
             ``total_wrinkling_strain``, ``min_wrinkling_strain`` and, when present,
             ``total_wrinkling_engineering`` (the literal measure, see
-            :meth:`~fenicsx_drape.forming.post.FormedGrid.total_wrinkling_strain`),
+            :meth:`~fenicsx_drape.forming.running.post.FormedGrid.total_wrinkling_strain`),
             ``kinematic_max_shear_deg`` and ``case`` (its conditions, printed in the title).
 
     Returns:

@@ -17,7 +17,7 @@ the penalty contact needs for its consistent Jacobian:
 
 Only the punch of the paper's hemisphere (section 4.1: radius 60 mm, fillet 20 mm) and its
 matched die are built here (:class:`HemisphereTools`); the blank holder is a plane and lives
-in :mod:`fenicsx_drape.forming.holder`.
+in :mod:`fenicsx_drape.forming.terms.holder`.
 """
 
 from __future__ import annotations
@@ -208,7 +208,7 @@ class HemisphereTools:
     its convex lip (the offset fillet) is the entry radius the sheet is drawn over.
 
     The blank holder is two plates at z = 0 with a circular opening ``holder_opening_mm`` in
-    diameter (:class:`~fenicsx_drape.forming.holder.BlankHolder`).
+    diameter (:class:`~fenicsx_drape.forming.terms.holder.BlankHolder`).
     """
 
     punch_radius_mm: float = 60.0
@@ -345,17 +345,17 @@ class MeshedTool:
     """A rigid tool given by a triangle surface (issue 13), moving with a rigid motion.
 
     The gap is the smooth signed distance field of the surface in the tool's own frame
-    (:mod:`~fenicsx_drape.forming.distance`: a cubic B-spline of exact distances, C², so the
+    (:mod:`~fenicsx_drape.forming.tools.distance`: a cubic B-spline of exact distances, C², so the
     penalty Jacobian stays consistent and symmetric), carried along by the motion
-    (:mod:`~fenicsx_drape.forming.motion`): with X = R(t)ᵀ (x − c − T(t)) + c,
+    (:mod:`~fenicsx_drape.forming.tools.motion`): with X = R(t)ᵀ (x − c − T(t)) + c,
 
         φ(x, t) = φ₀(X),   ∇φ = R ∇φ₀,   ∇∇φ = R ∇∇φ₀ Rᵀ.
 
     Args:
         name: The tool's name.
-        surface: Its :class:`~fenicsx_drape.forming.surfaces.TriangleSurface` (normals out of
+        surface: Its :class:`~fenicsx_drape.forming.tools.surfaces.TriangleSurface` (normals out of
             the tool, towards the sheet).
-        motion: Its :class:`~fenicsx_drape.forming.motion.RigidMotion` (default: fixed).
+        motion: Its :class:`~fenicsx_drape.forming.tools.motion.RigidMotion` (default: fixed).
         spacing_mm: Grid spacing h of the distance field (default: the tool mesh size).
         band_mm: Band of exact distances (default 3 mm + 2h).
         cache: Keep the built field on disk.
@@ -364,8 +364,8 @@ class MeshedTool:
 
     def __init__(self, name: str, surface, motion=None, *, spacing_mm: float | None = None,
                  band_mm: float | None = None, cache: bool = True, comm=None) -> None:
-        from fenicsx_drape.forming.distance import distance_field
-        from fenicsx_drape.forming.motion import RigidMotion
+        from fenicsx_drape.forming.tools.distance import distance_field
+        from fenicsx_drape.forming.tools.motion import RigidMotion
 
         if comm is None:
             try:
@@ -389,7 +389,7 @@ class MeshedTool:
         """Whether the surface is a plane (then a holder on it has a symmetric stiffness).
 
         A flat clamping surface is solved as the closed-form plate is (symmetric LDLᵀ,
-        :func:`~fenicsx_drape.forming.run.run_case`); its field is then linear up to the
+        :func:`~fenicsx_drape.forming.running.run.run_case`); its field is then linear up to the
         float32 rounding of the coefficients (open edges continued, ``forming.distance``).
         """
         if self._flat is None:

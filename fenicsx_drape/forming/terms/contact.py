@@ -1,7 +1,7 @@
 """Penalty contact between sheet nodes and a rigid tool, as a nodal term.
 
 With φ the signed gap of a node to the tool surface and n = ∇φ its outward normal
-(:mod:`fenicsx_drape.forming.tools`), a node that penetrates (φ < 0) is pushed out along the
+(:mod:`fenicsx_drape.forming.tools.shapes`), a node that penetrates (φ < 0) is pushed out along the
 normal by a penalty force p(φ) ≥ 0,
 
     f_N = p(φ) n,          K_N = −∂f_N/∂x = −p'(φ) n⊗n − p(φ) ∇∇φ,
@@ -17,7 +17,7 @@ a given force p is √(2 f_s p)/k below f_s/2 and (p + f_s/2)/k above, so it fal
 **Choice of k.** The natural scale is the axial stiffness of one tow bar of a unit cell,
 ``n_t E_o / Δ = l_t E_o`` (n_t = l_t Δ tows of modulus E_o per tow over the length Δ), which
 does not depend on Δ: 0.71 tows/mm × 3410 N/tow = 2.42 × 10³ N/mm for Table 2. The hemisphere
-uses k = 0.3 l_t E_o = 726 N/mm (``HemisphereCase.penalty_factor``): its deepest penetration
+uses k = 0.3 l_t E_o = 726 N/mm (its case's ``penalty_factor``): its deepest penetration
 at the end of forming is 0.020, 0.015 and 0.014 mm at Δ = 10, 5 and 2.5 mm, below 1 % of Δ
 and 5 % of the ply thickness, while the stiffer k = l_t E_o costs 40 % more Newton iterations
 on the finest mesh for results within 0.7° of shear. The smoothing force f_s = 100 N spreads
@@ -39,7 +39,7 @@ Jacobian through ∂s/∂x = P Q − (n·d) ∇∇φ − n ⊗ (∇∇φ d), d =
 
 **Any tool** (``forming.tools``: closed form or meshed) answers ``gap(x, t)`` (φ, ∇φ, ∇∇φ)
 and ``displacement(x, t0, t1)``. For a meshed tool φ is a C² spline
-(:mod:`~fenicsx_drape.forming.distance`), so force and Jacobian stay consistent and, without
+(:mod:`~fenicsx_drape.forming.tools.distance`), so force and Jacobian stay consistent and, without
 friction, symmetric, as for the exact surfaces.
 """
 
@@ -60,7 +60,7 @@ class PenaltyContact:
     Args:
         tool: the rigid tool: ``gap(x, t)`` (signed gap, normal, curvature) and
             ``displacement(x, t0, t1)`` (its prescribed motion), e.g. a
-            :class:`~fenicsx_drape.forming.tools.RevolvedTool` or ``MeshedTool``.
+            :class:`~fenicsx_drape.forming.tools.shapes.RevolvedTool` or ``MeshedTool``.
         stiffness_N_per_mm: penalty stiffness ``k`` per node (see the module docstring).
         friction: Coulomb coefficient μ_t of ``tool_friction`` (0 switches it off).
         slip_regularisation_mm: ``s_ε``, the slip below which friction is not yet at

@@ -1,6 +1,6 @@
 """What a lab measures on a formed sheet, taken from the model: points, edge, shear, distance.
 
-The formed sheet (:class:`~fenicsx_drape.forming.post.FormedGrid`, mirrored to the whole
+The formed sheet (:class:`~fenicsx_drape.forming.running.post.FormedGrid`, mirrored to the whole
 blank) is triangulated (:class:`SheetMesh`: each unit cell split along its 00-11 diagonal),
 so that
 
@@ -15,7 +15,7 @@ so that
 - the **blank's edge after forming** is the chain of the triangulation's boundary edges
   (:func:`edge_segments`), with the distance of a point to it and the model's **draw-in**
   there (inward in-plane displacement of the edge's material point, as
-  :func:`~fenicsx_drape.forming.run.draw_in`) from :func:`closest_on_edge`.
+  :func:`~fenicsx_drape.forming.running.run.draw_in`) from :func:`closest_on_edge`.
 
 No Python loop over points: everything is NumPy over (points × candidates) arrays.
 """
@@ -26,7 +26,7 @@ import dataclasses
 
 import numpy as np
 
-from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.forming.running.post import FormedGrid
 
 CANDIDATES = 8  # triangles (or edges) tried per point, nearest centres first
 
@@ -160,7 +160,7 @@ def coverage(mesh: SheetMesh, points: np.ndarray, reach_mm: float | None = None)
 def shear_at_flat(grid: FormedGrid, flat_mm: np.ndarray) -> np.ndarray:
     """The model's shear angle (deg) at material points (m, 2): bilinear within the cell.
 
-    The cells' shear (:meth:`~fenicsx_drape.forming.post.FormedGrid.shear_nodes`, averaged
+    The cells' shear (:meth:`~fenicsx_drape.forming.running.post.FormedGrid.shear_nodes`, averaged
     to the nodes) interpolated in the cell holding each point; NaN off the blank.
     """
     g = grid.full()

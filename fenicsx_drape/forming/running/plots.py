@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.post import FormedGrid
+from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.provenance import save_figure
 
 

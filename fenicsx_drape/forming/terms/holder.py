@@ -9,7 +9,7 @@ interior point of the surface: the node lies under it, not beyond its edge or op
 - **Clamping:** the node is held on the surface along its normal n = ∇φ by a two-sided
   penalty on the signed distance φ, ``f = −k φ n`` with the consistent stiffness
   ``K = k n⊗n + k φ ∇∇φ`` (N/mm; the same stiffness k as the tool contact,
-  :mod:`fenicsx_drape.forming.contact`). On the plane z = 0: ``f_z = −k z``.
+  :mod:`fenicsx_drape.forming.terms.contact`). On the plane z = 0: ``f_z = −k z``.
 - **Friction (eq. 1):** a perfectly plastic bar fixed at the node's initial position acts on
   it in the surface's tangent plane. The paper's bar has yield stress σ_y = F_tot μ / (A_f n_s),
   so it carries at most the force A_f σ_y = F_tot μ / n_s: the holding force times the
@@ -53,7 +53,7 @@ import dataclasses
 import numpy as np
 
 from fenicsx_drape.errors import ParameterError
-from fenicsx_drape.forming.tools import Gap
+from fenicsx_drape.forming.tools.shapes import Gap
 from fenicsx_drape.materials.base import MaterialLaw
 
 __all__ = ["FORCE_SHARES", "BlankHolder", "FlatHolder", "Gap", "part_force_N"]
@@ -61,7 +61,7 @@ __all__ = ["FORCE_SHARES", "BlankHolder", "FlatHolder", "Gap", "part_force_N"]
 FORCE_SHARES = ("symmetric_part", "model")
 
 
-def part_force_N(force_N: float, planes: int, force_share: str = "symmetric_part") -> float:
+def part_force_N(force_N: float, planes: int, force_share: str) -> float:
     """The holding force (N) carried by a model with ``planes`` symmetry planes.
 
     ``"symmetric_part"``: F / 2^planes (a quarter F/4); ``"model"``: the whole F.
@@ -131,8 +131,8 @@ class BlankHolder:
         law: the friction bar's law (role ``"friction"``; force in N against slip in mm),
             e.g. ``model.laws()["friction"]``; its conditions ``holder_force_N`` and
             ``holder_nodes`` are set here, node by node and step by step.
-        force_N: holding force carried by the modelled part (:func:`part_force_N`: F/4 for a
-            quarter under ``"symmetric_part"``, F under ``"model"``).
+        force_N: the holding force on the whole part (N; the case's ``[holder] force_N``); the
+            modelled part carries :attr:`part_force_N` of it, as ``force_share`` says.
         clamp_stiffness_N_per_mm: penalty stiffness ``k`` holding the nodes on the surface.
         surface: the clamping surface: ``gap(x, t)``, ``covers(x, t)`` and optionally
             ``displacement(x, t0, t1)`` (a tool of role holder).
@@ -140,13 +140,14 @@ class BlankHolder:
             opening of this radius (:class:`FlatHolder`).
         symmetry_axes: coordinate axes normal to the model's symmetry planes (0 for x = 0,
             1 for y = 0): under ``"symmetric_part"`` nodes on them count with weight 1/2.
-        force_share: ``"symmetric_part"`` or ``"model"`` (module docstring).
+        force_share: ``"symmetric_part"`` or ``"model"`` (module docstring; the case file's
+            default is the only default).
     """
 
-    def __init__(self, law: MaterialLaw, *, force_N: float, clamp_stiffness_N_per_mm: float,
-                 surface=None, opening_radius_mm: float | None = None,
-                 symmetry_axes: tuple[int, ...] = (),
-                 force_share: str = "symmetric_part") -> None:
+    def __init__(self, law: MaterialLaw, *, force_N: float, force_share: str,
+                 clamp_stiffness_N_per_mm: float, surface=None,
+                 opening_radius_mm: float | None = None,
+                 symmetry_axes: tuple[int, ...] = ()) -> None:
         if law.role != "friction":
             raise ParameterError(f"BlankHolder: the law {type(law).__name__} has role "
                                  f"{law.role!r}, expected 'friction'")
@@ -162,10 +163,15 @@ class BlankHolder:
         check_force_share(force_share, "BlankHolder: force_share")
         self.law = law
         self.surface = surface if surface is not None else FlatHolder(float(opening_radius_mm))
-        self.F = float(force_N)
+        self.force_N = float(force_N)
         self.k_z = float(clamp_stiffness_N_per_mm)
         self.symmetry_axes = tuple(symmetry_axes)
         self.force_share = force_share
+
+    @property
+    def part_force_N(self) -> float:
+        """The holding force the modelled part carries (:func:`part_force_N`)."""
+        return part_force_N(self.force_N, len(self.symmetry_axes), self.force_share)
 
     @property
     def flat(self) -> bool:
@@ -193,7 +199,8 @@ class BlankHolder:
         self.n_s = self.comm.allreduce(local) if self.comm is not None else local
         self.bars = np.flatnonzero(self.under)
         # Each bar's share of the force: a node on a symmetry plane is half a node.
-        self._law = dataclasses.replace(self.law, holder_force_N=self.F * self.w[self.bars],
+        self._law = dataclasses.replace(self.law,
+                                        holder_force_N=self.part_force_N * self.w[self.bars],
                                         holder_nodes=max(self.n_s, 1e-300))
 
     @property

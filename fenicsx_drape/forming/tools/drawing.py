@@ -1,6 +1,6 @@
 """The tools as Gmsh geometry, for pictures and ParaView (the contact uses the exact surfaces).
 
-Each profile of :mod:`fenicsx_drape.forming.tools` is drawn in the x-z plane with OpenCASCADE
+Each profile of :mod:`fenicsx_drape.forming.tools.shapes` is drawn in the x-z plane with OpenCASCADE
 arcs and lines and revolved about the z axis; the blank holder is two square plates with the
 circular opening. The surfaces are meshed with triangles and written as legacy VTK files that
 ParaView opens next to the sheet's XDMF fields.
@@ -12,7 +12,7 @@ import math
 import os
 from pathlib import Path
 
-from fenicsx_drape.forming.tools import Arc, HemisphereTools, RevolvedTool
+from fenicsx_drape.forming.tools.shapes import Arc, HemisphereTools, RevolvedTool
 
 PLATE_MM = 6.0  # thickness of the drawn holder plates (mm), for the picture only
 

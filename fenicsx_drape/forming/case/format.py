@@ -12,7 +12,7 @@ case it names (``docs/measurements.md``, "forming tests on any part"):
 ``load_case(path, duration_s=8.0, holder_force_N=500.0)``; :data:`OVERRIDES` lists the names.
 
 This module is plain NumPy (Gmsh only to sample an outline curve); the tools are built from
-the case by :func:`build_tools`, the run is :func:`fenicsx_drape.forming.run.run_case`.
+the case by :func:`build_tools`, the run is :func:`fenicsx_drape.forming.running.run.run_case`.
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError, ParameterError
 from fenicsx_drape.fe.grid import TrussGrid, outline_grid, polygon_area
-from fenicsx_drape.forming.holder import FORCE_SHARES
-from fenicsx_drape.forming.motion import RigidMotion
-from fenicsx_drape.forming.surfaces import sample_curve_loop
+from fenicsx_drape.forming.terms.holder import FORCE_SHARES
+from fenicsx_drape.forming.tools.motion import RigidMotion
+from fenicsx_drape.forming.tools.surfaces import sample_curve_loop
 
 ROLES = ("punch", "die", "holder", "surface")
 BUILTIN = "builtin:hemisphere"
@@ -46,7 +46,7 @@ DEFAULT_SHEET_SIDE = {"punch": "+z", "die": "-z", "holder": "+z", "surface": "+z
 # Names a measured test (or a command line) may override, besides tool parameter names.
 OVERRIDES = ("duration_s", "step_mm", "penalty_factor", "stabilisation_N_per_mm", "cell_mm",
              "ply_angle_deg", "symmetry", "sheet_mm", "holder_force_N", "holder_mu",
-             "holder_force_share", "travel_mm", "blank_offset_mm", "tool_offset_mm")
+             "holder_force_share", "travel_mm", "blank_offset_mm", "tool_offset_mm", "die")
 # Set-up overrides that move or turn something off the case's symmetry planes (issue 27).
 SETUP_OVERRIDES = ("ply_angle_deg", "blank_offset_mm", "tool_offset_mm")
 
@@ -294,8 +294,20 @@ def _finite(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
+def builtin_tools(case: FormingCase):
+    """The builtin (closed-form hemisphere) tools of a case, as its punch's parameters say.
+
+    Raises:
+        CaseError: the case has no builtin tool.
+    """
+    specs = [t for t in case.tools if t.builtin]
+    if not specs:
+        raise CaseError([f"case {case.name!r}: has no builtin tool ({BUILTIN!r})"])
+    return _builtin_tools(next((t for t in specs if t.role == "punch"), specs[0]))
+
+
 def _builtin_tools(spec: ToolSpec):
-    from fenicsx_drape.forming.tools import HemisphereTools
+    from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
     return HemisphereTools(**spec.params)
 
@@ -388,18 +400,40 @@ class _Reader:
         return v
 
 
+# The cases of the repository, by name: ``meshes/NAME/case.toml`` (the paper's hemisphere,
+# the double dome, the square box).
+CASES_FOLDER = Path(__file__).resolve().parents[3] / "meshes"
+
+
+def case_file(case: str | os.PathLike) -> Path:
+    """The file of a case: a path as given, or a case of the repository by its name.
+
+    ``"hemisphere"`` is ``meshes/hemisphere/case.toml`` (and so on for every folder of
+    ``meshes/`` holding a ``case.toml``); anything with a suffix or a folder is a path.
+    """
+    path = Path(case)
+    if path.suffix or len(path.parts) != 1 or path.exists():
+        return path
+    named = CASES_FOLDER / path.name / "case.toml"
+    if not named.is_file():
+        known = sorted(p.parent.name for p in CASES_FOLDER.glob("*/case.toml"))
+        raise CaseError([f"{str(case)!r}: not a case file (.toml) nor a named case "
+                         f"({', '.join(known) or 'none found in ' + str(CASES_FOLDER)})"])
+    return named
+
+
 def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
     """Read and check a forming case file; ``overrides`` change it (:data:`OVERRIDES`).
 
     Args:
-        path: The ``case.toml`` file.
+        path: The ``case.toml`` file, or a named case (:func:`case_file`: ``"hemisphere"``).
         **overrides: e.g. ``duration_s=8.0, holder_force_N=500.0, cell_mm=20.0`` or a tool
             parameter by name (``punch_radius_mm=50.0``): see :func:`with_overrides`.
 
     Raises:
         CaseError: with every problem of the file, each naming the file and the key.
     """
-    path = Path(path)
+    path = case_file(path)
     fname = str(path)
     if not path.is_file():
         raise CaseError([f"{fname}: no such case file"])
@@ -605,7 +639,7 @@ def _check_geo_tool(r: _Reader, at: str, path: Path, params: Mapping[str, float]
 
 
 def _check_builtin(r: _Reader, at: str, role, params, mesh, order, side, motion) -> None:
-    from fenicsx_drape.forming.tools import HemisphereTools
+    from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
     if role not in ("punch", "die", "holder"):
         r.add(f"{at} 'role'", f"{BUILTIN!r} gives the hemisphere's punch, die or holder, "
@@ -711,8 +745,8 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     ``holder_force_share``, ``travel_mm`` (builtin tools' parameter; motion tables are
     scaled so that the fastest tool travels it), ``blank_offset_mm`` ([x, y]: the blank and
     its net moved on the tools), ``tool_offset_mm`` ([x, y]: the punch moved off the die and
-    holder), and any tool parameter by name (every tool that has it, e.g.
-    ``punch_radius_mm``). None values are ignored.
+    holder), ``die`` (False: the case's dies left out), and any tool parameter by name (every
+    tool that has it, e.g. ``punch_radius_mm``). None values are ignored.
 
     A set-up override (:data:`SETUP_OVERRIDES`) that breaks a symmetry plane of the case
     removes that plane (the model needs the part of the blank the plane would mirror) unless
@@ -723,7 +757,7 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     param_names = {k for t in case.tools for k, _ in t.parameters}
     builtin_names = set()
     if any(t.builtin for t in case.tools):
-        from fenicsx_drape.forming.tools import HemisphereTools
+        from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
         builtin_names = {f.name for f in dataclasses.fields(HemisphereTools)}
     problems = []
@@ -804,6 +838,11 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
 
         tools = [dataclasses.replace(t, parameters=tuple({**t.params, **{
             k: v for k, v in params.items() if applies(t, k)}}.items())) for t in tools]
+    if "die" in overrides and not overrides["die"]:
+        if not any(t.role == "die" for t in tools):
+            raise CaseError([f"{where}: override die = false: the case has no tool of role "
+                             "'die'"])
+        tools = [t for t in tools if t.role != "die"]
     if "tool_offset_mm" in overrides:  # after travel_mm, which scales the motion tables
         tools = _offset_punches(tools, _offset(overrides["tool_offset_mm"], "tool_offset_mm",
                                                where), changes.get("duration_s",
@@ -888,7 +927,7 @@ def override_names(case: FormingCase) -> set[str]:
     """The names :func:`with_overrides` accepts for ``case``: :data:`OVERRIDES` and parameters."""
     names = set(OVERRIDES) | {k for t in case.tools for k, _ in t.parameters}
     if any(t.builtin for t in case.tools):
-        from fenicsx_drape.forming.tools import HemisphereTools
+        from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
         names |= {f.name for f in dataclasses.fields(HemisphereTools)}
     return names
@@ -994,9 +1033,9 @@ def build_tools(case: FormingCase, skip: tuple[str, ...] = ()) -> dict[str, obje
 
     A builtin punch moves ``travel_mm`` in the case's ``duration_s``; the builtin die is fixed
     at the punch's final position; the builtin holder is the plane z = 0 outside the opening
-    (:class:`~fenicsx_drape.forming.holder.FlatHolder`). Tools named in ``skip`` are left out.
+    (:class:`~fenicsx_drape.forming.terms.holder.FlatHolder`). Tools named in ``skip`` are left out.
     """
-    from fenicsx_drape.forming.holder import FlatHolder
+    from fenicsx_drape.forming.terms.holder import FlatHolder
 
     check_tool_sizes(case, skip)
     out: dict[str, object] = {}
@@ -1112,8 +1151,8 @@ def coarse_mesh_problem(surface, cell_mm: float) -> str | None:
 
 def _meshed_tool(case: FormingCase, spec: ToolSpec):
     """A tool from a geometry file: its surface meshed once by Gmsh, moved rigidly."""
-    from fenicsx_drape.forming.surfaces import load_surface
-    from fenicsx_drape.forming.tools import MeshedTool
+    from fenicsx_drape.forming.tools.shapes import MeshedTool
+    from fenicsx_drape.forming.tools.surfaces import load_surface
     from fenicsx_drape.trust import require_trust
 
     k = case.tools.index(spec) + 1

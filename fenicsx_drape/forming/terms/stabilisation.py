@@ -23,7 +23,7 @@ still biased the in-plane shear, whose stiffness (a few N/mm per node) is of the
 max shear 38° at c = 1.25 N/mm against 51° at c = 5. Out of the plane only, halving c from
 1.25 to 0.625 N/mm moves the nodes by 0.006 mm on average (0.06 mm at most), the maximum
 shear by 0.02° and the total wrinkling by 0.001 % (``demos/study_stabilisation.py``). It is
-part of the model: ``HemisphereCase.stabilisation_N_per_mm``.
+part of the model: a case's ``stabilisation_N_per_mm``.
 """
 
 from __future__ import annotations

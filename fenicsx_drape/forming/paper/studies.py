@@ -26,15 +26,16 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.hemisphere import HemisphereCase, draw_in, run_hemisphere
-from fenicsx_drape.forming.post import FormedGrid, mean_distance
+from fenicsx_drape.forming.case.format import FormingCase, builtin_tools, case_dict, load_case
+from fenicsx_drape.forming.running.post import FormedGrid, mean_distance
+from fenicsx_drape.forming.running.run import draw_in, run_case
 from fenicsx_drape.provenance import atomic_write_bytes, atomic_write_text, write_json
 
 # The two readings of eq. 1 on a symmetric part model (issue 15): "symmetric_part" gives the
 # quarter F/4 (the whole sheet's force per node), "model" the whole F over the quarter's own
 # n_s nodes (four times the force per node), as a model built of the quarter alone would.
 READINGS = ("symmetric_part", "model")
-# μ of prepreg on (release-agent-coated) steel: the literature range (README, issue 15).
+# μ of prepreg on (release-agent-coated) steel: the literature range (docs/paper.md, issue 15).
 MU_LITERATURE = (0.1, 0.2, 0.3, 0.4)
 # The paper's sweeps (section 4): Fig. 12a durations at 133 N, Fig. 12b forces at 40 s, and
 # Fig. 9 quarter models of 9 to 225 nodes (cells of 120 mm / 2 ... 120 mm / 14).
@@ -58,41 +59,34 @@ METRICS = ("max_shear_deg", "diagonal_max_shear_deg", "total_wrinkling_strain",
 class Variant:
     """One run of a study: a label, the case, and optionally the model and solver options.
 
-    ``model=None`` is the paper's model; ``options=None`` the hemisphere's default solver
-    options (:func:`~fenicsx_drape.forming.hemisphere.run_hemisphere`).
+    ``model=None`` is the paper's model; ``options=None`` the case's default solver options
+    (:func:`~fenicsx_drape.forming.running.run.run_case`).
     """
 
     label: str
-    case: HemisphereCase
+    case: FormingCase
     model: object = None
     options: object = None
 
 
-def paper_case(reading: str, **conditions) -> HemisphereCase:
-    """A hemisphere case under one reading of eq. 1's force share (see :data:`READINGS`).
+def paper_case(reading: str, **overrides) -> FormingCase:
+    """The paper's hemisphere under one reading of eq. 1's force share (see :data:`READINGS`).
 
-    With the case's own ``holder_force_share`` option when it has one; otherwise the "model"
-    reading is emulated exactly on a quarter by giving it four times the force (the quarter
-    then carries the whole F over its own n_s nodes). A full sheet has one reading.
+    ``meshes/hemisphere/case.toml`` with ``overrides`` (:func:`~fenicsx_drape.forming.case.format.
+    load_case`'s: ``cell_mm``, ``duration_s``, ``holder_force_N``, a tool parameter, ...).
     """
     if reading not in READINGS:
         raise ValueError(f"paper_case: reading {reading!r} is not one of {READINGS}")
-    names = {f.name for f in dataclasses.fields(HemisphereCase)}
-    if "holder_force_share" in names:
-        return HemisphereCase(holder_force_share=reading, **conditions)
-    force = conditions.pop("holder_force_N", HemisphereCase.holder_force_N)
-    quarter = conditions.get("quarter", True)
-    factor = 4.0 if reading == "model" and quarter else 1.0
-    return HemisphereCase(holder_force_N=factor * force, **conditions)
+    return load_case("hemisphere", holder_force_share=reading, **overrides)
 
 
 def default_options(model=None, **changes):
     """The hemisphere's default solver options with ``changes`` (e.g. ``tow_bending_EI_Nmm2``).
 
-    As :func:`~fenicsx_drape.forming.hemisphere.run_hemisphere` builds them when given none:
-    :func:`~fenicsx_drape.forming.run.forming_options` for the hemisphere's flat holder.
+    As :func:`~fenicsx_drape.forming.running.run.run_case` builds them when given none:
+    :func:`~fenicsx_drape.forming.running.run.forming_options` for the hemisphere's flat holder.
     """
-    from fenicsx_drape.forming.run import forming_options
+    from fenicsx_drape.forming.running.run import forming_options
     from fenicsx_drape.model import default_model
 
     return forming_options(model or default_model(), **changes)
@@ -114,7 +108,7 @@ def _bars(q: FormedGrid, strains):
     return out
 
 
-def metrics(grid: FormedGrid, case: HemisphereCase, stats: Mapping | None = None
+def metrics(grid: FormedGrid, case: FormingCase, stats: Mapping | None = None
             ) -> dict[str, float]:
     """The numbers of a formed sheet that the studies compare with the paper (a CSV row).
 
@@ -125,7 +119,7 @@ def metrics(grid: FormedGrid, case: HemisphereCase, stats: Mapping | None = None
     - ``total_wrinkling_engineering``: the length change of the compressed tow bars over the
       length of all tow bars (the paper's literal definition), ``total_wrinkling_gl_bars``:
       Green-Lagrange with every bar counted once
-      (:meth:`~fenicsx_drape.forming.post.FormedGrid.total_wrinkling_strain`);
+      (:meth:`~fenicsx_drape.forming.running.post.FormedGrid.total_wrinkling_strain`);
     - ``max_tow_strain``: the largest Green-Lagrange tow strain (Fig. 12b's ~0.5 % at 800 N),
       ``mean_tow_strain_in_part``: the mean tensile strain (compressed bars count 0) of the
       bars lying on the punch (inside the base radius, above the holder plane);
@@ -136,11 +130,12 @@ def metrics(grid: FormedGrid, case: HemisphereCase, stats: Mapping | None = None
     - where the most sheared cell lies (its centre's distance from the apex on the flat sheet,
       its formed radius);
     - the formed radius of the middle of a side and of a corner of the sheet (the holder's
-      opening is at ``case.tools.opening_radius_mm``), the part's base radius, the draw-in;
+      opening is at the builtin tools' ``opening_radius_mm``), the part's base radius, the
+      draw-in;
     - ``stats``: steps, cut-backs, Newton iterations, wall time, penetration, travel reached.
     """
     q = grid.quadrant
-    tools = case.tools
+    tools = builtin_tools(case)
     strains = q.tow_strains()
     row: dict[str, float] = {
         "max_shear_deg": float(np.nanmax(np.abs(grid.shear_deg()))),
@@ -198,14 +193,14 @@ def _plain(value):
 
 
 # The sources that decide a forming result (their hash is the default cache tag).
-_RESULT_SOURCES = ("fe", "materials", "forming/hemisphere.py", "forming/holder.py",
-                   "forming/contact.py", "forming/tools.py", "forming/stabilisation.py",
-                   "nodal.py", "model.py", "effects.py", "data")
+_RESULT_SOURCES = ("fe", "materials", "forming/running/run.py", "forming/case", "forming/terms",
+                   "forming/tools/shapes.py", "forming/tools/motion.py", "nodal.py", "model.py",
+                   "effects.py", "data")
 
 
 def source_tag() -> str:
     """A hash of the package sources that decide a forming result (the default cache tag)."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     digest = hashlib.sha256()
     for name in _RESULT_SOURCES:
         path = root / name
@@ -225,7 +220,7 @@ def run_key(variant: Variant, tag: str) -> str:
     from fenicsx_drape.model import default_model
 
     model = variant.model if variant.model is not None else default_model()
-    described = {"case": _plain(variant.case), "tag": tag,
+    described = {"case": case_dict(variant.case, variant.case.folder), "tag": tag,
                  "options": _plain(variant.options) if variant.options is not None else None,
                  "model": {"effects": sorted(model.effects),
                            "parameters": _plain(model.parameters)}}
@@ -264,8 +259,8 @@ def run_variants(variants: Iterable[Variant], *, cache: str | os.PathLike | None
                     grid = FormedGrid(data["X"], data["x"], bool(data["quarter"]))
         else:
             try:
-                run = run_hemisphere(variant.case, variant.model, variant.options,
-                                     allow_incomplete=allow_incomplete)
+                run = run_case(variant.case, variant.model, variant.options,
+                               allow_incomplete=allow_incomplete)
                 grid = run.grid
                 stats = {"steps": run.steps, "cutbacks": run.cutbacks,
                          "snes_iterations": run.iterations, "wall_time_s": run.wall_time_s,
@@ -297,7 +292,7 @@ def run_variants(variants: Iterable[Variant], *, cache: str | os.PathLike | None
     return rows, grids
 
 
-def sweep(cases: Iterable[HemisphereCase], model=None, options=None,
+def sweep(cases: Iterable[FormingCase], model=None, options=None,
           progress: Callable[[str], None] | None = print) -> tuple[list[dict], list[FormedGrid]]:
     """Run every case with the same model and options (see :func:`run_variants`)."""
     variants = [Variant(f"case {k}", c, model, options) for k, c in enumerate(cases)]

@@ -1,6 +1,6 @@
 """A smooth signed distance to a triangle surface: exact samples on a grid, cubic B-spline.
 
-Penalty contact (:mod:`~fenicsx_drape.forming.contact`) needs the signed gap φ of a node to
+Penalty contact (:mod:`~fenicsx_drape.forming.terms.contact`) needs the signed gap φ of a node to
 the tool, its gradient n = ∇φ (the force direction) and its Hessian ∇∇φ (the consistent
 Jacobian). On a flat-faceted surface the exact distance has a normal that jumps across
 every triangle edge and a Hessian that is zero on the faces and infinite at the edges: a node
@@ -48,13 +48,13 @@ to samples of the triangles selects them. Beyond the band the samples are clampe
 ±``band_mm``, with the sign of the nearest band sample (a flood fill by proximity). The field
 is exact (up to the spline's bias) where |φ| < band − 2h. The default band is 3 mm + 2h: the
 contact needs |φ| up to a step's penetration; the out-of-plane stabilisation
-(:func:`~fenicsx_drape.forming.hemisphere.sheet_normal`) reads the tool normal up to 3 mm.
+(:func:`~fenicsx_drape.forming.running.run.sheet_normal`) reads the tool normal up to 3 mm.
 Points outside the grid's box are farther than the band: φ = +band, ∇φ = 0 (they are skipped
 at once, as are points whose 64 coefficients are all clamped alike).
 
 **Closest triangles** of the band samples: a closest-point transform on the grid. Samples
 within 1.5 h of the surface get theirs by the exact search of
-:meth:`~fenicsx_drape.forming.surfaces.TriangleSurface.nearest` (k-d trees of centroids);
+:meth:`~fenicsx_drape.forming.tools.surfaces.TriangleSurface.nearest` (k-d trees of centroids);
 farther ones take the best of their six grid neighbours' closest triangles, front by front
 outwards (as in Mauch's and Bridson's distance-field constructions), then descend on the
 mesh until no triangle across an edge or around a corner of theirs is closer. Every sample
@@ -68,7 +68,7 @@ angle-weighted pseudo-normal of the feature q lies on (Bærentzen & Aanæs 2005:
 any closed, consistently oriented triangle mesh); beyond the boundary of an open surface
 (closest feature on a boundary edge, farther than 2.5 h) samples count as outside, so a
 holder's opening is "outside" and a punch's open rim adds no spurious inside region near the
-sheet (:mod:`~fenicsx_drape.forming.surfaces`).
+sheet (:mod:`~fenicsx_drape.forming.tools.surfaces`).
 
 **Open edges.** Within 2.5 h beyond the boundary of an open surface the samples are the
 signed distance to the plane of the closest triangle (the surface continued straight across
@@ -79,7 +79,7 @@ tilted normal and ~1/h curvature on the plane itself. On the hemisphere's meshed
 held the nodes just outside its 170 mm opening on that round and the quarter stalled at
 64 mm of travel (DIVERGED_MAX_IT from 38 mm on); with the plane continued, the holder's gap is
 exactly z up to its edge (a spline reproduces linear functions) and the run matches the
-closed form (README, "Forming cases").
+closed form (docs/forming.md).
 
 **Cache.** The hemisphere's punch at h = 1 mm (2 mm second-order mesh) has a 185 × 185 × 107
 grid with 0.6 M band samples, built in about 10 s (19 MB; peak memory of the build 270 MB).
@@ -283,7 +283,7 @@ def distance_field(surface, spacing_mm: float | None = None, band_mm: float | No
     """The smooth signed distance field of a surface, from the cache or built.
 
     Args:
-        surface: A :class:`~fenicsx_drape.forming.surfaces.TriangleSurface`.
+        surface: A :class:`~fenicsx_drape.forming.tools.surfaces.TriangleSurface`.
         spacing_mm: Grid spacing h (default :func:`default_spacing`, raised if the grid
             would have more than ``max_points`` points).
         band_mm: Half-width of the band of exact distances (default 3 mm + 2h).
