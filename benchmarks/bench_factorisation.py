@@ -35,7 +35,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fenicsx_drape.fe import solver as fe_solver
-from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+from fenicsx_drape.forming import load_case, run_case
 
 ORDERINGS = {  # name: MUMPS options (ICNTL(7) sequential, ICNTL(28)/(29) parallel analysis)
     "PORD": {"mat_mumps_icntl_7": 4},
@@ -223,4 +223,4 @@ def run_then_study(self, duration_s, dt_s, **kwargs):
 step_for = fe_solver.TrussProblem.run
 fe_solver.TrussProblem.run = run_then_study
 options = fe_solver.SolverOptions(tow_bending_EI_Nmm2=0.0) if args.no_bending else None
-run_hemisphere(HemisphereCase(cell_mm=args.cell_mm, quarter=False), options=options)
+run_case(load_case("hemisphere", cell_mm=args.cell_mm, symmetry=[]), options=options)

@@ -28,7 +28,7 @@ from mpi4py import MPI
 import numpy as np
 
 from fenicsx_drape.fe.solver import SINGLE_PRECISION_FACTOR, SolverOptions
-from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+from fenicsx_drape.forming import load_case, run_case
 from fenicsx_drape.forming.running.run import NODE_ATOL_N
 
 parser = argparse.ArgumentParser()
@@ -72,17 +72,17 @@ if args.before:
 
     PenaltyContact.project = project
 
-cases = [] if args.only_full else [HemisphereCase(cell_mm=c) for c in args.cells]
+cases = [] if args.only_full else [load_case("hemisphere", cell_mm=c) for c in args.cells]
 if args.full or args.only_full:
-    cases.append(HemisphereCase(cell_mm=2.5, quarter=False))
-run_hemisphere(HemisphereCase(cell_mm=30.0, duration_s=8.0),
+    cases.append(load_case("hemisphere", cell_mm=2.5, symmetry=[]))
+run_case(load_case("hemisphere", cell_mm=30.0, duration_s=8.0),
                options=SolverOptions(**options), allow_incomplete=True)  # JIT warm-up
 rows = []
 for case in cases:
     load = os.getloadavg()[0]
     comm.Barrier()
     start = time.perf_counter()
-    run = run_hemisphere(case, options=SolverOptions(**options), allow_incomplete=True)
+    run = run_case(case, options=SolverOptions(**options), allow_incomplete=True)
     wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     steps = run.problem.steps
     nodes = run.grid.X[..., 0].size

@@ -42,7 +42,7 @@ import numpy as np
 from fenicsx_drape.fe.grid import SYMMETRY_X, SYMMETRY_Y
 from fenicsx_drape.fe.newton import Newton
 from fenicsx_drape.fe.solver import SolverOptions, monitoring
-from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+from fenicsx_drape.forming import load_case, run_case
 from fenicsx_drape.forming.running.run import NODE_ATOL_N
 from fenicsx_drape.forming.terms.contact import PenaltyContact
 from fenicsx_drape.forming.terms.holder import BlankHolder
@@ -246,7 +246,7 @@ def main() -> None:
     probe = Probe()
     start = time.perf_counter()
     with monitoring(probe):
-        run = run_hemisphere(HemisphereCase(cell_mm=args.cell_mm, quarter=not args.full,
+        run = run_case(load_case("hemisphere", cell_mm=args.cell_mm, quarter=not args.full,
                                             step_mm=args.step_mm),
                              options=options, allow_incomplete=True)
     wall = time.perf_counter() - start

@@ -25,9 +25,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from fenicsx_drape.forming import HemisphereTools
-from fenicsx_drape.forming.hemisphere import HemisphereCase
-from fenicsx_drape.forming.running.outputs import form_hemisphere
+from fenicsx_drape.forming import form_case, load_case
 from fenicsx_drape.model import default_model
 
 # As a page of the docs the demo is a notebook run in demos/, without arguments.
@@ -38,24 +36,25 @@ out = Path(args[0]) if args else Path("results/hemisphere")
 
 # ## The case
 #
-# The tools are exact surfaces built from their parameters. Eq. 1 shares the holding force
-# over the nodes under the holder; the paper does not say how its quarter model did, and the
-# case's `holder_force_share` chooses (docs/paper.md, "Eq. 1's force share and μ"). The material is
-# the paper's model: its four coupon effects plus the blank-holder friction bars.
+# The hemisphere is a case file like any part's, `meshes/hemisphere/case.toml`, read here by
+# its name; keyword arguments override its values (a finer net: `cell_mm=5.0`). Its tools are
+# exact closed-form surfaces (`geometry = "builtin:hemisphere"`), its blank a symmetric
+# quarter. Eq. 1 shares the holding force over the nodes under the holder; the paper does not
+# say how its quarter model did, and the file's `force_share = "model"` chooses (docs/paper.md,
+# "Eq. 1's force share and μ"). The material is the paper's model: its four coupon effects
+# plus the blank-holder friction bars.
 
-tools = HemisphereTools()
-case = HemisphereCase(cell_mm=10.0, duration_s=40.0, holder_force_N=133.0, quarter=True,
-                      tools=tools)
+case = load_case("hemisphere", cell_mm=10.0, duration_s=40.0, holder_force_N=133.0)
+print(f"{case.name}: {case.description}; tools {', '.join(t.name for t in case.tools)}")
 model = default_model()
 print("effects:", ", ".join(model.effects))
 
 # ## Form it
 #
-# `form_hemisphere` runs the load steps (printing step, travel and Newton iterations) and
-# writes the summary, the ParaView fields, the forming bundle and the pictures.
+# `form_case` runs the load steps (printing step, travel and Newton iterations) and writes
+# the summary, the ParaView fields, the forming bundle and the pictures.
 
-run, summary = form_hemisphere(out, case, model,
-                               progress=print if MPI.COMM_WORLD.rank == 0 else None)
+run, summary = form_case(out, case, model, progress=print if MPI.COMM_WORLD.rank == 0 else None)
 
 # ## Compare with the paper and with the kinematic drape (Fig. 11)
 #

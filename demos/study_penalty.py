@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.hemisphere import HemisphereCase
+from fenicsx_drape.forming import load_case
 from fenicsx_drape.forming.paper.studies import sweep, write_rows
 from fenicsx_drape.provenance import save_figure, write_provenance
 
@@ -23,7 +23,7 @@ args = parser.parse_args()
 
 factors = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0]
 cell = 20.0 if args.quick else 10.0
-rows, _ = sweep(HemisphereCase(cell_mm=cell, penalty_factor=f) for f in factors)
+rows, _ = sweep(load_case("hemisphere", cell_mm=cell, penalty_factor=f) for f in factors)
 
 from mpi4py import MPI
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.hemisphere import HemisphereCase
+from fenicsx_drape.forming import load_case
 from fenicsx_drape.forming.paper.studies import sweep, write_rows
 from fenicsx_drape.forming.running.post import mean_distance
 from fenicsx_drape.provenance import save_figure, write_provenance
@@ -23,10 +23,11 @@ parser.add_argument("--out", type=Path, default=Path("results/study_stabilisatio
 parser.add_argument("--quick", action="store_true", help="20 mm cells")
 args = parser.parse_args()
 
-default = HemisphereCase().stabilisation_N_per_mm
+default = load_case("hemisphere").stabilisation_N_per_mm
 stiffness = [2 * default, default, default / 2, default / 4]
 cell = 20.0 if args.quick else 10.0
-rows, grids = sweep(HemisphereCase(cell_mm=cell, stabilisation_N_per_mm=c) for c in stiffness)
+rows, grids = sweep(load_case("hemisphere", cell_mm=cell, stabilisation_N_per_mm=c)
+                    for c in stiffness)
 ref = grids[1]
 moved = [mean_distance(g, ref) if g is not None else np.nan for g in grids]
 largest = [float(np.abs(g.x - ref.x).max()) if g is not None else np.nan for g in grids]

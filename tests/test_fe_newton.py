@@ -17,7 +17,7 @@ import numpy as np
 
 from fenicsx_drape.fe import SolverOptions, TrussProblem, truss_sheet
 from fenicsx_drape.fe.solver import SINGLE_PRECISION_FACTOR, monitoring
-from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+from fenicsx_drape.forming import load_case, run_case
 from fenicsx_drape.forming.terms.contact import PenaltyContact
 from fenicsx_drape.forming.tools.shapes import HemisphereTools
 from fenicsx_drape.model import default_model
@@ -53,8 +53,9 @@ DRAW_IN_BEFORE_MM = {"mid_side_mm": 43.9231, "corner_mm": 30.4169}
 
 def _hemisphere(cell_mm, **options):
     # The force share of commit 4c390df (the reference numbers above): F/4 on the quarter.
-    case = HemisphereCase(cell_mm=cell_mm, duration_s=8.0, holder_force_share="symmetric_part")
-    return run_hemisphere(case, options=SolverOptions(**{**OPTIONS, **options}),
+    case = load_case("hemisphere", cell_mm=cell_mm, duration_s=8.0,
+                     holder_force_share="symmetric_part")
+    return run_case(case, options=SolverOptions(**{**OPTIONS, **options}),
                           comm=MPI.COMM_SELF, allow_incomplete=True)
 
 
@@ -103,7 +104,7 @@ def test_snes_forms_the_default_hemisphere_as_the_hand_written_newton(cell_mm):
     """
     reference = json.loads((ROOT / "tests" / "data" / "hemisphere_hand_newton.json")
                            .read_text())[f"{cell_mm:g}"]
-    run = run_hemisphere(HemisphereCase(cell_mm=cell_mm), comm=MPI.COMM_SELF)
+    run = run_case(load_case("hemisphere", cell_mm=cell_mm), comm=MPI.COMM_SELF)
     iterations = [s.iterations for s in run.problem.steps]
     assert abs(sum(iterations) - sum(reference["iterations"])) <= 0.1 * run.iterations
     assert iterations == reference["iterations"]  # the same iterates

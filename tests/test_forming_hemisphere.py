@@ -9,7 +9,7 @@ from mpi4py import MPI
 
 from fenicsx_drape.fe.mesh import truss_sheet
 from fenicsx_drape.fe.solver import SolverOptions, TrussProblem
-from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+from fenicsx_drape.forming import load_case, run_case
 from fenicsx_drape.forming.terms.contact import PenaltyContact
 from fenicsx_drape.forming.terms.stabilisation import ExtrapolationSpring
 from fenicsx_drape.forming.tools.shapes import RevolvedTool, Segment
@@ -78,14 +78,14 @@ def test_contact_patch_reaction_equals_load_and_penetration_falls_as_1_over_k():
 
 @pytest.fixture(scope="module")
 def quarter():
-    return run_hemisphere(HemisphereCase(**COARSE, quarter=True), comm=MPI.COMM_SELF)
+    return run_case(load_case("hemisphere", **COARSE), comm=MPI.COMM_SELF)
 
 
 @pytest.fixture(scope="module")
 def full():
     # The default force share ("model") gives the quarter's own nodes the whole F: the full
     # sheet with the same force per node carries 4F.
-    return run_hemisphere(HemisphereCase(**COARSE, quarter=False, holder_force_N=4 * 133.0),
+    return run_case(load_case("hemisphere", **COARSE, symmetry=[], holder_force_N=4 * 133.0),
                           comm=MPI.COMM_SELF)
 
 
@@ -136,9 +136,9 @@ def test_formed_quarter_zero_shear_at_apex_and_wrinkling_on_the_tow_axes(quarter
 @pytest.mark.slow
 def test_serial_and_parallel_runs_agree(tight_solver):
     """The coarse quarter on all ranks equals the same run on one process."""
-    case = HemisphereCase(**COARSER, quarter=True)
-    parallel = run_hemisphere(case, options=tight_solver, comm=MPI.COMM_WORLD)
-    serial = run_hemisphere(case, options=tight_solver, comm=MPI.COMM_SELF)
+    case = load_case("hemisphere", **COARSER)
+    parallel = run_case(case, options=tight_solver, comm=MPI.COMM_WORLD)
+    serial = run_case(case, options=tight_solver, comm=MPI.COMM_SELF)
     assert parallel.problem.sheet.num_nodes_global == serial.grid.X[..., 0].size
     np.testing.assert_allclose(parallel.grid.x, serial.grid.x, atol=1e-5)
     assert parallel.max_penetration_mm == pytest.approx(serial.max_penetration_mm, rel=1e-3)
@@ -149,13 +149,13 @@ def test_a_run_that_cannot_finish_raises_or_returns_how_far_it_got():
     """One Newton iteration per step cannot converge: SolverError, or the last state."""
     from fenicsx_drape.errors import SolverError
 
-    case = HemisphereCase(cell_mm=30.0, duration_s=8.0)
+    case = load_case("hemisphere", cell_mm=30.0, duration_s=8.0)
     starved = SolverOptions(snes_atol=1e-6, snes_max_it=1)
     with pytest.raises(SolverError, match="cannot be cut"):
-        run_hemisphere(case, options=starved, comm=MPI.COMM_SELF)
-    run = run_hemisphere(case, options=starved, comm=MPI.COMM_SELF, allow_incomplete=True)
+        run_case(case, options=starved, comm=MPI.COMM_SELF)
+    run = run_case(case, options=starved, comm=MPI.COMM_SELF, allow_incomplete=True)
     assert "cannot be cut" in run.stopped
-    assert 0.0 <= run.travel_mm < case.tools.travel_mm
+    assert 0.0 <= run.travel_mm < case.total_travel_mm
     assert run.cutbacks >= 10  # halved down to dt / 1024
     np.testing.assert_allclose(run.grid.x[..., 2].max(), 0.0, atol=1e-6 + run.travel_mm)
 
@@ -166,7 +166,7 @@ def test_the_jacobian_is_symmetric_unless_tool_friction_acts(with_tool_friction)
     model = default_model()
     if with_tool_friction:
         model = model.with_effects("tool_friction")
-    run = run_hemisphere(HemisphereCase(cell_mm=30.0, duration_s=8.0), model)
+    run = run_case(load_case("hemisphere", cell_mm=30.0, duration_s=8.0), model)
     A = run.problem._A
     asymmetry = A.copy().transpose()  # in place, on the copy
     asymmetry.axpy(-1.0, A)

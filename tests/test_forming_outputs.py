@@ -28,7 +28,9 @@ def test_form_command_writes_summary_bundle_fields_and_pictures(tmp_path):
     assert 0.0 < summary["max_shear_deg"] < 90.0
     bundle = load_bundle(out / "bundle", read_case=case_for_test)
     (test,) = bundle.tests
-    assert test.kind == "forming" and test.geometry == "hemisphere"
+    # The bundle names a copy of the case file (the hemisphere's tools are builtin).
+    assert test.kind == "forming" and test.case == "case/case.toml"
+    assert test.forming_case.blank.symmetry == ("x", "y")
     assert test.conditions["friction_coefficient"] == 0.25
     assert test.forming["holder_force_N"] == 133.0 and test.forming["duration_s"] == 8.0
     # The 10 mm drawn grid of the quarter: 13 × 13 points, the apex on the punch's top.

@@ -128,11 +128,11 @@ def test_coarse_duration_sweep_keeps_its_documented_trend():
     """Fig. 12a on 20 mm cells (quarter, 133 N, default reading): slower forming wrinkles less
     and shears more (docs/paper.md, "Studies"), the trend the paper reports."""
     pytest.importorskip("dolfinx")
-    from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+    from fenicsx_drape.forming import load_case, run_case
 
     wrinkling, shear = [], []
     for duration in (8.0, 40.0, 240.0):
-        grid = run_hemisphere(HemisphereCase(cell_mm=20.0, duration_s=duration)).grid
+        grid = run_case(load_case("hemisphere", cell_mm=20.0, duration_s=duration)).grid
         wrinkling.append(-grid.total_wrinkling_strain())
         shear.append(np.abs(grid.diagonal_path()[1]).max())
     assert wrinkling[0] > wrinkling[1] > wrinkling[2] > 0.0

@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from fenicsx_drape.errors import DrapeInputError, ParameterError
+from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.fe.grid import (
     BORDER,
     DIAGONAL_MINUS,
@@ -111,15 +111,17 @@ def test_turned_net_is_clipped_to_the_square_with_whole_cells(θ, cell_mm):
 
 
 def test_a_ply_angle_needs_the_full_sheet():
-    from fenicsx_drape.forming.hemisphere import HemisphereCase
+    from fenicsx_drape.forming import load_case
 
-    with pytest.raises(ParameterError, match="quarter"):
-        HemisphereCase(ply_angle_deg=3.0)
-    with pytest.raises(ParameterError, match="ply_angle_deg"):
-        HemisphereCase(quarter=False, ply_angle_deg=float("nan"))
+    assert load_case("hemisphere", ply_angle_deg=3.0).planes == ()  # the planes it breaks go
+    with pytest.raises(DrapeInputError, match="symmetry"):
+        load_case("hemisphere", ply_angle_deg=3.0, symmetry=["x", "y"])
+    with pytest.raises(DrapeInputError, match="ply_angle_deg"):
+        load_case("hemisphere", symmetry=[], ply_angle_deg=float("nan"))
     with pytest.raises(DrapeInputError, match="full sheet"):
         sheet_grid(SIZE, 10.0, quarter=True, ply_angle_deg=3.0)
-    assert HemisphereCase(quarter=False, ply_angle_deg=0.0) == HemisphereCase(quarter=False)
+    full = load_case("hemisphere", symmetry=[])
+    assert load_case("hemisphere", symmetry=[], ply_angle_deg=0.0) == full
 
 
 def test_bending_stencils_follow_the_tows_of_the_clipped_net():
@@ -145,7 +147,7 @@ def test_bending_stencils_follow_the_tows_of_the_clipped_net():
 
 
 def test_post_processing_of_a_turned_net():
-    from fenicsx_drape.forming.hemisphere import draw_in
+    from fenicsx_drape.forming.running.run import draw_in
 
     grid = sheet_grid(SIZE, 10.0, ply_angle_deg=3.0)
     turn = np.radians(20.0)
@@ -262,9 +264,9 @@ def mirror_asymmetry_deg(g) -> float:
 def runs():
     from mpi4py import MPI
 
-    from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
+    from fenicsx_drape.forming import load_case, run_case
 
-    return {θ: run_hemisphere(HemisphereCase(**COARSE, ply_angle_deg=θ), comm=MPI.COMM_SELF)
+    return {θ: run_case(load_case("hemisphere", **COARSE, ply_angle_deg=θ), comm=MPI.COMM_SELF)
             for θ in (0.0, 90.0, 5.0, 10.0)}
 
 
@@ -323,21 +325,21 @@ def test_the_formed_net_turns_with_the_tows(runs):
 @pytest.mark.skip_in_parallel
 @pytest.mark.slow
 def test_summary_pictures_and_bundle_of_a_turned_ply(runs, tmp_path):
-    from fenicsx_drape.forming.running.outputs import forming_bundle, summary
+    from fenicsx_drape.forming.running.outputs import case_bundle, case_summary
     from fenicsx_drape.forming.running.plots import plot_paths, plot_shear, plot_wrinkling
 
     run = runs[5.0]
-    out = summary(run)
-    assert out["ply_angle_deg"] == 5.0 and out["case"]["ply_angle_deg"] == 5.0
+    out = case_summary(run)
+    assert out["ply_angle_deg"] == 5.0 and out["case"]["blank"]["ply_angle_deg"] == 5.0
     assert out["mirror_asymmetry_deg"] > 5.0
     assert out["nodes"] == len(sheet_grid(SIZE, 20.0, ply_angle_deg=5.0).nodes)
     for key in ("max_shear_deg", "total_wrinkling_strain", "min_wrinkling_strain"):
         assert np.isfinite(out[key])
-    assert summary(runs[0.0])["ply_angle_deg"] == 0.0
+    assert case_summary(runs[0.0])["ply_angle_deg"] == 0.0
     for plot in (plot_shear, plot_wrinkling):
         assert plot(run.grid, tmp_path / f"{plot.__name__}.png").stat().st_size > 1000
     assert plot_paths({"θ = 5°": run.grid}, tmp_path / "paths.png").exists()
-    columns = forming_bundle(run, 0.3).tests[0].columns
+    columns = case_bundle(run, 0.3).tests[0].columns
     assert all(np.isfinite(v).all() for v in columns.values())
     assert np.abs(np.column_stack([columns["x0_mm"], columns["y0_mm"]])).max() <= SIZE / 2 + 1e-9
 
@@ -354,7 +356,7 @@ def test_cli_forms_a_ply_angle_on_the_full_sheet_unasked(tmp_path, capsys):
                  "--cell-mm", "20", "--duration-s", "8", "--no-fields", "--quiet"]) == 0
     assert "breaks the symmetry plane(s) x = 0 and y = 0" in capsys.readouterr().err
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["case"]["quarter"] is False
+    assert summary["symmetry"] == [] and summary["case"]["blank"]["symmetry"] == []
 
 
 @pytest.mark.slow
@@ -370,7 +372,8 @@ def test_cli_forms_a_turned_ply(tmp_path):
                  "--cell-mm", "20", "--duration-s", "8", "--no-fields", "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     provenance = json.loads((out / "provenance.json").read_text())
-    assert summary["ply_angle_deg"] == 5.0 and provenance["case"]["ply_angle_deg"] == 5.0
+    assert summary["ply_angle_deg"] == 5.0
+    assert provenance["case"]["blank"]["ply_angle_deg"] == 5.0
     assert summary["nodes"] == len(sheet_grid(SIZE, 20.0, ply_angle_deg=5.0).nodes)
     assert summary["mirror_asymmetry_deg"] > 5.0
     assert (out / "shear.png").exists() and (out / "bundle" / "bundle.toml").exists()

@@ -12,8 +12,8 @@ pytest.importorskip("dolfinx")
 
 from mpi4py import MPI
 
+from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case.format import BlankSpec, ToolSpec, load_case
-from fenicsx_drape.forming.hemisphere import HemisphereCase, run_hemisphere
 from fenicsx_drape.forming.running.run import forming_options, free_edge, run_case
 from fenicsx_drape.forming.tools.shapes import HemisphereTools
 from fenicsx_drape.model import default_model
@@ -57,18 +57,15 @@ def octagon(symmetry, cell_mm=20.0):
     return dataclasses.replace(base, blank=blank, holder=holder)
 
 
-@pytest.mark.skip_in_parallel
-def test_the_hemisphere_case_file_runs_exactly_as_run_hemisphere():
-    """Bit for bit: the same sheet, tools, terms and steps."""
-    from_file = run_case(load_case(HEMISPHERE, **COARSE), comm=MPI.COMM_SELF)
-    reference = run_hemisphere(HemisphereCase(**COARSE), comm=MPI.COMM_SELF)
-    np.testing.assert_array_equal(from_file.grid.X, reference.grid.X)
-    np.testing.assert_array_equal(from_file.grid.x, reference.grid.x)
-    for key in ("steps", "cutbacks", "iterations", "max_penetration_mm", "draw_in_mm"):
-        assert getattr(from_file, key) == getattr(reference, key)
-    assert from_file.travel_mm == reference.travel_mm == 80.0
-    assert reference.forming_case.blank == from_file.case.blank
-    assert from_file.holder.n_s == reference.holder.n_s
+def test_the_named_hemisphere_is_its_case_file():
+    """One pipeline: ``"hemisphere"`` names meshes/hemisphere/case.toml, read like any case."""
+    from fenicsx_drape.forming.case.format import case_file
+
+    assert case_file("hemisphere") == HEMISPHERE.resolve()
+    assert load_case("hemisphere", **COARSE) == load_case(HEMISPHERE, **COARSE)
+    assert case_file("my_part/case.toml") == Path("my_part/case.toml")
+    with pytest.raises(DrapeInputError, match="named case"):
+        case_file("no_such_case")
 
 
 @pytest.fixture(scope="module")
@@ -137,7 +134,7 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
                 "snes_iterations", "wall_time_s", "max_penetration_mm", "ranks", "case"):
         assert key in summary
     assert summary["nodes"] == 25 and summary["case"]["holder"]["force_N"] == 200.0
-    reference = run_hemisphere(HemisphereCase(**COARSE, holder_force_N=200.0),
+    reference = run_case(load_case("hemisphere", **COARSE, holder_force_N=200.0),
                                comm=MPI.COMM_SELF)
     assert summary["max_shear_deg"] == np.abs(reference.grid.shear_deg()).max()
     assert summary["snes_iterations"] == reference.iterations
@@ -150,7 +147,8 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
     for name in ("shear.png", "wrinkling.png", "fields.xdmf", "provenance.json",
                  "kinematic_shear.png", "tools/punch.vtk", "tools/die.vtk", "tools/holder.vtk"):
         assert (out / name).stat().st_size > 0
-    assert not (out / "paths.png").exists()  # the hemisphere's paths: drape form hemisphere
+    # The case file is the paper's hemisphere: its paths (Figs. 10-11) and the paper's numbers.
+    assert (out / "paths.png").stat().st_size > 0 and "paper" in summary
     provenance = json.loads((out / "provenance.json").read_text())
     assert provenance["case"]["blank"]["cell_mm"] == 30.0
     # The bundle names a copy of the case, which loads and is the case that ran.

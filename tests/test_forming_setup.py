@@ -49,9 +49,8 @@ def test_a_tool_offset_moves_the_punch_only():
     assert punch.motion.y_mm == (3.0, 3.0) and punch.motion.z_mm == (0.0, 20.0)
     assert die == case.tool("die") and moved.planes == ("x",)
     assert moved.total_travel_mm == pytest.approx(20.0)
-    from fenicsx_drape.forming.hemisphere import HemisphereCase
-
-    hemi = HemisphereCase(quarter=False, tool_offset_mm=(2.0, 0.0)).to_case()
+    hemi = load_case("hemisphere", tool_offset_mm=(2.0, 0.0))  # breaks x = 0 only
+    assert hemi.planes == ("y",)
     assert hemi.tool("punch").params["punch_x_mm"] == 2.0
     assert hemi.tool("die").params.get("punch_x_mm", 0.0) == 0.0
     from fenicsx_drape.forming.case.format import build_tools
@@ -62,8 +61,8 @@ def test_a_tool_offset_moves_the_punch_only():
     # off the axis, above the cap of radius 60 mm by √(60² + 2²) − 60.
     gap = tools["punch"].gap(apex, 0.0).phi
     assert abs(gap[0]) < 1e-9 and gap[1] == pytest.approx(np.hypot(60.0, 2.0) - 60.0)
-    with pytest.raises(Exception, match="quarter"):
-        HemisphereCase(tool_offset_mm=(2.0, 0.0))
+    with pytest.raises(CaseError, match="symmetry"):
+        load_case("hemisphere", tool_offset_mm=(2.0, 0.0), symmetry=["x", "y"])
 
 
 def test_overrides_come_before_the_check_of_the_case(tmp_path):
@@ -169,12 +168,12 @@ def test_a_failure_after_the_solve_writes_what_was_computed(tmp_path, monkeypatc
 @pytest.mark.skip_in_parallel
 def test_the_hemisphere_with_every_set_up_is_formed(tmp_path):
     pytest.importorskip("dolfinx")
-    from fenicsx_drape.forming.hemisphere import HemisphereCase
-    from fenicsx_drape.forming.running.outputs import form_hemisphere
+    from fenicsx_drape.forming import form_case
 
-    case = HemisphereCase(quarter=False, cell_mm=20.0, step_mm=4.0, ply_angle_deg=4.0,
-                          blank_offset_mm=(0.0, 7.0), tool_offset_mm=(2.0, 0.0))
-    _, result = form_hemisphere(tmp_path / "h", case, fields=False)
+    case = load_case("hemisphere", cell_mm=20.0, step_mm=4.0, ply_angle_deg=4.0,
+                     blank_offset_mm=(0.0, 7.0), tool_offset_mm=(2.0, 0.0))
+    assert case.planes == ()  # every plane broken: the full sheet, unasked
+    _, result = form_case(tmp_path / "h", case, fields=False)
     for f in ("summary.json", "shear.png", "paths.png", "bundle/bundle.toml"):
         assert (tmp_path / "h" / f).is_file()
     assert result["mirror_asymmetry_deg"] > 1.0

@@ -19,7 +19,7 @@ def test_drape_command_writes_summary_bundle_picture(tmp_path, capsys):
     assert summary["nodes"] == 625 and summary["unplaced_nodes"] == 0
     assert summary["start_mm"] == pytest.approx([0.0, 0.0, 80.0])
     (test,) = load_bundle(out / "bundle", read_case=case_for_test).tests
-    assert test.kind == "forming" and test.geometry == "hemisphere"
+    assert test.kind == "forming" and test.case == "case/case.toml"  # a copy of the case
     assert len(test.columns["i"]) == 625  # the 10 mm drawn grid is the net
     apex = (test.columns["i"] == 0) & (test.columns["j"] == 0)
     assert test.columns["z_mm"][apex][0] == pytest.approx(80.0, abs=1e-9)

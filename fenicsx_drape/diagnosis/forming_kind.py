@@ -14,10 +14,11 @@ measurement to :mod:`~fenicsx_drape.diagnosis.lab_kind`):
   (the bundle loader applied them, :func:`~fenicsx_drape.forming.case.format.case_for_test`),
   in the case's frame. The modelled part (quarter, half or whole blank, by the case's
   symmetry planes) is compared as it is when the measured grid lies in it, else mirrored
-  through the planes to the whole sheet (:func:`sheet_for`); it is interpolated bilinearly in the reference coordinates at the
-  measured grid's ``(x0_mm, y0_mm)``, so the measured grid may be coarser than the mesh
-  (section 4.2). A measured node in a cell the model's net does not keep (the ragged edge of a
-  polygon blank, coarser cells than the data's) takes the bilinear map of the nearest kept
+  through the planes to the whole sheet (:func:`sheet_for`); it is interpolated bilinearly
+  in the reference coordinates at the measured grid's ``(x0_mm, y0_mm)``, so the measured
+  grid may be coarser than the mesh (section 4.2). A measured node in a cell the model's net
+  does not keep (the ragged edge of a polygon blank, coarser cells than the data's) takes the
+  bilinear map of the nearest kept
   cell, extended (:func:`sample`), up to :data:`EXTRAPOLATE_CELLS` cells away;
 - **values**: per row the three coordinates ``x, y, z`` (flattened), so a test's RMSE is the
   RMS position error per coordinate (mm) of the spec;

@@ -77,8 +77,9 @@ SINGLE_PRECISION_FACTOR = {
     "pc_precision": "single", "ksp_type": "gmres", "ksp_pc_side": "right",
     "ksp_norm_type": "unpreconditioned", "ksp_rtol": 1e-3, "ksp_atol": 0.0, "ksp_max_it": 30}
 """``petsc_options`` that factorise the Jacobian in single precision (PETSc's mixed-precision
-MUMPS) and solve to 10⁻³ with GMRES on that factor: 7-15 % faster on the hemisphere (docs/solver-notes.md,
-issue 17). Alone the single factor solves the forming Jacobians to about 10⁻¹."""
+MUMPS) and solve to 10⁻³ with GMRES on that factor: 7-15 % faster on the hemisphere
+(docs/solver-notes.md, issue 17). Alone the single factor solves the forming Jacobians to
+about 10⁻¹."""
 
 
 @dataclasses.dataclass
