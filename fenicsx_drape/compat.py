@@ -32,6 +32,23 @@ OLD_NAMES: dict[str, str] = {
     "fenicsx_drape.forming_compare": "fenicsx_drape.diagnosis.forming_kind",
     "fenicsx_drape.diagnose": "fenicsx_drape.diagnosis.diagnose",
     "fenicsx_drape.ledger": "fenicsx_drape.diagnosis.ledger",
+    # forming/ before its subpackages (issue 28; forming.case, .tools and .paper are
+    # packages now: their modules are forming.case.format, forming.tools.shapes and
+    # forming.paper.numbers, and fenicsx_drape.forming exports the API)
+    "fenicsx_drape.forming.motion": "fenicsx_drape.forming.tools.motion",
+    "fenicsx_drape.forming.surfaces": "fenicsx_drape.forming.tools.surfaces",
+    "fenicsx_drape.forming.distance": "fenicsx_drape.forming.tools.distance",
+    "fenicsx_drape.forming.tool_models": "fenicsx_drape.forming.tools.drawing",
+    "fenicsx_drape.forming.contact": "fenicsx_drape.forming.terms.contact",
+    "fenicsx_drape.forming.holder": "fenicsx_drape.forming.terms.holder",
+    "fenicsx_drape.forming.stabilisation": "fenicsx_drape.forming.terms.stabilisation",
+    "fenicsx_drape.forming.run": "fenicsx_drape.forming.running.run",
+    "fenicsx_drape.forming.outputs": "fenicsx_drape.forming.running.outputs",
+    "fenicsx_drape.forming.post": "fenicsx_drape.forming.running.post",
+    "fenicsx_drape.forming.measure": "fenicsx_drape.forming.running.measure",
+    "fenicsx_drape.forming.plots": "fenicsx_drape.forming.running.plots",
+    "fenicsx_drape.forming.kinematic": "fenicsx_drape.forming.running.kinematic",
+    "fenicsx_drape.forming.studies": "fenicsx_drape.forming.paper.studies",
 }
 
 

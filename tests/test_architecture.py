@@ -13,7 +13,8 @@ The layers, lowest first (docs/development.md, Layout)::
     unitcell, nodal) < fe | measurements < forming < calibration < diagnosis < command line
 
 ``fe`` and ``measurements`` are side by side: neither imports the other; ``forming`` may
-write a bundle (it imports ``measurements``). ``materials`` imports only ``errors``, and
+write a bundle (it imports ``measurements``). Inside ``forming`` its parts are layered too
+(:data:`FORMING_PARTS`): tools < terms < case < running < paper. ``materials`` imports only ``errors``, and
 neither DOLFINx (nor its stack) nor file I/O; only the command line parses arguments.
 """
 
@@ -67,6 +68,11 @@ MAY_IMPORT = {
     "diagnosis": _BELOW_FE | {"fe", "measurements", "forming", "calibration", "diagnosis"},
     "cli": _BELOW_FE | {"fe", "measurements", "forming", "calibration", "diagnosis", "cli"},
 }
+
+# The parts of forming/, lowest first: a part imports only itself and the parts before it
+# (tool geometry knows no case; the residual's terms know tools; the case format knows both;
+# a run knows the case; the paper's studies run cases).
+FORMING_PARTS = ("tools", "terms", "case", "running", "paper")
 
 # Third-party and standard modules a layer must not import.
 DOLFINX_STACK = {"dolfinx", "ufl", "basix", "ffcx", "petsc4py", "mpi4py", "adios2",
@@ -230,6 +236,25 @@ def layer_violations(graph: dict[str, set[str]]) -> list[str]:
     return out
 
 
+def forming_part(module: str) -> str | None:
+    """The part of forming/ a module is in (:data:`FORMING_PARTS`), None outside its parts."""
+    head = "fenicsx_drape.forming."
+    part = module[len(head):].split(".")[0] if module.startswith(head) else None
+    return part if part in FORMING_PARTS else None
+
+
+def forming_violations(graph: dict[str, set[str]]) -> list[str]:
+    """Imports of a later part of forming/ by an earlier one, as sentences."""
+    out = []
+    for module, targets in sorted(graph.items()):
+        here = forming_part(module)
+        for target in sorted(targets):
+            there = forming_part(target)
+            if here and there and FORMING_PARTS.index(there) > FORMING_PARTS.index(here):
+                out.append(f"{module} (forming/{here}) imports {target} (forming/{there})")
+    return out
+
+
 def external_violations(imports: dict[str, list[tuple[str, int]]]) -> list[str]:
     """Forbidden third-party or standard imports (DOLFINx or files in the physics, argparse
     outside the command line), as sentences."""
@@ -291,6 +316,19 @@ def test_lower_layers_never_import_higher_ones(graph):
     edges, _, _ = graph
     found = layer_violations(edges)
     assert not found, "\n".join(found)
+
+
+def test_the_parts_of_forming_import_only_earlier_parts(graph):
+    edges, _, known = graph
+    assert {forming_part(m) for m in known} - {None} == set(FORMING_PARTS)  # the layout
+    assert not [m for m in known if m.startswith("fenicsx_drape.forming.")
+                and forming_part(m) is None], "a module of forming/ outside its parts"
+    assert not forming_violations(edges), "\n".join(forming_violations(edges))
+    injected = {k: set(v) for k, v in edges.items()}
+    injected["fenicsx_drape.forming.tools.shapes"].add("fenicsx_drape.forming.case.format")
+    assert forming_violations(injected) == [
+        "fenicsx_drape.forming.tools.shapes (forming/tools) imports "
+        "fenicsx_drape.forming.case.format (forming/case)"]
 
 
 def test_physics_imports_no_dolfinx_or_files_and_only_the_cli_parses_arguments(graph):

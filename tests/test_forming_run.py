@@ -147,8 +147,8 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
     for name in ("shear.png", "wrinkling.png", "fields.xdmf", "provenance.json",
                  "kinematic_shear.png", "tools/punch.vtk", "tools/die.vtk", "tools/holder.vtk"):
         assert (out / name).stat().st_size > 0
-    # The case file is the paper's hemisphere: its paths (Figs. 10-11) and the paper's numbers.
-    assert (out / "paths.png").stat().st_size > 0 and "paper" in summary
+    # The case file is the paper's hemisphere: its paths (Figs. 10-11) too.
+    assert (out / "paths.png").stat().st_size > 0
     provenance = json.loads((out / "provenance.json").read_text())
     assert provenance["case"]["blank"]["cell_mm"] == 30.0
     # The bundle names a copy of the case, which loads and is the case that ran.

@@ -162,7 +162,11 @@ def run(args: argparse.Namespace) -> int:
     def progress(line: str) -> None:
         print(line, flush=True)
 
-    from fenicsx_drape.forming.running.outputs import FormingOutputError, form_case
+    from fenicsx_drape.forming.running.outputs import (
+        FormingOutputError,
+        form_case,
+        is_paper_hemisphere,
+    )
     from fenicsx_drape.forming.running.run import case_model
 
     try:
@@ -184,7 +188,8 @@ def run(args: argparse.Namespace) -> int:
               f"{result['min_wrinkling_strain']:.3f}, {result['steps']} steps, "
               f"{result['snes_iterations']} Newton iterations, {result['wall_time_s']:.1f} s",
               file=sys.stderr if args.quiet else sys.stdout)
-        if "paper" in result and not args.quiet:
+        hemisphere = is_paper_hemisphere(case)
+        if hemisphere and not args.quiet:
             from fenicsx_drape.forming.paper.numbers import paper_comparison
 
             print(paper_comparison(result))
@@ -192,7 +197,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"kinematic drape (pin-jointed net) on the same tools: max shear "
                   f"{result['kinematic_max_shear_deg']:.1f}°")
         pictures = ["shear.png", "wrinkling.png", "kinematic_shear.png",
-                    *(["paths.png"] if "paper" in result else [])]
+                    *(["paths.png"] if hemisphere else [])]
         print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "
               f"{args.out / 'summary.json'}")
     return 0

@@ -21,9 +21,10 @@
   each tool's peak, ``max_tool_force_N``; :func:`write_tool_forces`).
 
 The paper's hemisphere (``drape form hemisphere``, ``meshes/hemisphere/case.toml``: tools that
-are all builtin) is a case like any other; its summary also gives the paper's numbers
-(``paper``) and its folder ``paths.png``: shear along the diagonal path and wrinkling along
-the normal path (the paper's Figs. 10-11), with the kinematic drape beside the FE result.
+are all builtin) is a case like any other; its folder also holds ``paths.png``: shear along
+the diagonal path and wrinkling along the normal path (the paper's Figs. 10-11), with the
+kinematic drape beside the FE result (``drape form hemisphere`` prints the run beside the
+paper's numbers: :func:`~fenicsx_drape.forming.paper.numbers.paper_comparison`).
 """
 
 from __future__ import annotations
@@ -36,21 +37,12 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape.forming.case.format import FormingCase, case_dict, write_case
-from fenicsx_drape.forming.paper import numbers as paper
 from fenicsx_drape.forming.running.plots import plot_paths, plot_shear, plot_wrinkling
 from fenicsx_drape.forming.running.run import FormingRun, run_case
 from fenicsx_drape.measurements.bundle import Bundle, Test, write_bundle
 from fenicsx_drape.provenance import write_json, write_provenance
 
 FRAME_MM = 5.0  # punch travel between two frames of the field output
-
-# The paper's numbers for its hemisphere (section 4.3; all of them: forming/paper/numbers.py).
-PAPER = {"max_shear_deg": {"model": paper.MAX_SHEAR_MODEL_DEG,
-                           "experiment": paper.MAX_SHEAR_EXPERIMENT_DEG,
-                           "kinematic": paper.MAX_SHEAR_KINEMATIC_DEG},
-         "total_wrinkling_strain": {"model": paper.TOTAL_WRINKLING_MODEL},
-         "min_wrinkling_strain": {"model": paper.MIN_WRINKLING_MODEL,
-                                  "experiment": paper.MIN_WRINKLING_EXPERIMENT}}
 
 
 class FormingOutputError(RuntimeError):
@@ -148,8 +140,6 @@ def case_summary(run: FormingRun) -> dict:
         out["holder_force_share"] = case.holder.force_share
         out["holder_nodes"] = float(run.holder.n_s)
     out["case"] = case_dict(case, case.folder)
-    if is_paper_hemisphere(case):
-        out["paper"] = PAPER
     return out
 
 
