@@ -14,8 +14,9 @@ The layers, lowest first (docs/development.md, Layout)::
 
 ``fe`` and ``measurements`` are side by side: neither imports the other; ``forming`` may
 write a bundle (it imports ``measurements``). Inside ``forming`` its parts are layered too
-(:data:`FORMING_PARTS`): tools < terms < case < running < paper. ``materials`` imports only ``errors``, and
-neither DOLFINx (nor its stack) nor file I/O; only the command line parses arguments.
+(:data:`FORMING_PARTS`): tools < terms < case < running < paper. ``materials`` imports only
+``errors``, and neither DOLFINx (nor its stack) nor file I/O; only the command line parses
+arguments.
 """
 
 from __future__ import annotations
