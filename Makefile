@@ -37,6 +37,8 @@ demo:
 	@echo "pictures, fields and provenance.json: results/hemisphere/"
 
 # The documentation as a website (docs/_build/html): the docs/ pages, the demos run as pages,
-# the API reference from the docstrings. Warnings are errors.
+# the API reference from the docstrings (regenerated: no page of a module that is gone).
+# Warnings are errors.
 docs:
+	rm -rf docs/api
 	$(DRAPE) exec sphinx-build -W --keep-going -b html docs docs/_build/html

@@ -72,7 +72,8 @@ if args.before:
 
     PenaltyContact.project = project
 
-cases = [] if args.only_full else [load_case("hemisphere", cell_mm=c) for c in args.cells]
+cases = [] if args.only_full else [load_case("hemisphere", cell_mm=c)
+                                   for c in args.cells]
 if args.full or args.only_full:
     cases.append(load_case("hemisphere", cell_mm=2.5, symmetry=[]))
 run_case(load_case("hemisphere", cell_mm=30.0, duration_s=8.0),
@@ -87,7 +88,8 @@ for case in cases:
     steps = run.problem.steps
     nodes = run.grid.X[..., 0].size
     rows.append((nodes, wall))
-    name = f"{'quarter' if case.quarter else 'full'}_{case.cell_mm:g}.npz"
+    part = 'quarter' if case.planes else 'full'
+    name = f"{part}_{case.blank.cell_mm:g}.npz"
     distance = ""
     if args.save_nodes and comm.rank == 0:
         os.makedirs(args.save_nodes, exist_ok=True)
@@ -96,7 +98,7 @@ for case in cases:
         d = np.linalg.norm(run.grid.x - np.load(os.path.join(args.reference, name))["x"], axis=-1)
         distance = f", nodes {np.nanmax(d):.3f} mm from the reference (mean {np.nanmean(d):.3f})"
     if comm.rank == 0:
-        print(f"{'quarter' if case.quarter else 'full'} {case.cell_mm:5.2f} mm: {nodes:6d} nodes "
+        print(f"{part} {case.blank.cell_mm:5.2f} mm: {nodes:6d} nodes "
               f"{3 * nodes:6d} unknowns, {comm.size} rank(s), load {load:.1f}: {wall:7.1f} s, "
               f"{run.steps} steps, {run.cutbacks} cut back, {run.iterations} Newton iterations "
               f"({run.iterations / max(run.steps, 1):.2f} per step), "

@@ -246,9 +246,9 @@ def main() -> None:
     probe = Probe()
     start = time.perf_counter()
     with monitoring(probe):
-        run = run_case(load_case("hemisphere", cell_mm=args.cell_mm, quarter=not args.full,
-                                            step_mm=args.step_mm),
-                             options=options, allow_incomplete=True)
+        case = load_case("hemisphere", cell_mm=args.cell_mm, step_mm=args.step_mm,
+                         symmetry=[] if args.full else None)
+        run = run_case(case, options=options, allow_incomplete=True)
     wall = time.perf_counter() - start
     steps = run.problem.steps
     sw = switches(probe, comm)

@@ -125,7 +125,7 @@ class SquareOpening:
         self.v = np.asarray(velocity, float)
 
     def gap(self, x, t):
-        from fenicsx_drape.forming.terms.holder import Gap
+        from fenicsx_drape.forming.tools.shapes import Gap
 
         n = np.zeros_like(x)
         n[:, 2] = 1.0
@@ -146,7 +146,7 @@ class Cylinder:
         self.R, self.a = R, a
 
     def gap(self, x, t):
-        from fenicsx_drape.forming.terms.holder import Gap
+        from fenicsx_drape.forming.tools.shapes import Gap
 
         c = np.column_stack([np.zeros(len(x)), x[:, 1], x[:, 2] - self.R])
         ρ = np.linalg.norm(c, axis=1)

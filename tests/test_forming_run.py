@@ -35,7 +35,7 @@ class SquareOpening:
         self.a = a_mm
 
     def gap(self, x, t):
-        from fenicsx_drape.forming.terms.holder import Gap
+        from fenicsx_drape.forming.tools.shapes import Gap
 
         n = np.zeros_like(x)
         n[:, 2] = 1.0

@@ -56,7 +56,7 @@ from fenicsx_drape.errors import ParameterError
 from fenicsx_drape.forming.tools.shapes import Gap
 from fenicsx_drape.materials.base import MaterialLaw
 
-__all__ = ["FORCE_SHARES", "BlankHolder", "FlatHolder", "Gap", "part_force_N"]
+__all__ = ["FORCE_SHARES", "BlankHolder", "FlatHolder", "part_force_N"]
 
 FORCE_SHARES = ("symmetric_part", "model")
 
