@@ -24,7 +24,7 @@ from fenicsx_drape.fe.grid import (
 )
 
 SIZE = 240.0
-COARSE = {"cell_mm": 20.0, "duration_s": 8.0, "quarter": False}
+COARSE = {"cell_mm": 20.0, "duration_s": 8.0, "symmetry": []}
 
 
 def same_grid(a: TrussGrid, b: TrussGrid) -> bool:
