@@ -62,3 +62,23 @@ def test_bad_tables_name_the_key(table, message):
     with pytest.raises(ParameterError, match=message) as err:
         RigidMotion.from_table(table, where="case.toml: [[tool]] 2 [tool.motion]")
     assert str(err.value).startswith("case.toml: [[tool]] 2 [tool.motion]")
+
+
+def test_a_case_files_motion_is_the_one_motion_class(tmp_path):
+    """One class from the file to the tool: the case's [tool.motion] is a RigidMotion, and the
+    travel and speed the load steps use are its own (20 mm in 10 s, then 10 mm in 20 s)."""
+    from pathlib import Path
+
+    from fenicsx_drape.forming.case.format import load_case, with_overrides
+
+    case = load_case(Path(__file__).parents[1] / "meshes" / "double_dome" / "case.toml")
+    punch = case.tool("punch").motion
+    assert type(punch) is RigidMotion
+    assert case.total_travel_mm == pytest.approx(punch.travel_mm(case.duration_s))
+    moved = RigidMotion(time_s=[0.0, 10.0, 30.0], z_mm=[0.0, 20.0, 30.0])
+    assert moved.max_speed_mm_per_s() == pytest.approx(2.0)
+    assert moved.travel_mm(20.0) == pytest.approx(25.0)
+    slow = moved.scaled(time=2.0, travel=0.5)
+    assert slow.time_s == (0.0, 20.0, 60.0) and slow.z_mm == (0.0, 10.0, 15.0)
+    assert type(with_overrides(case, duration_s=2 * case.duration_s).tool("punch").motion) \
+        is RigidMotion
