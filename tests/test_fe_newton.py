@@ -92,6 +92,7 @@ def test_the_coarse_hemisphere_is_formed_as_before_within_the_discretisation_tol
         assert run.draw_in_mm[key] == pytest.approx(value, abs=0.1)
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 @pytest.mark.parametrize("cell_mm", [10.0, 5.0])
 def test_snes_forms_the_default_hemisphere_as_the_hand_written_newton(cell_mm):
@@ -142,6 +143,7 @@ def test_petsc_options_reach_snes_and_bad_ones_are_refused():
             set_petsc_options(bad)
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_a_trust_region_run_from_the_command_line(tmp_path):
     """``drape form --petsc-option "-snes_type newtontr"`` (and PETSC_OPTIONS) reach SNES.

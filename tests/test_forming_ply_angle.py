@@ -344,6 +344,7 @@ def test_summary_pictures_and_bundle_of_a_turned_ply(runs, tmp_path):
     assert np.abs(np.column_stack([columns["x0_mm"], columns["y0_mm"]])).max() <= SIZE / 2 + 1e-9
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_cli_forms_a_ply_angle_on_the_full_sheet_unasked(tmp_path, capsys):
     pytest.importorskip("dolfinx")

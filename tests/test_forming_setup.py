@@ -131,6 +131,7 @@ def test_each_set_up_of_the_double_dome_is_formed_with_all_its_outputs(tmp_path)
     assert json.loads((tmp_path / "turned" / "summary.json").read_text())["ply_angle_deg"] == 4.0
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_the_command_line_forms_an_off_centre_case_on_the_full_model(tmp_path, capsys):
     pytest.importorskip("dolfinx")
@@ -145,6 +146,7 @@ def test_the_command_line_forms_an_off_centre_case_on_the_full_model(tmp_path, c
     assert summary["symmetry"] == [] and summary["case"]["blank"]["centre_mm"] == [0.0, 6.0]
 
 
+@pytest.mark.slow
 @pytest.mark.skip_in_parallel
 def test_a_failure_after_the_solve_writes_what_was_computed(tmp_path, monkeypatch):
     pytest.importorskip("dolfinx")
