@@ -8,6 +8,7 @@
     ./drape exec python3 benchmarks/bench_forming.py --petsc-option "-snes_type newtontr"
     ./drape exec python3 benchmarks/bench_forming.py --save-nodes ref           # nodes to ref/
     ./drape exec python3 benchmarks/bench_forming.py --reference ref --petsc-option ...
+    ./drape exec python3 benchmarks/bench_forming.py --max-wall-s 600 ...      # stop runs at 600 s
 
 A JIT warm-up run (30 mm cells) comes first. ``--before`` runs the solver as issue 17 found it
 (backtracking line search, exact geometric stiffness, penetrating nodes projected onto the
@@ -17,6 +18,8 @@ evaluations, maximum shear, the travel reached if the run stopped short; the mac
 average before the run; with ``--reference`` the largest and mean node distance to the nodes
 that ``--save-nodes`` wrote there. ``--petsc-option`` (repeatable) passes options to SNES as
 ``drape form --petsc-option`` does (``docs/solver.md`` has the table these lines make).
+``--max-wall-s`` stops a run after the first load step that ends past that wall time and prints
+its line so far (the travel reached, its iterations and cut-backs) instead of letting it crawl.
 """
 
 import argparse
@@ -27,6 +30,7 @@ from mpi4py import MPI
 
 import numpy as np
 
+from fenicsx_drape.errors import SolverError
 from fenicsx_drape.fe.solver import SINGLE_PRECISION_FACTOR, SolverOptions
 from fenicsx_drape.forming import load_case, run_case
 from fenicsx_drape.forming.running.run import NODE_ATOL_N
@@ -46,8 +50,19 @@ parser.add_argument("--node-atol-N", type=float, default=None,
 parser.add_argument("--line-search", default=None, help="line search (fe/newton.py)")
 parser.add_argument("--single-factor", action="store_true",
                     help="MUMPS factor in single precision, GMRES to 1e-3 on it (fe/solver.py)")
+parser.add_argument("--max-wall-s", type=float, default=None,
+                    help="stop each run after the load step that ends past this wall time (s)")
 args = parser.parse_args()
 comm = MPI.COMM_WORLD
+
+
+def wall_limit(start):
+    """A step hook that stops the run (as a failed step would) once it ran ``--max-wall-s``."""
+    def check(problem):
+        if comm.allreduce(time.perf_counter() - start > args.max_wall_s, op=MPI.LOR):
+            raise SolverError(f"stopped by --max-wall-s {args.max_wall_s:g}")
+    return None if args.max_wall_s is None else check
+
 
 options = {"snes_atol": 1e-6, "node_atol_N": NODE_ATOL_N,
            "petsc_options": {"pc_type": "cholesky"}}
@@ -77,13 +92,14 @@ cases = [] if args.only_full else [load_case("hemisphere", cell_mm=c)
 if args.full or args.only_full:
     cases.append(load_case("hemisphere", cell_mm=2.5, symmetry=[]))
 run_case(load_case("hemisphere", cell_mm=30.0, duration_s=8.0),
-               options=SolverOptions(**options), allow_incomplete=True)  # JIT warm-up
+         options=SolverOptions(**options), allow_incomplete=True)  # JIT warm-up
 rows = []
 for case in cases:
     load = os.getloadavg()[0]
     comm.Barrier()
     start = time.perf_counter()
-    run = run_case(case, options=SolverOptions(**options), allow_incomplete=True)
+    run = run_case(case, options=SolverOptions(**options), allow_incomplete=True,
+                   on_step=wall_limit(start))
     wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
     steps = run.problem.steps
     nodes = run.grid.X[..., 0].size
@@ -94,7 +110,7 @@ for case in cases:
     if args.save_nodes and comm.rank == 0:
         os.makedirs(args.save_nodes, exist_ok=True)
         np.savez(os.path.join(args.save_nodes, name), x=run.grid.x)
-    if args.reference:
+    if args.reference and not run.stopped:  # a run stopped short is not at the same travel
         d = np.linalg.norm(run.grid.x - np.load(os.path.join(args.reference, name))["x"], axis=-1)
         distance = f", nodes {np.nanmax(d):.3f} mm from the reference (mean {np.nanmean(d):.3f})"
     if comm.rank == 0:
