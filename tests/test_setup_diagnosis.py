@@ -15,7 +15,7 @@ import pytest
 from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis import setup as st
 from fenicsx_drape.forming.case import load_case, with_overrides
-from fenicsx_drape.measurements.bundle import Bundle, Test
+from fenicsx_drape.measurements.bundle import Bundle, BundleError, Test, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
 
 CASE = Path(__file__).parents[1] / "meshes" / "double_dome" / "case.toml"
@@ -114,6 +114,30 @@ def test_the_report_and_the_ledger_record_the_set_up(tmp_path):
     st.add_setup(empty, None)
     assert empty["setup"] == [] and empty["setup_error"] is None
     json.dumps(report)
+
+
+def test_a_bundle_states_the_offsets_as_x_y_pairs(tmp_path):
+    from test_forming_case_diagnosis import write_bundle_toml, write_case
+
+    write_case(tmp_path / "b" / "part")
+    keys = "blank_offset_mm = [6.0, -2]\ntool_offset_mm = [0, 1.5]\n"
+    bundle = load_bundle(write_bundle_toml(tmp_path / "b", keys))
+    (test,) = bundle.tests
+    case = fk.forming_case_of(test)
+    assert case.blank.origin_mm == (6.0, -2.0) and case.planes == ()
+    assert case.tool("punch").params["punch_y_mm"] == 1.5
+    assert test.forming["blank_offset_mm"] == [6.0, -2.0]
+    # Written (next to its case) and read again: the same set-up.
+    again = load_bundle(write_bundle(bundle, tmp_path / "b"))
+    assert fk.forming_case_of(again.tests[0]).blank.origin_mm == (6.0, -2.0)
+    # A wrong length or a non-number: the file and the line of the key (after case = ...).
+    for bad in ("[6.0]", "[1, 2, 3]", '["a", 1.0]', "4.0"):
+        folder = write_bundle_toml(tmp_path / "b", f"blank_offset_mm = {bad}\n")
+        with pytest.raises(BundleError) as info:
+            load_bundle(folder)
+        assert (f"{folder / 'bundle.toml'}:9: test 'oct': blank_offset_mm = "
+                in str(info.value)), str(info.value)
+        assert "must be [x, y]: two finite numbers (mm)" in str(info.value)
 
 
 def _bundle(model, stated, seed, **setup) -> Bundle:
