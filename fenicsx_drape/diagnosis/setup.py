@@ -85,10 +85,10 @@ SETUP_PARAMETERS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", 
 # error may lie either side, and a turned net is clipped to the blank, so that the error is
 # not smooth through θ = 0): degrees, mm, a change of the factor on the force, μ. The
 # smallest positive move is the sensitivity's probe.
-# Two points per axis: the Gauss-Newton fit moves from the better one (issue 27: four per
-# axis cost a third of the set-up's runs and moved no fit of the held-out bundles).
+# Two points per axis, the Gauss-Newton fit moving from the best (issue 27: four per axis
+# were a quarter of the set-up stage's runs, all on the whole blank for a ply or an offset).
 SCAN = {"ply_angle_deg": (-4.0, 4.0), "blank_offset_mm": (-8.0, 8.0),
-        "holder_force_N": (-0.5, 1.0), "mu": (-0.15, 0.3), "tool_offset_mm": (-3.0, 3.0)}
+        "holder_force_N": (-0.4, 0.8), "mu": (-0.15, 0.3), "tool_offset_mm": (-3.0, 3.0)}
 # The finite-difference step of the Gauss-Newton fit, per axis.
 STEP = {"ply_angle_deg": (1.0,), "blank_offset_mm": (1.5, 1.5), "holder_force_N": (0.2,),
         "mu": (0.05,), "tool_offset_mm": (1.0, 1.0)}
