@@ -521,7 +521,8 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         if name in CONFOUNDED:
             entry["confounded_with"] = CONFOUNDED[name]
         entry["runs"] = runs.formed
-        say(f"  fitted {_show(name, c['p'], test0, model)}, normalised "
+        say(f"  fitted {_show(name, c['p'], test0, model)} ± {_value_text(entry['sd'])} "
+            f"(fit alone ± {_value_text(entry['sd_fit'])}), normalised "
             f"{entry['error_after']['normalised']:.3g}, held-out "
             f"{c['heldout_normalised']:.3g}, evidence {c['evidence']:.3g}; "
             f"{runs.formed} new forming runs ({c['folds_formed']} for the folds)")
