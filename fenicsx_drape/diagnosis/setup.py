@@ -32,11 +32,14 @@ Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
    residuals in noise units, forward differences of :data:`STEP`, at most
    :data:`MAX_ITERATIONS` iterations, steps of at most :data:`MAX_STEP` halved once when
    they do not lower the cost, stopped when the step is below :data:`CONVERGED_SD` × the
-   fit's sd. ``sd_fit`` is the fit's standard deviation, √diag((JᵀJ)⁻¹ · max(1, χ²/dof)) (a
-   lack of fit widens it); ``sd`` adds in quadrature the step the fit could not resolve
-   (a step it asked for that did not lower the cost, or the last one when it ran out of
-   iterations) as a uniform spread, step/√3: the error is not smooth in a turned net's
-   angle, so near the optimum the linearised fit's sd alone claims too much.
+   fit's sd. ``sd_fit`` is the fit's standard deviation, √diag((JᵀJ)⁻¹ · max(1, χ²/dof));
+   ``sd`` adds in quadrature the step the fit could not resolve (a step it asked for that
+   did not lower the cost, or the last one when it ran out of iterations) as a uniform
+   spread, step/√3, and the lack of fit in the parameter's units,
+   |p − p_stated| · √((A² − 1)/(S² − 1)) with A the normalised error after the fit and S
+   the stated set-up's on the same model (0 when the fit reaches the noise): the error the
+   fit leaves is a correlated one (a whole sheet's slide, a clipped net's edge), which
+   χ²/dof, made for independent noise, hardly widens.
 3. **Held-out**: every measured node is left out once, in :data:`FOLDS` interleaved folds
    of each test's rows; a fold refits the parameter from the full fit without its rows (one
    Gauss-Newton step on the full fit's Jacobian, kept when it lowers the fold's own cost)
@@ -329,9 +332,15 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
             break
     fitted_values = runs.values([p])[0]
     after = runs.compare(fitted_values)
-    # The honest sd: the fit's, and the unresolved step's (the optimum lies anywhere within
-    # it: a uniform spread, sd = step/√3), in quadrature.
-    sd_fit, sd = sd, np.sqrt(sd**2 + unresolved**2 / 3.0)
+    # The honest sd, in quadrature: the fit's; the unresolved step's (the optimum lies
+    # anywhere within it: a uniform spread, sd = step/√3); and the lack of fit's, the error
+    # the fit leaves beyond the noise turned into the parameter by its secant from the
+    # stated set-up (χ²/dof treats that error as independent noise: a whole sheet's slide is
+    # one correlated error, and widened the sd by 7 % where the fit was 18 sd off).
+    sd_fit = sd
+    A, S = normalised_error(after), base_ho
+    lack = np.abs(p - start) * math.sqrt(max(0.0, A**2 - 1.0) / max(S**2 - 1.0, 1e-12))
+    sd = np.sqrt(sd**2 + unresolved**2 / 3.0 + lack**2)
     # 3. Held-out: each fold refits from the full fit without its rows (one Gauss-Newton
     # step, kept only when it lowers the fold's own cost) and predicts its rows: linearised
     # on the fit's Jacobian when the step is within the fit's sd on every axis (no run),
