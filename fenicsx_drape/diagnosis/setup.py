@@ -36,8 +36,9 @@ Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
    ``sd`` adds in quadrature the step the fit could not resolve (a step it asked for that
    did not lower the cost, or the last one when it ran out of iterations) as a uniform
    spread, step/√3, and the lack of fit in the parameter's units,
-   |p − p_stated| · √((A² − 1)/(S² − 1)) with A the normalised error after the fit and S
-   the stated set-up's on the same model (0 when the fit reaches the noise): the error the
+   |p − p_stated| · √((A² − 1 − 2√(2/n))/(S² − 1)) with A the normalised error after the fit
+   and S the stated set-up's on the same model, n the residual coordinates (0 when A is
+   within the noise's own spread): the error the
    fit leaves is a correlated one (a whole sheet's slide, a clipped net's edge), which
    χ²/dof, made for independent noise, hardly widens.
 3. **Held-out**: every measured node is left out once, in :data:`FOLDS` interleaved folds
@@ -337,9 +338,11 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     # the fit leaves beyond the noise turned into the parameter by its secant from the
     # stated set-up (χ²/dof treats that error as independent noise: a whole sheet's slide is
     # one correlated error, and widened the sd by 7 % where the fit was 18 sd off).
+    # Beyond the noise: A² of pure noise is 1 ± √(2/n) over n coordinates (2 sd allowed).
     sd_fit = sd
     A, S = normalised_error(after), base_ho
-    lack = np.abs(p - start) * math.sqrt(max(0.0, A**2 - 1.0) / max(S**2 - 1.0, 1e-12))
+    floor = 1.0 + 2.0 * math.sqrt(2.0 / sum(3 * t.n_rows for t in runs.tests))
+    lack = np.abs(p - start) * math.sqrt(max(0.0, A**2 - floor) / max(S**2 - 1.0, 1e-12))
     sd = np.sqrt(sd**2 + unresolved**2 / 3.0 + lack**2)
     # 3. Held-out: each fold refits from the full fit without its rows (one Gauss-Newton
     # step, kept only when it lowers the fold's own cost) and predicts its rows: linearised
