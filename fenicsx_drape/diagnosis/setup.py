@@ -45,8 +45,9 @@ Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
    of each test's rows; a fold refits the parameter from the full fit without its rows (one
    Gauss-Newton step on the full fit's Jacobian, kept when it lowers the fold's own cost)
    and predicts them: linearised on the fit's Jacobian when the fold's step is within
-   ``sd`` on every axis (no run), else by a run. The stated set-up fits nothing: its
-   held-out error is its error.
+   ``sd_fit`` on every axis (no run), else by a run (``sd``'s wider terms say the model is
+   not linear over them: a linearised prediction there would flatter the held-out error).
+   The stated set-up fits nothing: its held-out error is its error.
 4. **Decision**: ``evidence`` = stated held-out / candidate held-out on the forming tests
    (the stated set-up on the case's own model), ``evidence_on_model`` the same against the
    stated set-up on the model the candidate needs (a whole blank may form a little unlike the
@@ -346,7 +347,7 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     sd = np.sqrt(sd**2 + unresolved**2 / 3.0 + lack**2)
     # 3. Held-out: each fold refits from the full fit without its rows (one Gauss-Newton
     # step, kept only when it lowers the fold's own cost) and predicts its rows: linearised
-    # on the fit's Jacobian when the step is within the fit's sd on every axis (no run),
+    # on the fit's Jacobian when the step is within sd_fit on every axis (no run),
     # else by a run.
     masks = [{t.id: np.arange(t.n_rows) % FOLDS != b for t in runs.tests} for b in range(FOLDS)]
     steps = []
@@ -355,7 +356,7 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
         step = np.linalg.lstsq(J[keep], -r[keep], rcond=None)[0]
         step /= max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
         steps.append(np.clip(p + step, lo, hi) - p)
-    far = [b for b, step in enumerate(steps) if np.any(np.abs(step) > sd)]
+    far = [b for b, step in enumerate(steps) if np.any(np.abs(step) > sd_fit)]
     formed = dict(zip(far, runs.values([p + steps[b] for b in far])))
     predicted = {t.id: np.full(3 * t.n_rows, np.nan) for t in runs.tests}
     for b, step in enumerate(steps):
