@@ -577,7 +577,8 @@ def _model_note(tried: list, stated_ho: float) -> str | None:
     if not other:
         return None
     worst = max(other, key=lambda e: e["stated_on_model"])
-    return (f"the stated set-up on the {worst['model']} model is "
+    where = "whole-blank" if worst["model"] == "full" else worst["model"]
+    return (f"the stated set-up on the {where} model is "
             f"{worst['stated_on_model']:.3g} × the noise from the forming tests, against "
             f"{stated_ho:.3g} on the case's own model: the models differ, not the set-up (a "
             "whole blank on frictionless tools may slide on them as a whole once the holder's "
