@@ -140,6 +140,17 @@ def test_a_bundle_states_the_offsets_as_x_y_pairs(tmp_path):
         assert "must be [x, y]: two finite numbers (mm)" in str(info.value)
 
 
+def test_a_note_when_the_stated_set_up_forms_unlike_on_the_case_model():
+    # The double dome at 20 mm: the whole blank slides on frictionless tools (docs).
+    whole, quarter = {"stated_on_model": 9.82, "model": "full"}, {"stated_on_model": 4.71,
+                                                                  "model": "x/y symmetry"}
+    note = st._model_note([(quarter, {}), (whole, {})], 4.71)
+    assert "whole-blank model is 9.82 × the noise" in note and "against 4.71" in note
+    assert st._model_note([(quarter, {})], 4.71) is None
+    # Both near the noise: no note, however their ratio.
+    assert st._model_note([({"stated_on_model": 1.9, "model": "full"}, {})], 0.5) is None
+
+
 def _bundle(model, stated, seed, **setup) -> Bundle:
     """The coarse double dome formed with a hidden set-up, its test naming the stated case."""
     truth = with_overrides(stated, **setup)
