@@ -36,7 +36,8 @@ Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
    ``sd`` adds in quadrature the step the fit could not resolve (a step it asked for that
    did not lower the cost, or the last one when it ran out of iterations) as a uniform
    spread, step/√3, and the lack of fit in the parameter's units,
-   |p − p_stated| · √((A² − 1 − 2√(2/n))/(S² − 1)) with A the normalised error after the fit
+   ``|p − p0| · √((A² − 1 − 2√(2/n)) / (S² − 1))`` (p0 the stated value), A the normalised
+   error after the fit
    and S the stated set-up's on the same model, n the residual coordinates (0 when A is
    within the noise's own spread): the error the
    fit leaves is a correlated one (a whole sheet's slide, a clipped net's edge), which
