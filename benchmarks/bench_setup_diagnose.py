@@ -61,6 +61,10 @@ def main() -> None:
         print(f"{label}: {times[label]:.0f} s, {len(runs._cache)} forming runs cached; "
               f"setup_error {report.get('setup_error')}, missing_effect "
               f"{report['missing_effect']}", flush=True)
+        for s in report.get("setup", []):
+            print(f"  {s['parameter']}: fitted {s['fitted']} ± {s['sd']} (fit alone "
+                  f"± {s['sd_fit']}), normalised {s['error_after']['normalised']:.3g}, "
+                  f"evidence {s['evidence']:.3g}, {s['runs']} new forming runs", flush=True)
     ratio = times["set-up and effects"] / times["effects only"]
     print(f"set-up and effects / effects only: {ratio:.2f}× (target <= 2); whole diagnosis "
           f"{times['set-up and effects'] / 60:.1f} min (target < 5 min on one core)")

@@ -15,7 +15,7 @@ import pytest
 from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis import setup as st
 from fenicsx_drape.forming.case.format import load_case, with_overrides
-from fenicsx_drape.measurements.bundle import Bundle, Test
+from fenicsx_drape.measurements.bundle import Bundle, BundleError, Test, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
 
 CASE = Path(__file__).parents[1] / "meshes" / "double_dome" / "case.toml"
@@ -116,6 +116,41 @@ def test_the_report_and_the_ledger_record_the_set_up(tmp_path):
     json.dumps(report)
 
 
+def test_a_bundle_states_the_offsets_as_x_y_pairs(tmp_path):
+    from test_forming_case_diagnosis import write_bundle_toml, write_case
+
+    write_case(tmp_path / "b" / "part")
+    keys = "blank_offset_mm = [6.0, -2]\ntool_offset_mm = [0, 1.5]\n"
+    bundle = load_bundle(write_bundle_toml(tmp_path / "b", keys))
+    (test,) = bundle.tests
+    case = fk.forming_case_of(test)
+    assert case.blank.origin_mm == (6.0, -2.0) and case.planes == ()
+    assert case.tool("punch").params["punch_y_mm"] == 1.5
+    assert test.forming["blank_offset_mm"] == [6.0, -2.0]
+    # Written (next to its case) and read again: the same set-up.
+    again = load_bundle(write_bundle(bundle, tmp_path / "b"))
+    assert fk.forming_case_of(again.tests[0]).blank.origin_mm == (6.0, -2.0)
+    # A wrong length or a non-number: the file and the line of the key (after case = ...).
+    for bad in ("[6.0]", "[1, 2, 3]", '["a", 1.0]', "4.0"):
+        folder = write_bundle_toml(tmp_path / "b", f"blank_offset_mm = {bad}\n")
+        with pytest.raises(BundleError) as info:
+            load_bundle(folder)
+        assert (f"{folder / 'bundle.toml'}:9: test 'oct': blank_offset_mm = "
+                in str(info.value)), str(info.value)
+        assert "must be [x, y]: two finite numbers (mm)" in str(info.value)
+
+
+def test_a_note_when_the_stated_set_up_forms_unlike_on_the_case_model():
+    # The double dome at 20 mm: the whole blank slides on frictionless tools (docs).
+    whole, quarter = {"stated_on_model": 9.82, "model": "full"}, {"stated_on_model": 4.71,
+                                                                  "model": "x/y symmetry"}
+    note = st._model_note([(quarter, {}), (whole, {})], 4.71)
+    assert "whole-blank model is 9.82 × the noise" in note and "against 4.71" in note
+    assert st._model_note([(quarter, {})], 4.71) is None
+    # Both near the noise: no note, however their ratio.
+    assert st._model_note([({"stated_on_model": 1.9, "model": "full"}, {})], 0.5) is None
+
+
 def _bundle(model, stated, seed, **setup) -> Bundle:
     """The coarse double dome formed with a hidden set-up, its test naming the stated case."""
     truth = with_overrides(stated, **setup)
@@ -133,14 +168,21 @@ def test_a_turned_ply_is_named_with_its_angle_and_a_null_bundle_stays_null():
     from fenicsx_drape.diagnosis import diagnose as dg
 
     rules = st.Rules(dg.EVIDENCE_THRESHOLD, dg.PARSIMONY, dg.UNTESTABLE_BELOW, 1)
-    names = ["ply_angle_deg", "holder_force_N"]
     out = st.fit_setup(_bundle(model, stated, 41, ply_angle_deg=4.0), model, rules,
-                       parameters=names)
+                       parameters=["ply_angle_deg"])
     assert out["setup_error"] == "ply_angle_deg"
     best = out["setup"][0]
-    assert abs(best["fitted"] - 4.0) <= max(2 * best["sd"], 1.0)
+    assert abs(best["fitted"] - 4.0) <= 2 * best["sd"] and best["sd"] < 1.0
     assert best["evidence"] > 1.2 and best["error_after"]["normalised"] < 1.5
     assert out["stated_error"]["normalised"] > 3.0
-    null = st.fit_setup(_bundle(model, stated, 42), model, rules, parameters=names)
+    # The null bundle on the quarter's own set-ups: μ is reported from the force's fit
+    # (μF, eq. 1), with no runs of its own.
+    null = st.fit_setup(_bundle(model, stated, 42), model, rules,
+                        parameters=["holder_force_N", "mu"])
     assert null["setup_error"] is None
     assert all(s["evidence"] < 1.2 for s in null["setup"])
+    force, mu = (next(s for s in null["setup"] if s["parameter"] == n)
+                 for n in ("holder_force_N", "mu"))
+    assert mu["runs"] == 0 and mu["tied_to"] == "holder_force_N"
+    assert mu["fitted"] == pytest.approx(0.3 * force["fitted"] / 200.0)
+    assert mu["heldout_normalised"] == force["heldout_normalised"]

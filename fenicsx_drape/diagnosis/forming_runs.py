@@ -233,6 +233,11 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     return [_cache[k] for k in keys]
 
 
+def cached(case, model: Model) -> bool:
+    """Whether a run of ``(case, model)`` is in the cache (:func:`form_many` will not form it)."""
+    return _key(case, model) in _cache
+
+
 def tool_forces(case, model: Model) -> dict[str, np.ndarray]:
     """The force curves of a cached run of ``(case, model)`` (run :func:`form_many` first).
 

@@ -31,22 +31,36 @@ Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
 2. **Fit**: Gauss-Newton from the best point of the scan (per axis) on the per-coordinate
    residuals in noise units, forward differences of :data:`STEP`, at most
    :data:`MAX_ITERATIONS` iterations, steps of at most :data:`MAX_STEP` halved once when
-   they do not lower the cost. ``sd`` is the fit's standard deviation,
-   √diag((JᵀJ)⁻¹ · max(1, χ²/dof)) (a lack of fit widens it).
+   they do not lower the cost, stopped when the step is below :data:`CONVERGED_SD` × the
+   fit's sd. ``sd_fit`` is the fit's standard deviation, √diag((JᵀJ)⁻¹ · max(1, χ²/dof));
+   ``sd`` adds in quadrature the step the fit could not resolve (a step it asked for that
+   did not lower the cost, or the last one when it ran out of iterations) as a uniform
+   spread, step/√3, and the lack of fit in the parameter's units,
+   ``|p − p0| · √((A² − 1 − 2√(2/n)) / (S² − 1))`` (p0 the stated value), A the normalised
+   error after the fit
+   and S the stated set-up's on the same model, n the residual coordinates (0 when A is
+   within the noise's own spread): the error the
+   fit leaves is a correlated one (a whole sheet's slide, a clipped net's edge), which
+   χ²/dof, made for independent noise, hardly widens.
 3. **Held-out**: every measured node is left out once, in :data:`FOLDS` interleaved folds
    of each test's rows; a fold refits the parameter from the full fit without its rows (one
    Gauss-Newton step on the full fit's Jacobian, kept when it lowers the fold's own cost)
-   and predicts them by a run. The stated
-   set-up fits nothing: its held-out error is its error.
+   and predicts them: linearised on the fit's Jacobian when the fold's step is within
+   ``sd_fit`` on every axis (no run), else by a run (``sd``'s wider terms say the model is
+   not linear over them: a linearised prediction there would flatter the held-out error).
+   The stated set-up fits nothing: its held-out error is its error.
 4. **Decision**: ``evidence`` = stated held-out / candidate held-out on the forming tests
    (the stated set-up on the case's own model), ``evidence_on_model`` the same against the
    stated set-up on the model the candidate needs (a whole blank may form a little unlike the
    mirrored quarter: that difference is not the set-up's); significant when both are
    ``>= EVIDENCE_THRESHOLD`` (the effects' rule). Ranked by held-out error;
    near-ties (``PARSIMONY``) go to the fewer parameters, then to the order of
-   :data:`SETUP_PARAMETERS` (``holder_force_N`` and ``mu`` act on the holder's friction only
-   through their product μF, eq. 1: the data cannot tell them apart, and the report says so).
-   ``setup_error`` is the first if significant.
+   :data:`SETUP_PARAMETERS`. ``setup_error`` is the first if significant.
+
+``holder_force_N`` and ``mu`` act on the part only through their product μF (eq. 1: a
+friction bar yields at F μ / n_s; the clamping does not depend on F), so the data cannot
+tell them apart: when both are tried, ``mu`` is not formed again but reported from the
+force's fit (μ · F'/F, the same errors and evidence, ``tied_to`` and ``confounded_with``).
 
 Each round's runs (a point and its finite differences, the folds' predictions) go to
 :func:`~fenicsx_drape.diagnosis.forming_runs.form_many` at once: worker processes on every
@@ -64,7 +78,7 @@ import numpy as np
 
 from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.compare import compare_tests, error_record, normalised_error
-from fenicsx_drape.diagnosis.forming_runs import form_many
+from fenicsx_drape.diagnosis.forming_runs import cached, form_many
 from fenicsx_drape.errors import DrapeInputError, SolverError
 from fenicsx_drape.forming.case.format import FormingCase, broken_planes, with_overrides
 
@@ -77,9 +91,10 @@ SETUP_PARAMETERS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", 
 # error may lie either side, and a turned net is clipped to the blank, so that the error is
 # not smooth through θ = 0): degrees, mm, a change of the factor on the force, μ. The
 # smallest positive move is the sensitivity's probe.
-SCAN = {"ply_angle_deg": (-6.0, -3.0, 3.0, 6.0), "blank_offset_mm": (-10.0, -5.0, 5.0, 10.0),
-        "holder_force_N": (-0.5, 1.0), "mu": (-0.15, 0.3),
-        "tool_offset_mm": (-4.0, -2.0, 2.0, 4.0)}
+# Two points per axis, the Gauss-Newton fit moving from the best (issue 27: four per axis
+# were a quarter of the set-up stage's runs, all on the whole blank for a ply or an offset).
+SCAN = {"ply_angle_deg": (-4.0, 4.0), "blank_offset_mm": (-8.0, 8.0),
+        "holder_force_N": (-0.4, 0.8), "mu": (-0.15, 0.3), "tool_offset_mm": (-3.0, 3.0)}
 # The finite-difference step of the Gauss-Newton fit, per axis.
 STEP = {"ply_angle_deg": (1.0,), "blank_offset_mm": (1.5, 1.5), "holder_force_N": (0.2,),
         "mu": (0.05,), "tool_offset_mm": (1.0, 1.0)}
@@ -90,6 +105,9 @@ MAX_STEP = {"ply_angle_deg": 10.0, "blank_offset_mm": 15.0, "holder_force_N": 2.
 # A value of each parameter that breaks every plane it can break (the model it needs).
 GENERIC = {"ply_angle_deg": 1.0, "blank_offset_mm": (1.0, 1.0), "tool_offset_mm": (1.0, 1.0)}
 MAX_ITERATIONS = 4
+# A Gauss-Newton step smaller than this share of the fit's sd (every axis) is not taken: the
+# fit has converged within its uncertainty.
+CONVERGED_SD = 0.25
 FOLDS = 3
 CONFOUNDED = {"holder_force_N": "mu", "mu": "holder_force_N"}
 
@@ -204,6 +222,7 @@ class _Runs:
         self.regions = {t.id: fk.part_regions(t) for t in self.tests}
         self.measured = {t.id: fk.measured_positions(t).ravel() for t in self.tests}
         self.weights = {t.id: np.repeat(1.0 / fk.row_noise(t), 3) for t in self.tests}
+        self.formed = 0  # new forming runs asked of form_many (not in its cache)
 
     def values(self, points: Sequence[np.ndarray]) -> list[dict[str, np.ndarray]]:
         """Per point, the simulated ``x, y, z`` of every measured node of every test."""
@@ -213,6 +232,7 @@ class _Runs:
                 t, shift = applied(test, self.name, p, self.model)
                 jobs.append((fk.case_of(t), self.model))
                 reads.append((test, shift))
+        self.formed += sum(not cached(c, m) for c, m in jobs)
         sheets = form_many(jobs)
         out: list[dict[str, np.ndarray]] = [{} for _ in points]
         for k, (sheet, (test, shift)) in enumerate(zip(sheets, reads)):
@@ -278,49 +298,70 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     # 2. Gauss-Newton from the best of the scan.
     h = np.diag(STEP[name]).astype(float)
     batch = runs.values([p] + [p + h[i] for i in range(k)])
-    r = runs.residual(batch[0])
-    J = np.column_stack([(runs.residual(v) - r) / h[i, i] for i, v in enumerate(batch[1:])])
+    r, J, Jv = _linearised(runs, batch, h)
+    sd = _sd_of(runs, J, r)
+    # The step the fit could not resolve: the model's error is not smooth in the parameter
+    # (a turned net is clipped to the blank cell by cell), so a step the linearised fit
+    # asks for may not lower the cost. The parameter is then known only to within it.
+    unresolved = np.zeros(k)
     for iteration in range(MAX_ITERATIONS):
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
         step /= max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
+        if np.all(np.abs(step) < np.maximum(CONVERGED_SD * sd, 0.01 * h.diagonal())):
+            unresolved[:] = 0.0  # converged within the fit's uncertainty
+            break
+        unresolved = np.abs(step)
         moved = False
         for attempt in range(2):
             trial = np.clip(p + step / 2**attempt, lo, hi)
+            unresolved = np.abs(trial - p)
             if np.abs(trial - p).max() < 0.01 * float(h.diagonal().min()):
+                unresolved[:] = 0.0
                 break
-            batch = runs.values([trial] + [trial + h[i] for i in range(k)])
-            r_new = runs.residual(batch[0])
+            # The trial first, its finite differences only when it is taken (a step that
+            # does not lower the cost costs one run).
+            (at_trial,) = runs.values([trial])
+            r_new = runs.residual(at_trial)
             say(f"    {name} fit {iteration + 1}: {_show(name, trial, test0, model)}, cost "
                 f"{r_new @ r_new:.4g} (was {r @ r:.4g})")
             if r_new @ r_new < r @ r:
-                J = np.column_stack([(runs.residual(v) - r_new) / h[i, i]
-                                     for i, v in enumerate(batch[1:])])
-                p, r, moved = trial, r_new, True
+                batch = [at_trial, *runs.values([trial + h[i] for i in range(k)])]
+                r, J, Jv = _linearised(runs, batch, h)
+                p, moved = trial, True
+                sd = _sd_of(runs, J, r)
                 break
         if not moved:
             break
     fitted_values = runs.values([p])[0]
     after = runs.compare(fitted_values)
-    # The fit's uncertainty: residuals per coordinate in noise units (undo the 1/√n).
-    n = sum(3 * t.n_rows for t in runs.tests)
-    scale = np.concatenate([np.full(3 * t.n_rows, math.sqrt(3 * t.n_rows)) for t in runs.tests])
-    Jn, rn = J * scale[:, None], r * scale
-    try:
-        cov = np.linalg.inv(Jn.T @ Jn) * max(1.0, float(rn @ rn) / max(1, n - k))
-        sd = np.sqrt(np.diag(cov))
-    except np.linalg.LinAlgError:
-        sd = np.full(k, math.inf)
+    # The honest sd, in quadrature: the fit's; the unresolved step's (the optimum lies
+    # anywhere within it: a uniform spread, sd = step/√3); and the lack of fit's, the error
+    # the fit leaves beyond the noise turned into the parameter by its secant from the
+    # stated set-up (χ²/dof treats that error as independent noise: a whole sheet's slide is
+    # one correlated error, and widened the sd by 7 % where the fit was 18 sd off).
+    # Beyond the noise: A² of pure noise is 1 ± √(2/n) over n coordinates (2 sd allowed).
+    sd_fit = sd
+    A, S = normalised_error(after), base_ho
+    floor = 1.0 + 2.0 * math.sqrt(2.0 / sum(3 * t.n_rows for t in runs.tests))
+    lack = np.abs(p - start) * math.sqrt(max(0.0, A**2 - floor) / max(S**2 - 1.0, 1e-12))
+    sd = np.sqrt(sd**2 + unresolved**2 / 3.0 + lack**2)
     # 3. Held-out: each fold refits from the full fit without its rows (one Gauss-Newton
-    # step, kept only when it lowers the fold's own cost) and predicts its rows.
+    # step, kept only when it lowers the fold's own cost) and predicts its rows: linearised
+    # on the fit's Jacobian when the step is within sd_fit on every axis (no run),
+    # else by a run.
     masks = [{t.id: np.arange(t.n_rows) % FOLDS != b for t in runs.tests} for b in range(FOLDS)]
-    trials = []
+    steps = []
     for rows in masks:
         keep = np.concatenate([np.repeat(rows[t.id], 3) for t in runs.tests])
         step = np.linalg.lstsq(J[keep], -r[keep], rcond=None)[0]
         step /= max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
-        trials.append(np.clip(p + step, lo, hi))
+        steps.append(np.clip(p + step, lo, hi) - p)
+    far = [b for b, step in enumerate(steps) if np.any(np.abs(step) > sd_fit)]
+    formed = dict(zip(far, runs.values([p + steps[b] for b in far])))
     predicted = {t.id: np.full(3 * t.n_rows, np.nan) for t in runs.tests}
-    for b, values in enumerate(runs.values(trials)):
+    for b, step in enumerate(steps):
+        values = formed.get(b) or {t.id: fitted_values[t.id] + Jv[t.id] @ step
+                                   for t in runs.tests}
         own, full = runs.residual(values, masks[b]), runs.residual(fitted_values, masks[b])
         chosen = values if own @ own < full @ full else fitted_values
         for t in runs.tests:
@@ -328,9 +369,35 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
             predicted[t.id][held] = chosen[t.id][held]
     heldout = normalised_error(runs.compare(predicted))
     evidence = base_ho / heldout if heldout > 0 else math.inf
-    return {"untestable": False, "p": p, "sd_internal": sd, "after": after,
+    return {"untestable": False, "p": p, "sd_internal": sd, "sd_fit": sd_fit, "after": after,
             "heldout_normalised": heldout, "evidence": evidence, "sensitivity": change,
-            "values": fitted_values, "stated_normalised": base_ho}
+            "values": fitted_values, "stated_normalised": base_ho,
+            "folds_formed": len(far)}
+
+
+def _linearised(runs: _Runs, batch: list[dict[str, np.ndarray]], h: np.ndarray):
+    """Residuals at a point, their Jacobian and the simulated values' (forward differences).
+
+    ``batch``: the values at the point, then at the point moved by each column of ``h``.
+    """
+    r = runs.residual(batch[0])
+    J = np.column_stack([(runs.residual(v) - r) / h[i, i] for i, v in enumerate(batch[1:])])
+    Jv = {t.id: np.column_stack([(v[t.id] - batch[0][t.id]) / h[i, i]
+                                 for i, v in enumerate(batch[1:])]) for t in runs.tests}
+    return r, J, {k: np.where(np.isfinite(d), d, 0.0) for k, d in Jv.items()}
+
+
+def _sd_of(runs: _Runs, J: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The fit's sd per axis: √diag((JᵀJ)⁻¹ · max(1, χ²/dof)), residuals per coordinate."""
+    n, k = sum(3 * t.n_rows for t in runs.tests), J.shape[1]
+    # Undo the residuals' 1/√n (per test) to have them in noise units per coordinate.
+    scale = np.concatenate([np.full(3 * t.n_rows, math.sqrt(3 * t.n_rows)) for t in runs.tests])
+    Jn, rn = J * scale[:, None], r * scale
+    try:
+        cov = np.linalg.inv(Jn.T @ Jn) * max(1.0, float(rn @ rn) / max(1, n - k))
+    except np.linalg.LinAlgError:
+        return np.full(k, math.inf)
+    return np.sqrt(np.abs(np.diag(cov)))
 
 
 def _step_text(name: str) -> str:
@@ -421,6 +488,19 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         if reason is not None:
             out["untestable"].append({"effect": name, "setup": True, "reason": reason})
             continue
+        force = [ec for ec in tried if ec[0]["parameter"] == "holder_force_N"]
+        if name == "mu" and force:  # eq. 1: μ acts through μF only, as the force does
+            tried.append(_tied_mu(*force[0], test0, model))
+            say(f"set-up candidate mu: tied to holder_force_N (μF, eq. 1), "
+                f"{_value_text(tried[-1][0]['fitted'])}, no runs of its own")
+            continue
+        if name == "mu" and "holder_force_N" in names:  # the force was untestable: so is μ
+            untestable = [u for u in out["untestable"] if u["effect"] == "holder_force_N"]
+            if untestable:
+                out["untestable"].append({**untestable[0], "effect": "mu", "reason": (
+                    f"as holder_force_N (μ acts through μF only, eq. 1): "
+                    f"{untestable[0]['reason']}")})
+                continue
         runs = _Runs(tests, model, name)
         # The stated point is the same for every parameter: its values are shared.
         start = _start(name, test0, model)
@@ -439,6 +519,7 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         entry = {"parameter": name, "stated": stated(test0, name, model),
                  "fitted": _fitted(name, c["p"], test0, model),
                  "sd": _sd(name, c["sd_internal"], test0, model),
+                 "sd_fit": _sd(name, c["sd_fit"], test0, model),
                  "error_after": error_record(c["after"]),
                  "heldout_normalised": c["heldout_normalised"],
                  "evidence": base_ho / c["heldout_normalised"],
@@ -452,9 +533,12 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                           "/".join(_planes(tests, name, c["p"], model)) + " symmetry"}
         if name in CONFOUNDED:
             entry["confounded_with"] = CONFOUNDED[name]
-        say(f"  fitted {_show(name, c['p'], test0, model)}, normalised "
+        entry["runs"] = runs.formed
+        say(f"  fitted {_show(name, c['p'], test0, model)} ± {_value_text(entry['sd'])} "
+            f"(fit alone ± {_value_text(entry['sd_fit'])}), normalised "
             f"{entry['error_after']['normalised']:.3g}, held-out "
-            f"{c['heldout_normalised']:.3g}, evidence {c['evidence']:.3g}")
+            f"{c['heldout_normalised']:.3g}, evidence {c['evidence']:.3g}; "
+            f"{runs.formed} new forming runs ({c['folds_formed']} for the folds)")
         tried.append((entry, c))
     order = {n: i for i, n in enumerate(SETUP_PARAMETERS)}
     tried.sort(key=lambda ec: (ec[0]["heldout_normalised"], order[ec[0]["parameter"]]))
@@ -466,11 +550,54 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         tried.remove(first)
         tried.insert(0, first)
     out["setup"] = [e for e, _ in tried]
+    out["model_note"] = _model_note(tried, base_ho)
+    if out["model_note"]:
+        say(out["model_note"])
     if tried and tried[0][0]["significant"]:
         entry, c = tried[0]
         out["setup_error"] = entry["parameter"]
         out["best"] = {"parameter": entry["parameter"], "p": [float(v) for v in c["p"]]}
     return out
+
+
+# The stated set-up on the model a candidate needs, this many times further from the data than
+# on the case's own model (and beyond the noise): the two models differ, not the set-up.
+MODELS_DIFFER = 2.0
+
+
+def _model_note(tried: list, stated_ho: float) -> str | None:
+    """A note when the stated set-up forms unlike the case's model on another (issue 27.2).
+
+    A whole blank on frictionless tools can slide on them as a whole: only the holder's
+    friction holds it, and once that yields (eq. 1) the translation is free, so where it
+    ends is set by small differences (a quarter's symmetry planes fix it). The candidates
+    on that model are then judged against the stated set-up on it (``evidence_on_model``).
+    """
+    other = [e for e, _ in tried if e["stated_on_model"] > MODELS_DIFFER * max(1.0, stated_ho)]
+    if not other:
+        return None
+    worst = max(other, key=lambda e: e["stated_on_model"])
+    where = "whole-blank" if worst["model"] == "full" else worst["model"]
+    return (f"the stated set-up on the {where} model is "
+            f"{worst['stated_on_model']:.3g} × the noise from the forming tests, against "
+            f"{stated_ho:.3g} on the case's own model: the models differ, not the set-up (a "
+            "whole blank on frictionless tools may slide on them as a whole once the holder's "
+            "friction yields); candidates on it are judged against the stated set-up on the "
+            "same model too (evidence_on_model)")
+
+
+def _tied_mu(entry: dict[str, Any], c: dict[str, Any], test: Test, model: Model):
+    """The ``mu`` candidate from the fitted ``holder_force_N`` one (μF fitted: no runs).
+
+    Eq. 1: a friction bar yields at F μ / n_s and F acts nowhere else, so μ' = μ · (F'/F)
+    forms the same part as F' with μ: the same errors and evidence, μ's sd scaled likewise.
+    """
+    mu = float(stated(test, "mu", model))
+    factor, sd = float(c["p"][0]), float(c["sd_internal"][0])
+    tied = {**entry, "parameter": "mu", "stated": mu, "fitted": mu * factor, "sd": mu * sd,
+            "sd_fit": mu * float(c["sd_fit"][0]),
+            "confounded_with": "holder_force_N", "tied_to": "holder_force_N", "runs": 0}
+    return tied, {**c, "p": np.array([mu * factor]), "sd_internal": np.array([mu * sd])}
 
 
 def _planes(tests: Sequence[Test], name: str, p, model: Model) -> tuple[str, ...]:
@@ -568,6 +695,8 @@ def add_setup(report: dict[str, Any], stage: dict[str, Any] | None) -> None:
                                 "heldout_normalised": stage.get("stated_heldout_normalised")},
                   setup_scheme=stage.get("scheme"), setup_rule=stage.get("rule"))
     report["untestable"] = list(report.get("untestable", [])) + stage["untestable"]
+    if stage.get("model_note"):
+        report["notes"] = [*report.get("notes", []), f"set-up: {stage['model_note']}"]
     if stage["setup_error"] is None:
         return
     s = stage["setup"][0]

@@ -72,6 +72,9 @@ REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
 # A forming test that names its case file needs nothing else: the case says the rest, and the
 # test's own keys override it. ``grid_mm`` describes the drawn grid (not a case value).
 CASE_DESCRIPTIVE_KEYS = ("grid_mm",)
+# The set-up keys a forming test naming its case gives as [x, y] in mm (spec version 3: the
+# blank's or the punch's displacement from where the case puts it).
+PAIR_KEYS = ("blank_offset_mm", "tool_offset_mm")
 
 # A reader of forming cases (the forming layer's ``case_for_test``, passed to
 # :func:`load_bundle`): ``read_case(case_path, keys) -> (case, used)`` reads and checks the
@@ -147,7 +150,7 @@ class Test:
     noise_rel: float | None = None  # declared noise as a fraction of the peak |force|
     noise_declared_by: str | None = None  # where the declaration came from (for the report)
     geometry: str | None = None  # forming: tool set ("hemisphere")
-    forming: Mapping[str, float] = dataclasses.field(default_factory=dict)  # forming keys
+    forming: Mapping[str, Any] = dataclasses.field(default_factory=dict)  # forming keys
     case: str | None = None  # forming: the case file as written (relative to the bundle)
     case_path: Path | None = None  # forming: the case file (absolute)
     # forming: the test's keys offered to its case as overrides (all its scalar keys but the
@@ -281,6 +284,12 @@ def _key_lines(text: str) -> dict[tuple[str, int, str], int]:
 
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_pair(value: Any) -> bool:
+    """Whether ``value`` is [x, y]: two finite numbers."""
+    return (isinstance(value, list) and len(value) == 2
+            and all(_is_number(v) and math.isfinite(v) for v in value))
 
 
 def _unit_problem(name: str) -> str | None:
@@ -457,7 +466,7 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
         for key in _missing(REQUIRED_KEYS[kind], raw):
             problems.add(fname, line, f"{label}: a {kind} test needs {key}")
 
-    setup: dict[str, float] = {}
+    setup: dict[str, Any] = {}
     conditions: dict[str, float] = {}
     text_notes: dict[str, str] = {}
     geometry = raw.get("geometry")
@@ -468,6 +477,12 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
                                                     if kind == "forming" else set())
     case_file, case_path, used, forming_case = None, None, {}, None
     if names_case:
+        for key in PAIR_KEYS:
+            if key in raw and not _is_pair(raw[key]):
+                problems.add(fname, where("test", index, key),
+                             f"{label}: {key} = {raw[key]!r} must be [x, y]: two finite "
+                             "numbers (mm)")
+                raw = {k: v for k, v in raw.items() if k != key}
         case_file, case_path, used, forming_case = _read_case(
             folder, fname, raw, index, where, label, known, problems, read_case)
     for key, value in raw.items():
@@ -479,6 +494,8 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
         elif key in used:  # a value of the case, checked by its reader
             if isinstance(value, str):
                 text_notes[key] = value  # e.g. holder_force_share
+            elif key in PAIR_KEYS:
+                setup[key] = [float(v) for v in value]
             else:
                 setup[key] = float(value)
         elif key in SETUP_KEYS[kind] and (not names_case or key in CASE_DESCRIPTIVE_KEYS):
@@ -621,6 +638,7 @@ def declared_noise(test: Test, noise: Mapping[str, float], by: str) -> Test:
 def _offered(key: str, value: Any, known) -> bool:
     """Whether a [[test]] key is offered to the test's case as an override."""
     scalar = isinstance(value, (str, int, float)) and not isinstance(value, bool)
+    scalar = scalar or (key in PAIR_KEYS and _is_pair(value))
     return (key not in known and key not in CASE_DESCRIPTIVE_KEYS and scalar
             and _unit_problem(key) is None)
 
@@ -782,6 +800,8 @@ def _toml_value(value: Any) -> str:
         return "true" if value else "false"
     if isinstance(value, (int, float)):
         return repr(float(value)) if isinstance(value, float) else str(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     escaped = str(value).replace("\\", "\\\\").replace('"', '\\"')
     return f'"{escaped}"'
 
