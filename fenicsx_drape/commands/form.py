@@ -192,8 +192,8 @@ def run(args: argparse.Namespace) -> int:
         if hemisphere and not args.quiet:
             from fenicsx_drape.forming.paper.numbers import paper_comparison
 
-            print(paper_comparison(result))
-        if result.get("kinematic_max_shear_deg") is not None:
+            print(paper_comparison(result))  # the kinematic drape's shear among its rows
+        elif result.get("kinematic_max_shear_deg") is not None:
             print(f"kinematic drape (pin-jointed net) on the same tools: max shear "
                   f"{result['kinematic_max_shear_deg']:.1f}°")
         pictures = ["shear.png", "wrinkling.png", "kinematic_shear.png",
