@@ -38,6 +38,7 @@ import numpy as np
 
 from fenicsx_drape.forming.case.format import FormingCase, case_dict, write_case
 from fenicsx_drape.forming.running.plots import plot_paths, plot_shear, plot_wrinkling
+from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.running.run import FormingRun, run_case
 from fenicsx_drape.measurements.bundle import Bundle, Test, write_bundle
 from fenicsx_drape.provenance import write_json, write_provenance
@@ -219,8 +220,8 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
     with _WrittenOnFailure(out, run, comm, "drape form") as partial:
         result = partial.update(case_summary(run))
         if comm.rank == 0:
-            kinematic = _kinematic_beside(case, run, out if pictures else None)
-            result.update({k: v for k, v in kinematic.items() if k != "net"})
+            net, kinematic = _kinematic_beside(case, run, out if pictures else None)
+            result.update(kinematic)
             result.update(write_tool_forces(run, out, case.name, pictures=pictures))
             write_json(out / "summary.json", result)
             given = case.holder.mu if case.holder is not None else None
@@ -233,8 +234,8 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
                 plot_shear(run.grid, out / "shear.png",
                            f"{case.name}: shear angle (max {result['max_shear_deg']:.1f}°)")
                 plot_wrinkling(run.grid, out / "wrinkling.png")
-                if is_paper_hemisphere(case) and kinematic.get("net") is not None:
-                    plot_paths({"FE truss": run.grid, "kinematic (PjN)": kinematic["net"]},
+                if is_paper_hemisphere(case) and net is not None:
+                    plot_paths({"FE truss": run.grid, "kinematic (PjN)": net},
                                out / "paths.png")
             if fields:
                 result["tool_files"] = [str(p.relative_to(out)) for p in
@@ -285,8 +286,11 @@ def write_tool_forces(run: FormingRun, out: str | os.PathLike, part: str, *,
     return {"max_tool_force_N": peak, "tool_forces_file": "tool_forces.csv"}
 
 
-def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None) -> dict:
-    """The kinematic drape on the formed tools: the ``net``, its numbers and its picture.
+def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None
+                      ) -> tuple[FormedGrid | None, dict]:
+    """The kinematic drape on the formed tools: the net (None if it fails) and its numbers.
+
+    Its picture ``kinematic_shear.png`` goes to ``pictures`` when given.
 
     A net that cannot be draped (a surface the generators leave) is reported, not raised: the
     mechanical result it stands beside is kept.
@@ -296,15 +300,15 @@ def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None)
     try:
         net = drape_case(case, tools=run.tools)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
-        return {"kinematic_error": str(err)}
+        return None, {"kinematic_error": str(err)}
     numbers = net.summary()
     if pictures is not None and numbers["max_shear_deg"] is not None:
         pictures.mkdir(parents=True, exist_ok=True)
         plot_shear(net, pictures / "kinematic_shear.png",
                    f"{case.name}: kinematic drape (pin-jointed net), shear angle "
                    f"(max {numbers['max_shear_deg']:.1f}°)")
-    return {"kinematic_max_shear_deg": numbers["max_shear_deg"],
-            "kinematic_unplaced_nodes": numbers["unplaced_nodes"], "net": net}
+    return net, {"kinematic_max_shear_deg": numbers["max_shear_deg"],
+                 "kinematic_unplaced_nodes": numbers["unplaced_nodes"]}
 
 
 def write_case_tools(run: FormingRun, folder: str | os.PathLike) -> list[Path]:
