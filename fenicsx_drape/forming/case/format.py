@@ -46,7 +46,8 @@ DEFAULT_SHEET_SIDE = {"punch": "+z", "die": "-z", "holder": "+z", "surface": "+z
 # Names a measured test (or a command line) may override, besides tool parameter names.
 OVERRIDES = ("duration_s", "step_mm", "penalty_factor", "stabilisation_N_per_mm", "cell_mm",
              "ply_angle_deg", "symmetry", "sheet_mm", "holder_force_N", "holder_mu",
-             "holder_force_share", "travel_mm", "blank_offset_mm", "tool_offset_mm", "die")
+             "holder_force_share", "travel_mm", "blank_offset_mm", "tool_offset_mm", "die",
+             "hold_origin")
 # Set-up overrides that move or turn something off the case's symmetry planes (issue 27).
 SETUP_OVERRIDES = ("ply_angle_deg", "blank_offset_mm", "tool_offset_mm")
 
@@ -110,6 +111,9 @@ class BlankSpec:
     ply_angle_deg: float = 0.0  # warp at this angle to x, the net turned about origin_mm
     origin_mm: tuple[float, float] = (0.0, 0.0)  # a node of the net
     symmetry: tuple[str, ...] = ()  # "x" (x = 0) and/or "y" (y = 0)
+    # The net's node at origin_mm held in its plane: what is left of the planes x = 0 and
+    # y = 0 when a model drops them (with_overrides).
+    hold_origin: bool = False
 
     def polygon(self) -> np.ndarray:
         """The whole blank's outline as polygon vertices (m, 2) in mm."""
@@ -287,6 +291,8 @@ def _case_problems(case: FormingCase) -> list[str]:
         out.append(f"blank: cell_mm = {b.cell_mm!r} must be a positive number")
     if not set(b.symmetry) <= {"x", "y"}:
         out.append(f"blank: symmetry = {list(b.symmetry)}: planes are \"x\" and \"y\"")
+    if not isinstance(b.hold_origin, bool):
+        out.append(f"blank: hold_origin = {b.hold_origin!r} must be true or false")
     return out
 
 
@@ -507,7 +513,7 @@ def _read_blank(r: _Reader, raw: Mapping, folder: Path) -> BlankSpec:
     b = r.table(raw, "blank", "[blank]", required=True) or {}
     at = "[blank]"
     r.unknown(b, ("outline", "size_mm", "centre_mm", "points_mm", "cell_mm", "ply_angle_deg",
-                  "origin_mm", "symmetry"), at)
+                  "origin_mm", "symmetry", "hold_origin"), at)
     outline = r.string(b, "outline", at, required=True, default="rectangle")
     cell = r.number(b, "cell_mm", at, positive=True, required=True, default=10.0)
     angle = r.number(b, "ply_angle_deg", at, default=0.0)
@@ -521,6 +527,10 @@ def _read_blank(r: _Reader, raw: Mapping, folder: Path) -> BlankSpec:
                                       "\"y\" (y = 0), each once")
         else:
             symmetry = tuple(p for p in ("x", "y") if p in s)
+    hold_origin = b.get("hold_origin", False)
+    if not isinstance(hold_origin, bool):
+        r.add(f"{at} 'hold_origin'", f"{hold_origin!r} must be true or false")
+        hold_origin = False
     size = centre = points = path = None
     centre = (0.0, 0.0)
     rect_keys, poly_keys = ("size_mm", "centre_mm"), ("points_mm",)
@@ -560,7 +570,7 @@ def _read_blank(r: _Reader, raw: Mapping, folder: Path) -> BlankSpec:
             r.add(f"{at} '{key}'", f"does not apply to outline = {outline!r}")
     return BlankSpec(outline=outline, cell_mm=cell, size_mm=size, centre_mm=centre,
                      points_mm=points, path=path, ply_angle_deg=angle, origin_mm=origin,
-                     symmetry=symmetry)
+                     symmetry=symmetry, hold_origin=hold_origin)
 
 
 def _read_tools(r: _Reader, raw: Mapping, folder: Path, duration: float) -> list[ToolSpec]:
@@ -745,12 +755,22 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     ``holder_force_share``, ``travel_mm`` (builtin tools' parameter; motion tables are
     scaled so that the fastest tool travels it), ``blank_offset_mm`` ([x, y]: the blank and
     its net moved on the tools), ``tool_offset_mm`` ([x, y]: the punch moved off the die and
-    holder), ``die`` (False: the case's dies left out), and any tool parameter by name (every
-    tool that has it, e.g. ``punch_radius_mm``). None values are ignored.
+    holder), ``die`` (False: the case's dies left out), ``hold_origin`` (the net's node at
+    ``origin_mm`` held in plane), and any tool parameter by name (every tool that has it, e.g.
+    ``punch_radius_mm``). None values are ignored.
 
     A set-up override (:data:`SETUP_OVERRIDES`) that breaks a symmetry plane of the case
     removes that plane (the model needs the part of the blank the plane would mirror) unless
     ``symmetry`` is given too; :func:`broken_planes` says which.
+
+    When a case symmetric in both planes loses one (``symmetry``, a set-up), the net's node
+    at ``origin_mm`` (the blank's centre; it moves with ``blank_offset_mm``) is held in plane
+    (``hold_origin``, unless given), as the planes held it. Without it a sheet on
+    frictionless tools, once the holder's friction bars (eq. 1) yield, slides on the tools
+    as a whole to where small differences take it (``docs/setup-diagnosis.md``). With a
+    turned ply or the whole sheet the part keeps the planes' half turn about x = y = 0, so
+    the hold is exact; with an offset it stands for the friction that keeps a placed blank
+    in place.
     """
     overrides = {k: v for k, v in overrides.items() if v is not None}
     where = str(case.path) if case.path is not None else f"case {case.name!r}"
@@ -808,6 +828,10 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     elif broken_planes(overrides) & set(blank.symmetry):
         blank = dataclasses.replace(blank, symmetry=tuple(
             p for p in blank.symmetry if p not in broken_planes(overrides)))
+    if "hold_origin" in overrides:
+        blank = dataclasses.replace(blank, hold_origin=bool(overrides["hold_origin"]))
+    elif set(case.blank.symmetry) == {"x", "y"} and set(blank.symmetry) != {"x", "y"}:
+        blank = dataclasses.replace(blank, hold_origin=True)
     if "sheet_mm" in overrides:
         if blank.outline != "rectangle":
             raise CaseError([f"{where}: override sheet_mm: the blank is not a rectangle"])
@@ -1196,6 +1220,8 @@ def case_dict(case: FormingCase, relative_to: str | os.PathLike | None = None) -
         blank["points_mm"] = [list(p) for p in b.points_mm]
     blank.update(cell_mm=b.cell_mm, ply_angle_deg=b.ply_angle_deg, origin_mm=list(b.origin_mm),
                  symmetry=list(b.symmetry))
+    if b.hold_origin:
+        blank["hold_origin"] = True
     out: dict[str, Any] = {"case": c, "blank": blank}
     if case.holder is not None:
         h = case.holder

@@ -5,7 +5,9 @@ core and steps it to the end of its motion (the paper's hemisphere is the case
 ``meshes/hemisphere/case.toml``). The terms of the model, for any case:
 
 - the blank's structured net (:meth:`~fenicsx_drape.forming.case.format.BlankSpec.grid`), with the
-  symmetry conditions u_x = 0 on x = 0 and/or u_y = 0 on y = 0 of a half or quarter model;
+  symmetry conditions u_x = 0 on x = 0 and/or u_y = 0 on y = 0 of a half or quarter model,
+  and u_x = u_y = 0 at the net's node at ``origin_mm`` when the blank holds it
+  (``hold_origin``: a part symmetric in both planes modelled without them);
 - penalty contact with every punch, die and surface (:mod:`~fenicsx_drape.forming.terms.contact`)
   of stiffness k = ``penalty_factor`` · l_t E_o (l_t E_o: the axial stiffness of one tow bar),
   with ``tool_friction`` when the model has it;
@@ -187,6 +189,12 @@ def run_case(case: FormingCase, model=None, options=None, *,
         problem.symmetry()
     elif planes:
         problem.fix(f"symmetry_{planes[0]}", ({"x": 0, "y": 1}[planes[0]],))
+    if case.blank.hold_origin:
+        origin = np.hypot(*(problem.X[:, :2] - case.blank.origin_mm).T) <= 1e-6 * grid.cell_mm
+        if comm.allreduce(int(origin[: problem.num_owned].sum())) != 1:
+            raise CaseError([f"case {case.name!r}: hold_origin: no node of the net at "
+                             f"origin_mm = {list(case.blank.origin_mm)} (inside the blank)"])
+        problem.fix(origin, (0, 1))
 
     def report(step) -> None:
         if progress is not None and comm.rank == 0:
