@@ -829,6 +829,9 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
         blank = dataclasses.replace(blank, symmetry=tuple(
             p for p in blank.symmetry if p not in broken_planes(overrides)))
     if "hold_origin" in overrides:
+        if not isinstance(overrides["hold_origin"], (bool, np.bool_)):
+            raise CaseError([f"{where}: override hold_origin = {overrides['hold_origin']!r} "
+                             "must be true or false"])
         blank = dataclasses.replace(blank, hold_origin=bool(overrides["hold_origin"]))
     elif set(case.blank.symmetry) == {"x", "y"} and set(blank.symmetry) != {"x", "y"}:
         blank = dataclasses.replace(blank, hold_origin=True)
