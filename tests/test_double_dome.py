@@ -71,7 +71,8 @@ def test_the_full_blank_with_tool_friction_is_formed_symmetric():
 
     The part is symmetric in x = 0 and y = 0. Without tool friction the sliding holder (eq. 1,
     no tangent stiffness once it slides) leaves the blank's in-plane position free and the
-    full blank drifts (docs/cases.md); with friction on punch and die it stays: every node within
+    full blank drifts (docs/cases.md) unless its centre node is held (``hold_origin``, which
+    a whole model of this case gets); with friction on punch and die it stays: every node within
     0.5 mm of its mirror images and of the quarter model's (measured at Δ = 20 mm: 0.20 and
     0.11 mm from the mirror images, 0.17 mm from the quarter, shear 26.59° against 26.60°).
     """

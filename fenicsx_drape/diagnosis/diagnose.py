@@ -224,6 +224,31 @@ def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
                       details=details)
 
 
+def _with_setup_refitted(stage: dict[str, Any], model: Model, data: _Data, noise,
+                         outliers: Sequence[dict[str, Any]], say: Progress
+                         ) -> tuple[dict[str, Any] | None, _Data]:
+    """The set-up stage's best parameter fitted again with ``model`` (a candidate's refit).
+
+    Returns the record ``{parameter, fitted, fitted_alone}`` and the data with that set-up
+    applied, or ``(None, data)`` when the set-up does not move. The set-up is fitted on all
+    rows; the held-out folds then refit the effect's parameters only.
+    """
+    from fenicsx_drape.diagnosis.setup import corrected, fitted_value, refit_setup
+
+    best, original, stated_model = stage["best"], stage["bundle"], stage["stated_model"]
+    name = best["parameter"]
+    p = refit_setup(original, name, best["p"], model, say)
+    if np.allclose(p, best["p"]):
+        return None, data
+    new = _prepare(declare_noise(corrected(original, name, p, stated_model), noise))
+    if outliers:
+        new = _prepare(_without_outliers(new.bundle, outliers))
+    record = {"parameter": name, "fitted": fitted_value(original, name, p, stated_model),
+              "fitted_alone": fitted_value(original, name, best["p"], stated_model)}
+    say(f"  {name} with the effect: {record['fitted']} (alone: {record['fitted_alone']})")
+    return record, new
+
+
 def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
     """Every row predicted by the fold that held it out (module doc, 5.)."""
     predicted = {t.id: np.full(np.shape(KINDS[t.kind].measured(t)), np.nan) for t in data.tests}
@@ -413,8 +438,17 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         refit = _fit(data.bundle, _best_start(data, start_model, own, names), parameters=names,
                      max_iterations=REFIT_ITERATIONS)
         after = data.compare(simulate(data.tests, refit))
+        joint, data_c = None, data
+        if stage and stage.get("best") and normalised_error(after) < normalised_error(base):
+            # The set-up fitted again with the effect, then the effect again at that set-up.
+            joint, data_c = _with_setup_refitted(stage, refit, data, model.noise, outliers,
+                                                 say)
+            if joint is not None:
+                refit = _fit(data_c.bundle, refit, parameters=names,
+                             max_iterations=REFIT_ITERATIONS)
+                after = data_c.compare(simulate(data_c.tests, refit))
         say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
-        heldout_cmp = data.compare(_heldout(data, refit, say))
+        heldout_cmp = data_c.compare(_heldout(data_c, refit, say))
         heldout = normalised_error(heldout_cmp)
         evidence = _evidence(base_ho_cmp, heldout_cmp, added)
         say(f"  held-out normalised error {heldout:.3g}, evidence {evidence:.3g}")
@@ -425,6 +459,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
             "error_after": error_record(after), "heldout_normalised": heldout,
             "evidence": evidence, "significant": bool(evidence >= EVIDENCE_THRESHOLD),
             "sensitivity": change, "where_after": where(after)[:3],
+            **({"setup_refitted": joint} if joint else {}),
             "_n_parameters": len(own), "_after": after, "_model": refit,
         })
     ranked = rank(tried)
@@ -469,6 +504,12 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         "seconds": time.perf_counter() - start,
     })
     add_setup(report, stage)
+    if missing and missing.get("setup_refitted"):
+        from fenicsx_drape.diagnosis.setup import _value_text
+
+        j = missing["setup_refitted"]
+        report["conclusion"] += (f" With {missing['effect']} added, {j['parameter']} is fitted "
+                                 f"again: {_value_text(j['fitted'])}.")
     report.models, report.comparisons = models, comparisons
     report.tests = data.tests
     say(report["conclusion"])
