@@ -46,8 +46,8 @@ def main() -> None:
         runs.WORKERS = args.workers
     paper = default_model()
     stated = load_case(CASE, cell_mm=args.cell_mm, step_mm=args.step_mm)
-    test = fk.synthetic_case_test(paper, with_overrides(stated, ply_angle_deg=args.ply_angle_deg), sd_mm=0.3,
-                                  seed=2028, full=True)
+    truth = with_overrides(stated, ply_angle_deg=args.ply_angle_deg)
+    test = fk.synthetic_case_test(paper, truth, sd_mm=0.3, seed=2028, full=True)
     bundle = Bundle(name="ply", tests=(dataclasses.replace(test, forming_case=stated,
                                                             case_keys={}),))
     print(f"double dome, cells {stated.blank.cell_mm:g} mm, steps {stated.step_mm:g} mm, "

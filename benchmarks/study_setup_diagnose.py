@@ -167,6 +167,9 @@ def main() -> None:
                 "setup_error": report["setup_error"], "setup": report["setup"],
                 "stated_error": report.get("setup_stated"),
                 "missing_effect": report["missing_effect"], "within": hit,
+                "candidates": [{k: c.get(k) for k in ("effect", "parameters", "evidence",
+                                                      "setup_refitted")}
+                               for c in report["candidates"]],
                 "baseline_after_setup": report["baseline"]["error"]["normalised"],
                 "untestable": [u for u in report["untestable"] if u.get("setup")]}
             if args.json:

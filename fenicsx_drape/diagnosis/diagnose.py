@@ -90,6 +90,8 @@ PARSIMONY = 0.05  # candidates this close to the best held-out error count as ti
 BLOCKS = 3  # interleaved folds of a kind with a single test
 BASELINE_ITERATIONS = 100  # iteration caps of the fits: baseline, candidates, folds
 REFIT_ITERATIONS = 40
+# Rounds of set-up and effect fitted in turn when a set-up error was fitted (issue 27).
+SETUP_ROUNDS = 4
 FOLD_ITERATIONS = 8
 WEAK = 0.01  # a candidate's weak start: its own vanishing parameters at 1 % of default
 
@@ -225,26 +227,30 @@ def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
 
 
 def _with_setup_refitted(stage: dict[str, Any], model: Model, data: _Data, noise,
-                         outliers: Sequence[dict[str, Any]], say: Progress
-                         ) -> tuple[dict[str, Any] | None, _Data]:
+                         outliers: Sequence[dict[str, Any]], last: dict[str, Any] | None,
+                         say: Progress) -> tuple[dict[str, Any] | None, _Data]:
     """The set-up stage's best parameter fitted again with ``model`` (a candidate's refit).
 
-    Returns the record ``{parameter, fitted, fitted_alone}`` and the data with that set-up
-    applied, or ``(None, data)`` when the set-up does not move. The set-up is fitted on all
-    rows; the held-out folds then refit the effect's parameters only.
+    From ``last`` (the previous round's record) or the set-up fitted alone. Returns the
+    record ``{parameter, fitted, fitted_alone, p}`` and the data with that set-up applied, or
+    ``(None, data)`` when the set-up does not move. The set-up is fitted on all rows; the
+    held-out folds then refit the effect's parameters only.
     """
+    from fenicsx_drape.calibration.coupons import declare_noise
     from fenicsx_drape.diagnosis.setup import corrected, fitted_value, refit_setup
 
     best, original, stated_model = stage["best"], stage["bundle"], stage["stated_model"]
     name = best["parameter"]
-    p = refit_setup(original, name, best["p"], model, say)
-    if np.allclose(p, best["p"]):
+    before = np.asarray(last["p"] if last else best["p"], dtype=float)
+    p = refit_setup(original, name, before, model, say)
+    if np.allclose(p, before):
         return None, data
     new = _prepare(declare_noise(corrected(original, name, p, stated_model), noise))
     if outliers:
         new = _prepare(_without_outliers(new.bundle, outliers))
     record = {"parameter": name, "fitted": fitted_value(original, name, p, stated_model),
-              "fitted_alone": fitted_value(original, name, best["p"], stated_model)}
+              "fitted_alone": fitted_value(original, name, best["p"], stated_model),
+              "p": [float(v) for v in p]}
     say(f"  {name} with the effect: {record['fitted']} (alone: {record['fitted_alone']})")
     return record, new
 
@@ -440,13 +446,17 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         after = data.compare(simulate(data.tests, refit))
         joint, data_c = None, data
         if stage and stage.get("best") and normalised_error(after) < normalised_error(base):
-            # The set-up fitted again with the effect, then the effect again at that set-up.
-            joint, data_c = _with_setup_refitted(stage, refit, data, model.noise, outliers,
-                                                 say)
-            if joint is not None:
+            # The set-up fitted again with the effect, then the effect again at that set-up,
+            # in turn (a set-up error and an effect can act alike).
+            for _ in range(SETUP_ROUNDS):
+                again, data_c = _with_setup_refitted(stage, refit, data_c, model.noise,
+                                                     outliers, joint, say)
+                if again is None:
+                    break
+                joint = again
                 refit = _fit(data_c.bundle, refit, parameters=names,
                              max_iterations=REFIT_ITERATIONS)
-                after = data_c.compare(simulate(data_c.tests, refit))
+            after = data_c.compare(simulate(data_c.tests, refit))
         say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
         heldout_cmp = data_c.compare(_heldout(data_c, refit, say))
         heldout = normalised_error(heldout_cmp)
@@ -459,7 +469,8 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
             "error_after": error_record(after), "heldout_normalised": heldout,
             "evidence": evidence, "significant": bool(evidence >= EVIDENCE_THRESHOLD),
             "sensitivity": change, "where_after": where(after)[:3],
-            **({"setup_refitted": joint} if joint else {}),
+            **({"setup_refitted": {k: v for k, v in joint.items() if k != "p"}}
+               if joint else {}),
             "_n_parameters": len(own), "_after": after, "_model": refit,
         })
     ranked = rank(tried)

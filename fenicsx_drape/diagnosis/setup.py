@@ -612,16 +612,22 @@ def refit_setup(bundle: Bundle, name: str, p: Sequence[float], model: Model,
     friction the part had takes some of the friction's error (the study's 4.17° came out at
     4.94°), and the effect refitted at that angle then gains little. Gauss-Newton steps from
     ``p`` (internal units) on the original ``bundle``, each kept only when it lowers the
-    cost (a half step tried once), up to :data:`MAX_ITERATIONS`; no scan and no folds.
+    cost (a half step tried once), up to :data:`MAX_ITERATIONS`, from the best of ``p``,
+    the stated value and the scan's points about it (the set-up fitted alone may sit in
+    another valley); no folds.
     """
     say = progress or (lambda line: None)
     runs = _Runs(forming_tests(bundle), model, name)
+    test0 = runs.tests[0]
     lo, hi = BOUNDS[name]
     h = np.diag(STEP[name]).astype(float)
-    p = np.asarray(p, dtype=float)
-    k = len(p)
+    start = _start(name, test0, model)
+    k = len(start)
+    points = [np.asarray(p, dtype=float), start,
+              *(start + v * np.eye(k)[i] for i in range(k) for v in SCAN[name])]
+    costs = [float(r @ r) for r in map(runs.residual, runs.values(points))]
+    p = points[int(np.argmin(costs))]
     r, J, _ = _linearised(runs, runs.values([p] + [p + h[i] for i in range(k)]), h)
-    test0 = runs.tests[0]
     for iteration in range(MAX_ITERATIONS):
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
         step /= max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
