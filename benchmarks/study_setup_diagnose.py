@@ -61,19 +61,22 @@ BUNDLES = {
     "blank": ({"blank_offset_mm": [8.86, 3.54]}, None),
     "force2x": ({"holder_force_N": 400.0}, None),
     "ply+tool_friction": ({"ply_angle_deg": 4.17}, 0.52),
+    # Drawn with default_rng(3301) after the rounds of set-up and effect were written (run
+    # once, with --seed 3301 --sd-mm 0.1).
+    "ply+tool_friction_b": ({"ply_angle_deg": 4.37}, 0.76),
     "null": ({}, None),
     "tool_friction": ({}, 0.52),
 }
 
 
-def measured_test(stated, setup: dict, model, test_id: str):
+def measured_test(stated, setup: dict, model, test_id: str, seed: int = SEED):
     """The grid of the part formed with the hidden set-up, as a test naming the stated case."""
     truth = with_overrides(stated, **setup)
     options = dataclasses.replace(forming_options(model), snes_atol=1e-8,
                                   node_atol_N=NODE_ATOL_N / 100)
     run = run_case(truth, model, options)
     table = run.grid.full().drawn_grid(stated.blank.cell_mm)
-    rng = np.random.default_rng(SEED)
+    rng = np.random.default_rng(seed)
     columns = {k: np.asarray(v, float) for k, v in table.items()}
     d = setup.get("blank_offset_mm")
     if d is not None:  # the lab's grid is drawn on the blank, where the sheet says it lies
@@ -122,6 +125,7 @@ def main() -> None:
     parser.add_argument("--only", nargs="*", default=None,
                         help="bundle names (none: no bundle, e.g. with --drift)")
     parser.add_argument("--json", default=None)
+    parser.add_argument("--seed", type=int, default=SEED, help="the noise's seed")
     parser.add_argument("--sd-mm", type=float, default=SD_MM,
                         help="the bundles' position noise (mm per coordinate)")
     parser.add_argument("--drift", action="store_true",
@@ -138,7 +142,7 @@ def main() -> None:
                 continue
             truth = (paper.with_effects("tool_friction").with_parameters(mu_tool=mu_tool)
                      if mu_tool else paper)
-            test = measured_test(stated, setup, truth, name.replace("+", "-"))
+            test = measured_test(stated, setup, truth, name.replace("+", "-"), args.seed)
             folder = Path(tmp) / name
             fk.write_case_bundle(f"hidden-{name}", [test], folder,
                                  comment="set-up study (benchmarks/study_setup_diagnose.py)")
