@@ -305,33 +305,16 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     # asks for may not lower the cost. The parameter is then known only to within it.
     unresolved = np.zeros(k)
     for iteration in range(MAX_ITERATIONS):
-        step = np.linalg.lstsq(J, -r, rcond=None)[0]
-        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
+        step = _gauss_newton(J, r, name)
         if np.all(np.abs(step) < np.maximum(CONVERGED_SD * sd, 0.01 * h.diagonal())):
             unresolved[:] = 0.0  # converged within the fit's uncertainty
             break
-        unresolved = np.abs(step)
-        moved = False
-        for attempt in range(2):
-            trial = np.clip(p + step / 2**attempt, lo, hi)
-            unresolved = np.abs(trial - p)
-            if np.abs(trial - p).max() < 0.01 * float(h.diagonal().min()):
-                unresolved[:] = 0.0
-                break
-            # The trial first, its finite differences only when it is taken (a step that
-            # does not lower the cost costs one run).
-            (at_trial,) = runs.values([trial])
-            r_new = runs.residual(at_trial)
-            say(f"    {name} fit {iteration + 1}: {_show(name, trial, test0, model)}, cost "
-                f"{r_new @ r_new:.4g} (was {r @ r:.4g})")
-            if r_new @ r_new < r @ r:
-                batch = [at_trial, *runs.values([trial + h[i] for i in range(k)])]
-                r, J, Jv = _linearised(runs, batch, h)
-                p, moved = trial, True
-                sd = _sd_of(runs, J, r)
-                break
-        if not moved:
+        new, batch, unresolved = _try(runs, p, step, r, h, f"fit {iteration + 1}", say)
+        if new is None:
             break
+        p = new
+        r, J, Jv = _linearised(runs, batch, h)
+        sd = _sd_of(runs, J, r)
     fitted_values = runs.values([p])[0]
     after = runs.compare(fitted_values)
     # The honest sd, in quadrature: the fit's; the unresolved step's (the optimum lies
@@ -353,8 +336,7 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     steps = []
     for rows in masks:
         keep = np.concatenate([np.repeat(rows[t.id], 3) for t in runs.tests])
-        step = np.linalg.lstsq(J[keep], -r[keep], rcond=None)[0]
-        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
+        step = _gauss_newton(J[keep], r[keep], name)
         steps.append(np.clip(p + step, lo, hi) - p)
     far = [b for b, step in enumerate(steps) if np.any(np.abs(step) > sd_fit)]
     formed = dict(zip(far, runs.values([p + steps[b] for b in far])))
@@ -373,6 +355,37 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
             "heldout_normalised": heldout, "evidence": evidence, "sensitivity": change,
             "values": fitted_values, "stated_normalised": base_ho,
             "folds_formed": len(far)}
+
+
+def _gauss_newton(J: np.ndarray, r: np.ndarray, name: str) -> np.ndarray:
+    """The Gauss-Newton step of residuals ``r`` with Jacobian ``J``, at most MAX_STEP long."""
+    step = np.linalg.lstsq(J, -r, rcond=None)[0]
+    return step / max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
+
+
+def _try(runs: _Runs, p: np.ndarray, step: np.ndarray, r: np.ndarray, h: np.ndarray,
+         label: str, say: Progress):
+    """``p + step``, else the half step, kept when it lowers the cost.
+
+    The trial first, its finite differences only when it is taken (a step that does not
+    lower the cost costs one run). Returns ``(p', values at p' and its difference points,
+    the last move)``, or ``(None, None, the last move)`` when neither lowers the cost (a move
+    of zero when the step is below a hundredth of the difference step).
+    """
+    name, test0 = runs.name, runs.tests[0]
+    lo, hi = BOUNDS[name]
+    for attempt in range(2):
+        trial = np.clip(p + step / 2**attempt, lo, hi)
+        move = np.abs(trial - p)
+        if move.max() < 0.01 * float(h.diagonal().min()):
+            return None, None, np.zeros_like(move)
+        (at_trial,) = runs.values([trial])
+        r_new = runs.residual(at_trial)
+        say(f"    {name} {label}: {_show(name, trial, test0, runs.model)}, cost "
+            f"{r_new @ r_new:.4g} (was {r @ r:.4g})")
+        if r_new @ r_new < r @ r:
+            return trial, [at_trial, *runs.values([trial + h[i] for i in range(len(p))])], move
+    return None, None, move
 
 
 def _linearised(runs: _Runs, batch: list[dict[str, np.ndarray]], h: np.ndarray):
@@ -618,10 +631,8 @@ def refit_setup(bundle: Bundle, name: str, p: Sequence[float], model: Model,
     """
     say = progress or (lambda line: None)
     runs = _Runs(forming_tests(bundle), model, name)
-    test0 = runs.tests[0]
-    lo, hi = BOUNDS[name]
     h = np.diag(STEP[name]).astype(float)
-    start = _start(name, test0, model)
+    start = _start(name, runs.tests[0], model)
     k = len(start)
     points = [np.asarray(p, dtype=float), start,
               *(start + v * np.eye(k)[i] for i in range(k) for v in SCAN[name])]
@@ -629,24 +640,12 @@ def refit_setup(bundle: Bundle, name: str, p: Sequence[float], model: Model,
     p = points[int(np.argmin(costs))]
     r, J, _ = _linearised(runs, runs.values([p] + [p + h[i] for i in range(k)]), h)
     for iteration in range(MAX_ITERATIONS):
-        step = np.linalg.lstsq(J, -r, rcond=None)[0]
-        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP[name])
-        moved = False
-        for attempt in range(2):
-            trial = np.clip(p + step / 2**attempt, lo, hi)
-            if np.abs(trial - p).max() < 0.01 * float(h.diagonal().min()):
-                return p
-            (at_trial,) = runs.values([trial])
-            r_new = runs.residual(at_trial)
-            say(f"    {name} refit with the effect {iteration + 1}: "
-                f"{_show(name, trial, test0, model)}, cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
-            if r_new @ r_new < r @ r:
-                batch = [at_trial, *runs.values([trial + h[i] for i in range(k)])]
-                r, J, _ = _linearised(runs, batch, h)
-                p, moved = trial, True
-                break
-        if not moved:
+        new, batch, _ = _try(runs, p, _gauss_newton(J, r, name), r, h,
+                             f"refit with the effect {iteration + 1}", say)
+        if new is None:
             break
+        p = new
+        r, J, _ = _linearised(runs, batch, h)
     return p
 
 
