@@ -188,6 +188,15 @@ def test_a_turned_ply_is_named_with_its_angle_and_a_null_bundle_stays_null():
     assert mu["heldout_normalised"] == force["heldout_normalised"]
 
 
+def force_and_friction(truth, seed: int) -> Bundle:
+    """The quarter double dome formed by ``truth`` with 400 N where the case says 200 N."""
+    stated = load_case(CASE, **COARSE)
+    test = fk.synthetic_case_test(truth, with_overrides(stated, holder_force_N=400.0),
+                                  sd_mm=0.1, seed=seed, full=True)
+    return Bundle(name="b", tests=(dataclasses.replace(test, forming_case=stated,
+                                                       case_keys={}),))
+
+
 @pytest.mark.skip_in_parallel
 def test_the_set_up_is_fitted_again_with_a_candidate_effect():
     """A set-up fitted without the friction the part had is refitted with it (issue 27.3).
@@ -196,12 +205,8 @@ def test_the_set_up_is_fitted_again_with_a_candidate_effect():
     tool friction μ_tool = 0.8. With the model that has the friction, the force is refitted
     from the stated one to the truth, within 5 % (its sd at this noise is about 2 %).
     """
-    stated = load_case(CASE, **COARSE)
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
-    test = fk.synthetic_case_test(truth, with_overrides(stated, holder_force_N=400.0),
-                                  sd_mm=0.1, seed=11, full=True)
-    bundle = Bundle(name="b", tests=(dataclasses.replace(test, forming_case=stated,
-                                                         case_keys={}),))
+    bundle = force_and_friction(truth, seed=11)
     p = st.refit_setup(bundle, "holder_force_N", [1.0], truth)
     assert st.fitted_value(bundle, "holder_force_N", p, truth) == pytest.approx(400.0, rel=0.05)
 
@@ -218,12 +223,8 @@ def test_a_set_up_error_and_a_missing_effect_are_both_named():
     """
     from fenicsx_drape.diagnosis.diagnose import diagnose
 
-    stated = load_case(CASE, **COARSE)
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
-    test = fk.synthetic_case_test(truth, with_overrides(stated, holder_force_N=400.0),
-                                  sd_mm=0.1, seed=12, full=True)
-    bundle = Bundle(name="b", tests=(dataclasses.replace(test, forming_case=stated,
-                                                         case_keys={}),))
+    bundle = force_and_friction(truth, seed=12)
     report = diagnose(bundle, default_model(), candidates=["tool_friction"],
                       setup=["holder_force_N"])
     assert report["setup_error"] == "holder_force_N"
