@@ -151,6 +151,54 @@ def test_a_note_when_the_stated_set_up_forms_unlike_on_the_case_model():
     assert st._model_note([({"stated_on_model": 1.9, "model": "full"}, {})], 0.5) is None
 
 
+class _LinearRuns:
+    """Residuals linear in a blank offset (truth ``d``) plus noise: a stand-in for _Runs."""
+
+    name = "blank_offset_mm"
+
+    def __init__(self, d, other=0.0, n=40, seed=0):
+        rng = np.random.default_rng(seed)
+        self.tests = [dataclasses.replace(grid_test(None), columns={
+            "i": np.zeros(n)})]  # n_rows = n
+        self.A = rng.normal(size=(3 * n, 2))
+        # noise, and an error no offset explains (``other`` × noise, orthogonal to A)
+        e = rng.normal(size=3 * n)
+        q, _ = np.linalg.qr(self.A)
+        e_other = e - q @ (q.T @ e)
+        self.base = rng.normal(size=3 * n) + other * e_other / np.linalg.norm(e_other) * \
+            np.sqrt(3 * n)
+        self.d, self.n = np.asarray(d, float), 3 * n
+
+    def point(self, p):
+        return {"r": (self.A @ (np.asarray(p) - self.d) + self.base) / np.sqrt(self.n)}
+
+    def residual(self, values):
+        return values["r"]
+
+
+def test_a_candidate_with_nothing_to_gain_stops_at_the_stated_set_up():
+    axes = [(i, v) for i in range(2) for v in st.SCAN["blank_offset_mm"]]
+    start = np.zeros(2)
+    for d, other in (([0.0, 0.0], 0.0), ([0.0, 0.0], 3.0)):
+        runs = _LinearRuns(d, other)
+        scanned = [runs.point(start + v * np.eye(2)[i]) for i, v in axes]
+        out = st._nothing_to_gain(runs, start, runs.point(start)["r"], scanned, axes,
+                                  lambda line: None)
+        assert out is not None and np.array_equal(out["p"], start) and out["evidence"] == 1.0
+        # The step not taken widens the sd; the secants of a linear model give its sd.
+        assert np.all(out["sd_internal"] >= out["sd_fit"])
+        J = runs.A / np.sqrt(runs.n)
+        expected = st._sd_of(runs, J, runs.point(start)["r"])
+        np.testing.assert_allclose(out["sd_fit"], expected, rtol=1e-9)
+    # A 3 mm offset: both scan points (±8 mm) are worse than the stated one, but the secant
+    # fit finds it: the candidate goes on to its Gauss-Newton fit.
+    runs = _LinearRuns([3.0, 0.0])
+    scanned = [runs.point(start + v * np.eye(2)[i]) for i, v in axes]
+    r0 = runs.point(start)["r"]
+    assert all(runs.residual(v) @ runs.residual(v) > r0 @ r0 for v in scanned)
+    assert st._nothing_to_gain(runs, start, r0, scanned, axes, lambda line: None) is None
+
+
 def _bundle(model, stated, seed, **setup) -> Bundle:
     """The coarse double dome formed with a hidden set-up, its test naming the stated case."""
     truth = with_overrides(stated, **setup)

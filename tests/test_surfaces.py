@@ -93,6 +93,27 @@ def test_parameters_reach_the_script_and_do_not_leak(sources):
 
 
 @pytest.mark.skip_in_parallel
+def test_a_surface_is_read_once_until_its_folder_changes(tmp_path, monkeypatch):
+    from fenicsx_drape.forming.tools import surfaces
+
+    path = tmp_path / "sphere.geo"
+    path.write_text(SPHERE_GEO)
+    reads = []
+    read = surfaces._read
+    monkeypatch.setattr(surfaces, "_read", lambda *a: reads.append(a) or read(*a))
+    first = load_surface(path, mesh_size_mm=3.0, comm=None)
+    assert load_surface(path, mesh_size_mm=3.0, comm=None) is first and len(reads) == 1
+    # Other arguments, the file's bytes or a file it may include: read again.
+    load_surface(path, {"radius_mm": 12.0}, mesh_size_mm=3.0, comm=None)
+    path.write_text(SPHERE_GEO.replace("10.0", "11.0"))
+    bigger = load_surface(path, mesh_size_mm=3.0, comm=None)
+    assert bigger.bounds[1][2] == pytest.approx(11.0, abs=1e-6)
+    (tmp_path / "included.geo").write_text("// a file the script might include\n")
+    assert load_surface(path, mesh_size_mm=3.0, comm=None) is not bigger
+    assert len(reads) == 4
+
+
+@pytest.mark.skip_in_parallel
 def test_onelab_parameters_by_their_name(tmp_path):
     path = tmp_path / "onelab.geo"
     path.write_text('DefineConstant[ r = {10, Name "Parameters/radius"} ];\n'

@@ -44,6 +44,11 @@ started, every model added (ours, and any a ``build()`` adds) is removed and the
 touched are put back, also after an error. The parser's variables and the ONELAB parameters
 are cleared before a script runs so that no value leaks from one file to the next (in a
 caller's session too).
+
+**Read once per process.** A surface read is kept (the :data:`_READ_CACHE` latest) under its
+file's bytes, the other files of its folder (size and time: a script's ``Include``) and the
+reading's arguments: a diagnosis forms the same tools dozens of times, and Gmsh meshing them
+took a third of each run.
 """
 
 from __future__ import annotations
@@ -66,6 +71,8 @@ SUFFIXES = (".geo", ".py", *CAD_SUFFIXES, *MESH_SUFFIXES)
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 _WELD_TOLERANCE = 1e-7  # of the bounding box's diagonal
+_READ_CACHE = 16
+_read_cache: dict[tuple, TriangleSurface] = {}
 
 # Regions of the closest point on a triangle (a, b, c): the face, the corners, the edges.
 FACE, CORNER_A, CORNER_B, CORNER_C, EDGE_AB, EDGE_BC, EDGE_CA = range(7)
@@ -642,7 +649,7 @@ def load_surface(path: str | os.PathLike, parameters: Mapping[str, float] | None
     result: object = None
     if comm is None or comm.rank == 0:
         try:
-            result = _read(path, parameters, mesh_size_mm, order, sheet_side, physical)
+            result = _read_once(path, parameters, mesh_size_mm, order, sheet_side, physical)
         except DrapeInputError as error:
             result = error
     if comm is not None and comm.size > 1:
@@ -650,6 +657,25 @@ def load_surface(path: str | os.PathLike, parameters: Mapping[str, float] | None
     if isinstance(result, DrapeInputError):
         raise result
     return result
+
+
+def _read_once(path: Path, parameters, mesh_size_mm, order, sheet_side,
+               physical) -> TriangleSurface:
+    """:func:`_read`, kept per process (the module doc); surfaces are immutable."""
+    if not path.is_file():
+        return _read(path, parameters, mesh_size_mm, order, sheet_side, physical)
+    folder = sorted((e.name, e.stat().st_size, e.stat().st_mtime_ns)
+                    for e in os.scandir(path.parent) if e.is_file() and e.name != path.name)
+    side = sheet_side if isinstance(sheet_side, str) or sheet_side is None \
+        else tuple(float(v) for v in sheet_side)
+    key = (str(path.resolve()), hashlib.sha256(path.read_bytes()).hexdigest(), tuple(folder),
+           tuple(sorted((parameters or {}).items())), mesh_size_mm, order, side, physical)
+    if key not in _read_cache:
+        surface = _read(path, parameters, mesh_size_mm, order, sheet_side, physical)
+        while len(_read_cache) >= _READ_CACHE:
+            _read_cache.pop(next(iter(_read_cache)))
+        _read_cache[key] = surface
+    return _read_cache[key]
 
 
 def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
