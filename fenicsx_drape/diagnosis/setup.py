@@ -25,6 +25,9 @@ Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
 1. **Scan and untestable**: each axis of the parameter is moved by the values of
    :data:`SCAN` about the stated value (one batch of runs: the error may lie either side,
    and a turned net is clipped to the blank, so the error is not smooth through θ = 0).
+   On a case symmetric in a plane, a point whose mirror image in it is scanned too is not
+   formed but read from the image's run, mirrored: a net turned by −δθ forms the part of
+   +δθ mirrored, an offset −d across the plane that of +d (one run for both sides).
    When the smallest move changes the simulated tests by less than ``UNTESTABLE_BELOW`` ×
    their noise (normalised like the error), or the part has nothing it acts on (no holder,
    no punch), the parameter is listed as untestable with the reason, not ranked.
@@ -236,29 +239,60 @@ class _Runs:
         self.weights = {t.id: np.repeat(1.0 / fk.row_noise(t), 3) for t in self.tests}
         self.formed = 0  # new forming runs asked of form_many (not in its cache)
         self.known: dict[tuple[float, ...], dict[str, np.ndarray]] = {}  # values by point
+        # The stated cases' common symmetry planes (a case keeps them with a ply at a
+        # multiple of 90° only, which mirrors to itself).
+        cases = [fk.forming_case_of(t) for t in self.tests]
+        self.planes = [q for q in ("x", "y") if all(q in c.planes for c in cases)]
 
-    def values(self, points: Sequence[np.ndarray]) -> list[dict[str, np.ndarray]]:
-        """Per point, the simulated ``x, y, z`` of every measured node of every test."""
-        new = [p for p in dict.fromkeys(map(tuple, points)) if p not in self.known]
-        for p, v in zip(new, self._formed([np.array(p) for p in new])):
-            self.known[p] = v
+    def values(self, points: Sequence[np.ndarray], mirror: bool = False
+               ) -> list[dict[str, np.ndarray]]:
+        """Per point, the simulated ``x, y, z`` of every measured node of every test.
+
+        With ``mirror``, a point whose mirror image in a symmetry plane of the stated cases
+        is formed in the same batch is read from that run, mirrored (module doc, 1.).
+        """
+        new = list(dict.fromkeys(p for p in map(tuple, points) if p not in self.known))
+        images = self._images(new) if mirror else {}
+        for batch in ([p for p in new if p not in images], list(images)):
+            for p, v in zip(batch, self._formed(batch, images)):
+                self.known[p] = v
         return [self.known[tuple(p)] for p in points]
 
-    def _formed(self, points: Sequence[np.ndarray]) -> list[dict[str, np.ndarray]]:
+    def _images(self, new: list[tuple[float, ...]]) -> dict[tuple[float, ...], str]:
+        """The points of ``new`` to read from their image's run, with the plane."""
+        out = {}
+        for p in new:
+            for plane in self.planes:
+                q = _mirrored(self.name, p, plane)
+                if q is not None and sum(q) > sum(p) and q in new:
+                    out[p] = plane
+                    break
+        return out
+
+    def _formed(self, points: Sequence[tuple[float, ...]], images: dict[tuple, str]
+                ) -> list[dict[str, np.ndarray]]:
         jobs, reads = [], []
         for p in points:
+            plane = images.get(p)
+            source = p if plane is None else _mirrored(self.name, p, plane)
             for test in self.tests:
-                t, shift = applied(test, self.name, p, self.model)
+                t, _ = applied(test, self.name, np.array(source), self.model)
+                _, shift = applied(test, self.name, np.array(p), self.model)
                 jobs.append((fk.case_of(t), self.model))
-                reads.append((test, shift))
+                reads.append((test, shift, plane))
         self.formed += sum(not cached(c, m) for c, m in jobs)
         sheets = form_many(jobs)
         out: list[dict[str, np.ndarray]] = [{} for _ in points]
-        for k, (sheet, (test, shift)) in enumerate(zip(sheets, reads)):
-            P = fk.reference_points(test) + shift
+        for k, (sheet, (test, shift, plane)) in enumerate(zip(sheets, reads)):
+            # The part of a mirrored set-up is the mirrored part: its point X is the
+            # image's point M X, moved by M.
+            M = np.ones(3) if plane is None else np.where(np.arange(3) == "xy".index(plane),
+                                                          -1.0, 1.0)
+            P = (fk.reference_points(test) + shift) * M[:2]
             part = sheet if _in_part(P, sheet.planes) else sheet.full()
-            out[k // len(self.tests)][test.id] = fk.sample(part, P, test.id).ravel()
+            out[k // len(self.tests)][test.id] = (fk.sample(part, P, test.id) * M).ravel()
         return out
+
 
     def residual(self, values: dict[str, np.ndarray], rows: dict[str, np.ndarray] | None = None
                  ) -> np.ndarray:
@@ -273,6 +307,20 @@ class _Runs:
 
     def compare(self, values: dict[str, np.ndarray]):
         return compare_tests(self.tests, values, self.regions, self.noise)
+
+
+def _mirrored(name: str | None, p: tuple[float, ...], plane: str) -> tuple[float, ...] | None:
+    """The set-up point that forms ``p``'s part mirrored in the symmetry plane ``plane``.
+
+    A net turned by δθ mirrors to one turned by −δθ (in either plane); an offset's
+    component across the plane changes sign; the force and μ have no image.
+    """
+    if name == "ply_angle_deg":
+        return (-p[0],)
+    if name in ("blank_offset_mm", "tool_offset_mm"):
+        a = "xy".index(plane)
+        return tuple(-v if i == a else v for i, v in enumerate(p))
+    return None
 
 
 def _in_part(P: np.ndarray, planes: Sequence[str]) -> bool:
@@ -297,7 +345,7 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     # 1. The scan: each axis moved by the values of SCAN (one batch of runs).
     axes = [(i, v) for i in range(k) for v in SCAN[name]]
     points = [start + v * np.eye(k)[i] for i, v in axes]
-    scanned = runs.values(points)
+    scanned = runs.values(points, mirror=True)
     first = [j for j, (i, v) in enumerate(axes) if v == min(u for u in SCAN[name] if u > 0)]
     change = float(np.sqrt(np.mean([
         np.mean((scanned[j][t.id] - base_values[t.id]) ** 2) / runs.noise[t.id][0] ** 2
