@@ -516,11 +516,11 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     })
     add_setup(report, stage)
     if missing and missing.get("setup_refitted"):
-        from fenicsx_drape.diagnosis.setup import _value_text
+        from fenicsx_drape.diagnosis.setup import value_text
 
         j = missing["setup_refitted"]
         report["conclusion"] += (f" With {missing['effect']} added, {j['parameter']} is fitted "
-                                 f"again: {_value_text(j['fitted'])}.")
+                                 f"again: {value_text(j['fitted'])}.")
     report.models, report.comparisons = models, comparisons
     report.tests = data.tests
     say(report["conclusion"])

@@ -608,7 +608,7 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         if name == "mu" and force:  # eq. 1: μ acts through μF only, as the force does
             tried.append(_tied_mu(*force[0], test0, model))
             say(f"set-up candidate mu: tied to holder_force_N (μF, eq. 1), "
-                f"{_value_text(tried[-1][0]['fitted'])}, no runs of its own")
+                f"{value_text(tried[-1][0]['fitted'])}, no runs of its own")
             continue
         if name == "mu" and "holder_force_N" in names:  # the force was untestable: so is μ
             untestable = [u for u in out["untestable"] if u["effect"] == "holder_force_N"]
@@ -650,8 +650,8 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         if name in CONFOUNDED:
             entry["confounded_with"] = CONFOUNDED[name]
         entry["runs"] = runs.formed
-        say(f"  fitted {_show(name, c['p'], test0, model)} ± {_value_text(entry['sd'])} "
-            f"(fit alone ± {_value_text(entry['sd_fit'])}), normalised "
+        say(f"  fitted {_show(name, c['p'], test0, model)} ± {value_text(entry['sd'])} "
+            f"(fit alone ± {value_text(entry['sd_fit'])}), normalised "
             f"{entry['error_after']['normalised']:.3g}, held-out "
             f"{c['heldout_normalised']:.3g}, evidence {c['evidence']:.3g}; "
             f"{runs.formed} new forming runs ({c['folds_formed']} for the folds)")
@@ -786,7 +786,7 @@ def setup_summary(report: dict[str, Any]) -> list[str]:
         return lines
     lines.append(f"{'set-up candidate':<20} {'stated':>12} {'fitted':>18} {'after':>7} "
                  f"{'held-out':>9} {'evidence':>9}  significant")
-    show = _value_text
+    show = value_text
     for s in report["setup"]:
         fitted = f"{show(s['fitted'])} ± {show(s['sd'])}"
         lines.append(f"{s['parameter']:<20} {show(s['stated']):>12} {fitted:>18} "
@@ -796,7 +796,8 @@ def setup_summary(report: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _value_text(v) -> str:
+def value_text(v) -> str:
+    """A fitted set-up value as text: a number, or ``[x, y]`` for an offset."""
     return f"[{v[0]:.3g}, {v[1]:.3g}]" if isinstance(v, list) else f"{v:.4g}"
 
 
@@ -854,7 +855,7 @@ def add_setup(report: dict[str, Any], stage: dict[str, Any] | None) -> None:
     if stage["setup_error"] is None:
         return
     s = stage["setup"][0]
-    show = _value_text
+    show = value_text
     also = (f" (equivalently {s['confounded_with']}: the holder's friction acts through μF)"
             if "confounded_with" in s else "")
     words = (f"Set-up error: {s['parameter']} fitted {show(s['fitted'])} ± {show(s['sd'])} "
