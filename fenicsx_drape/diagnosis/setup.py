@@ -276,8 +276,9 @@ class _Runs:
             plane = images.get(p)
             source = p if plane is None else _mirrored(self.name, p, plane)
             for test in self.tests:
-                t, _ = applied(test, self.name, np.array(source), self.model)
-                _, shift = applied(test, self.name, np.array(p), self.model)
+                t, shift = applied(test, self.name, np.array(p), self.model)
+                if plane is not None:  # formed as its image, read where p's part lies
+                    t, _ = applied(test, self.name, np.array(source), self.model)
                 jobs.append((fk.case_of(t), self.model))
                 reads.append((test, shift, plane))
         self.formed += sum(not cached(c, m) for c, m in jobs)
@@ -292,7 +293,6 @@ class _Runs:
             part = sheet if _in_part(P, sheet.planes) else sheet.full()
             out[k // len(self.tests)][test.id] = (fk.sample(part, P, test.id) * M).ravel()
         return out
-
 
     def residual(self, values: dict[str, np.ndarray], rows: dict[str, np.ndarray] | None = None
                  ) -> np.ndarray:
