@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime
+import hashlib
 import json
 import math
 import os
@@ -13,6 +14,23 @@ from pathlib import Path
 from typing import Any
 
 from fenicsx_drape import __version__
+
+_digests: dict[tuple, str] = {}  # file digests by (path, size, modification time)
+
+
+def file_digest(path: str | os.PathLike) -> str:
+    """SHA-256 of a file's bytes, read in blocks (memoised by path, size and time).
+
+    Cache keys of inputs (a case's geometry files, a tool surface read): a file changed
+    on disk gets a new key; a large one is never held in memory whole.
+    """
+    path = Path(path)
+    stat = path.stat()
+    key = (str(path), stat.st_size, stat.st_mtime_ns)
+    if key not in _digests:
+        with path.open("rb") as f:
+            _digests[key] = hashlib.file_digest(f, "sha256").hexdigest()
+    return _digests[key]
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import atexit
 import contextlib
-import hashlib
 import json
 import os
 from collections.abc import Iterator, Sequence
@@ -31,6 +30,7 @@ import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case.format import case_dict
+from fenicsx_drape.provenance import file_digest
 from fenicsx_drape.trust import set_trusted, trusted
 
 if TYPE_CHECKING:
@@ -46,7 +46,6 @@ _cache: dict[tuple, FormedGrid] = {}
 _stopped: dict[tuple, float] = {}  # travel (mm) reached by the runs that stopped short
 _forces: dict[tuple, dict] = {}  # the tools' force curves of the cached runs (run.tool_forces)
 _CACHE_SIZE = 256
-_digests: dict[tuple, str] = {}  # file digests by (path, size, mtime)
 
 
 @contextlib.contextmanager
@@ -70,15 +69,6 @@ def cell_override() -> float | None:
     return _settings["cell_mm"]
 
 
-def _digest(path: Path) -> str:
-    """SHA-256 of a file's bytes (memoised by path, size and modification time)."""
-    stat = path.stat()
-    key = (str(path), stat.st_size, stat.st_mtime_ns)
-    if key not in _digests:
-        _digests[key] = hashlib.sha256(path.read_bytes()).hexdigest()
-    return _digests[key]
-
-
 def case_key(case) -> str:
     """What a forming run of ``case`` depends on, as text.
 
@@ -92,7 +82,7 @@ def case_key(case) -> str:
     files = [t.path for t in case.tools if t.path is not None]
     if case.blank.path is not None:
         files.append(case.blank.path)
-    digests = [_digest(Path(p)) if Path(p).is_file() else f"missing {p}" for p in files]
+    digests = [file_digest(Path(p)) if Path(p).is_file() else f"missing {p}" for p in files]
     return json.dumps([tables, digests], sort_keys=True, default=str)
 
 

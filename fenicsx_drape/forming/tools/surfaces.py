@@ -63,6 +63,7 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.provenance import file_digest
 
 #: Geometry sources by suffix.
 CAD_SUFFIXES = (".step", ".stp", ".iges", ".igs", ".brep")
@@ -666,10 +667,9 @@ def _read_once(path: Path, parameters, mesh_size_mm, order, sheet_side,
         return _read(path, parameters, mesh_size_mm, order, sheet_side, physical)
     folder = sorted((e.name, e.stat().st_size, e.stat().st_mtime_ns)
                     for e in os.scandir(path.parent) if e.is_file() and e.name != path.name)
-    side = sheet_side if isinstance(sheet_side, str) or sheet_side is None \
-        else tuple(float(v) for v in sheet_side)
-    key = (str(path.resolve()), hashlib.sha256(path.read_bytes()).hexdigest(), tuple(folder),
-           tuple(sorted((parameters or {}).items())), mesh_size_mm, order, side, physical)
+    key = (str(path.resolve()), file_digest(path), tuple(folder),
+           repr(sorted((parameters or {}).items())), mesh_size_mm, order, repr(sheet_side),
+           physical)
     if key not in _read_cache:
         surface = _read(path, parameters, mesh_size_mm, order, sheet_side, physical)
         while len(_read_cache) >= _READ_CACHE:
