@@ -264,6 +264,7 @@ class _Runs:
         for p in new:
             for plane in self.planes:
                 q = _mirrored(self.name, p, plane)
+                # the side with the moved component positive is formed, the other read
                 if q is not None and sum(q) > sum(p) and q in new:
                     out[p] = plane
                     break
