@@ -223,9 +223,10 @@ def test_a_mirrored_set_up_is_read_from_its_image_run():
         assert runs.formed == 1  # the image only
         direct = st._Runs(tests, model, name).values([np.array(p)])[0]
         d = mirrored[tests[0].id] - direct[tests[0].id]
-        # Within the noise (0.3 mm): the two runs differ as any two whole-blank runs of a
-        # coarse net do (0.22 mm for the ply at 20 mm, 0.05 mm at 10 mm).
-        assert np.sqrt(np.nanmean(d**2)) < 0.3, name
+        # The two runs differ as any two whole-blank runs of a coarse net do: the ply's by
+        # 0.27 mm at 20 mm cells and 1 mm steps, 0.40 mm at this test's 4 mm steps (their
+        # cut-backs fall at other travels); 0.05 mm at 10 mm. A wrong mirror is tens of mm off.
+        assert np.sqrt(np.nanmean(d**2)) < 0.5, name
     # A case modelled whole has no plane to mirror in: every point is formed.
     whole = dataclasses.replace(tests[0], forming_case=with_overrides(stated, symmetry=[]))
     runs = st._Runs([whole], model, "ply_angle_deg")
