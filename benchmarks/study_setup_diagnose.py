@@ -69,13 +69,17 @@ BUNDLES = {
 }
 
 
-def measured_test(stated, setup: dict, model, test_id: str, seed: int = SEED):
-    """The grid of the part formed with the hidden set-up, as a test naming the stated case."""
+def measured_test(stated, setup: dict, model, test_id: str, seed: int = SEED,
+                  grid_mm: float | None = None):
+    """The grid of the part formed with the hidden set-up, as a test naming the stated case.
+
+    The grid's pitch is ``grid_mm`` (default the net's cell).
+    """
     truth = with_overrides(stated, **setup)
     options = dataclasses.replace(forming_options(model), snes_atol=1e-8,
                                   node_atol_N=NODE_ATOL_N / 100)
     run = run_case(truth, model, options)
-    table = run.grid.full().drawn_grid(stated.blank.cell_mm)
+    table = run.grid.full().drawn_grid(grid_mm or stated.blank.cell_mm)
     rng = np.random.default_rng(seed)
     columns = {k: np.asarray(v, float) for k, v in table.items()}
     d = setup.get("blank_offset_mm")
@@ -88,8 +92,8 @@ def measured_test(stated, setup: dict, model, test_id: str, seed: int = SEED):
     keys = {"duration_s": stated.duration_s, "travel_mm": stated.total_travel_mm,
             "holder_force_N": stated.holder.force_N}
     return Test(id=test_id, kind="forming", file=f"{test_id}.csv", columns=columns,
-                forming={**keys, "grid_mm": stated.blank.cell_mm}, case="case/case.toml",
-                case_keys=keys, forming_case=stated)
+                forming={**keys, "grid_mm": grid_mm or stated.blank.cell_mm},
+                case="case/case.toml", case_keys=keys, forming_case=stated)
 
 
 def drift(stated, paper) -> dict:
