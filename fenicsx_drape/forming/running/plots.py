@@ -78,6 +78,7 @@ def plot_shear(grid: FormedGrid, path: str | os.PathLike, title: str = "") -> Pa
     fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax2,
                  label="shear angle (deg)")
     fig.suptitle(title or f"shear angle, max {γ.max():.1f}°")
+    fig.subplots_adjust(wspace=0.3)  # the top view's y label clear of the 3D view's z ticks
     return save_figure(fig, path)
 
 
