@@ -23,23 +23,16 @@ from pathlib import Path
 import numpy as np
 from study_setup_diagnose import measured_test
 
-from fenicsx_drape.diagnosis.diagnose import (
-    BASELINE_ITERATIONS,
-    EVIDENCE_THRESHOLD,
-    PARSIMONY,
-    UNTESTABLE_BELOW,
-)
-from fenicsx_drape.diagnosis.setup import Rules, fit_setup
+from fenicsx_drape.diagnosis.diagnose import setup_rules
+from fenicsx_drape.diagnosis.setup import fit_setup
 from fenicsx_drape.forming.case.format import load_case
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model
 
-RULES = Rules(EVIDENCE_THRESHOLD, PARSIMONY, UNTESTABLE_BELOW, BASELINE_ITERATIONS)
-
 
 def fit(test, model) -> dict:
     bundle = Bundle(name="coverage", tests=(test,))
-    stage = fit_setup(bundle, model, RULES, parameters=["blank_offset_mm"])
+    stage = fit_setup(bundle, model, setup_rules(), parameters=["blank_offset_mm"])
     (entry,) = stage["setup"]
     return entry
 

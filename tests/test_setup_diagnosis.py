@@ -241,7 +241,7 @@ def test_a_turned_ply_is_named_with_its_angle_and_a_null_bundle_stays_null():
     stated = load_case(CASE, **COARSE)
     from fenicsx_drape.diagnosis import diagnose as dg
 
-    rules = st.Rules(dg.EVIDENCE_THRESHOLD, dg.PARSIMONY, dg.UNTESTABLE_BELOW, 1)
+    rules = dg.setup_rules(iterations=1)
     out = st.fit_setup(_bundle(model, stated, 41, ply_angle_deg=4.0), model, rules,
                        parameters=["ply_angle_deg"])
     assert out["setup_error"] == "ply_angle_deg"

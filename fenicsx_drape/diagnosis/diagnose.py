@@ -358,6 +358,13 @@ def _refit_parameters(model: Model, name: str) -> tuple[str, ...]:
 # Diagnosis
 
 
+def setup_rules(iterations: int = BASELINE_ITERATIONS):
+    """The rules the set-up stage shares with the effects (:class:`~fenicsx_drape.diagnosis.setup.Rules`)."""
+    from fenicsx_drape.diagnosis.setup import Rules
+
+    return Rules(EVIDENCE_THRESHOLD, PARSIMONY, UNTESTABLE_BELOW, iterations)
+
+
 def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
              candidates: Sequence[str] | None = None,
              setup: Sequence[str] | None = None) -> Report:
@@ -379,15 +386,14 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     """
     from fenicsx_drape.calibration.coupons import declare_noise
     from fenicsx_drape.diagnosis.compare import kind_metrics
-    from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS, Rules, add_setup, setup_stage
+    from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS, add_setup, setup_stage
     from fenicsx_drape.effects import describe_effect
 
     start = time.perf_counter()
     say = progress or (lambda line: None)
     # Set-up before physics (spec version 3): the best set-up fitted, then the effects.
-    rules = Rules(EVIDENCE_THRESHOLD, PARSIMONY, UNTESTABLE_BELOW, BASELINE_ITERATIONS)
     stage, bundle = setup_stage(bundle, model, SETUP_PARAMETERS if setup is None
-                                and candidates is None else setup, rules, say)
+                                and candidates is None else setup, setup_rules(), say)
     data = _prepare(declare_noise(bundle, model.noise))
     say(f"baseline ({', '.join(model.effects) or 'no effects'}): fitting (global stage)")
     details: dict[str, Any] = {}
