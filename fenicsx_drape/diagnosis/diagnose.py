@@ -359,7 +359,10 @@ def _refit_parameters(model: Model, name: str) -> tuple[str, ...]:
 
 
 def setup_rules(iterations: int = BASELINE_ITERATIONS):
-    """The rules the set-up stage shares with the effects (:class:`~fenicsx_drape.diagnosis.setup.Rules`)."""
+    """The rules the set-up stage shares with the effects.
+
+    A :class:`~fenicsx_drape.diagnosis.setup.Rules`; ``iterations`` caps the coupon fits.
+    """
     from fenicsx_drape.diagnosis.setup import Rules
 
     return Rules(EVIDENCE_THRESHOLD, PARSIMONY, UNTESTABLE_BELOW, iterations)
