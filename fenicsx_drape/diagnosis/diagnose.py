@@ -282,19 +282,23 @@ def _costs(data: _Data, model: Model) -> np.ndarray:
 
 
 def _best_start(data: _Data, model: Model, own: Sequence[str], names: Sequence[str]) -> Model:
-    """The best of three starts for a candidate's refit, judged in one vectorised call.
+    """The best of four starts for a candidate's refit, judged in one vectorised call.
 
-    The starts: the candidate at its default strength; the candidate weak, its own
-    parameters that may vanish at 1 % of their defaults (for most effects nearly the
-    baseline, while the fit still feels them: exactly zero can leave it no gradient, e.g.
-    a Maxwell branch without spring); the curve-feature guess of section 3.2.
+    The starts: the candidate at its default strength on the baseline's fit; the candidate
+    weak, its own parameters that may vanish at 1 % of their defaults (for most effects
+    nearly the baseline, while the fit still feels them: exactly zero can leave it no
+    gradient, e.g. a Maxwell branch without spring); every refitted parameter at the
+    catalogue's documented value (Table 2: a baseline fitted without the effect can sit far
+    from it); the curve-feature guess of section 3.2.
     """
     from fenicsx_drape.calibration.fit import initial_guess
     from fenicsx_drape.model import parameter_info
 
     weak = {n: WEAK * float(model.parameters[n]) for n in own
             if parameter_info(n).bounds[0] == 0.0}
-    starts = [model, model.with_parameters(**weak)]
+    documented = {n: parameter_info(n).default for n in names
+                  if parameter_info(n).default is not None}
+    starts = [model, model.with_parameters(**weak), model.with_parameters(**documented)]
     try:
         starts.append(initial_guess(model, data.tests, names))
     except (ValueError, FloatingPointError, ArithmeticError):
@@ -302,6 +306,11 @@ def _best_start(data: _Data, model: Model, own: Sequence[str], names: Sequence[s
     sets = model.with_parameters(**{n: np.array([float(m.parameters[n]) for m in starts])
                                     for n in names})
     return starts[int(np.nanargmin(_costs(data, sets)))]
+
+
+def _no_worse(data: _Data, fitted: Model, start: Model) -> Model:
+    """The fit, or its start when the fit ended worse (a refit never loses its best start)."""
+    return start if _costs(data, start)[0] < _costs(data, fitted)[0] else fitted
 
 
 def _sensitivity(data: _Data, without: Model, with_: Model) -> tuple[float, dict[str, float]]:
@@ -450,22 +459,27 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         # Its own parameters: those it brings that the baseline does not use.
         own = [p for p in names if p not in base_active
                and any(p in describe_effect(a).parameters for a in added)]
-        refit = _fit(data.bundle, _best_start(data, start_model, own, names), parameters=names,
-                     max_iterations=REFIT_ITERATIONS)
+        best_start = _best_start(data, start_model, own, names)
+        refit = _no_worse(data, _fit(data.bundle, best_start, parameters=names,
+                                     max_iterations=REFIT_ITERATIONS), best_start)
         after = data.compare(simulate(data.tests, refit))
         joint, data_c = None, data
         if stage and stage.get("best") and normalised_error(after) < normalised_error(base):
             # The set-up fitted again with the effect, then the effect again at that set-up,
             # in turn (a set-up error and an effect can act alike).
+            alone = (refit, after)
             for _ in range(SETUP_ROUNDS):
                 again, data_c = _with_setup_refitted(stage, refit, data_c, model.noise,
                                                      outliers, joint, say)
                 if again is None:
                     break
                 joint = again
-                refit = _fit(data_c.bundle, refit, parameters=names,
-                             max_iterations=REFIT_ITERATIONS)
+                refit = _no_worse(data_c, _fit(data_c.bundle, refit, parameters=names,
+                                               max_iterations=REFIT_ITERATIONS), refit)
             after = data_c.compare(simulate(data_c.tests, refit))
+            if normalised_error(after) > normalised_error(alone[1]):
+                # The rounds ended worse than the effect at the set-up fitted alone: keep that.
+                (refit, after), joint, data_c = alone, None, data
         say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
         heldout_cmp = data_c.compare(_heldout(data_c, refit, say))
         heldout = normalised_error(heldout_cmp)

@@ -10,6 +10,7 @@ coefficients) to all of a bundle's forming tests together, whichever they hold (
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -31,6 +32,7 @@ from fenicsx_drape.diagnosis.forming_kind import (
 from fenicsx_drape.diagnosis.kinds import Kind
 
 if TYPE_CHECKING:
+    from fenicsx_drape.forming.running.post import FormedGrid
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
@@ -77,6 +79,62 @@ def value_noise(test: Test) -> np.ndarray:
     return np.repeat(fk.row_noise(test), 3)
 
 
+def value_sd(test: Test) -> np.ndarray:
+    """Per compared value of any forming measurement, the noise it is weighed with.
+
+    The one noise function of each measurement kind (its column, else its key, else its
+    model-free estimate: the grid's :func:`~fenicsx_drape.diagnosis.forming_kind.noise`, a
+    lab measurement's :func:`~fenicsx_drape.diagnosis.lab_kind.noise`), shared by the set-up
+    stage, the effects' fits and the comparison; ``inf``: not fitted.
+    """
+    return _by_measurement(value_noise, "row_sd")(test)
+
+
+def moved(test: Test, shift: np.ndarray) -> Test:
+    """``test`` with its flat-blank positions moved by ``shift`` (mm): a blank offset.
+
+    The flat positions of a grid or of shear points at flat positions are where the stated
+    set-up puts the material; on a blank moved by d the same material lies d further. Formed
+    positions (a scan, an edge, shear points on the formed part) and forces are in the tools'
+    frame and do not move.
+    """
+    if not np.any(shift) or "x0_mm" not in test.columns:
+        return test
+    columns = dict(test.columns)
+    columns["x0_mm"] = np.asarray(columns["x0_mm"], float) + shift[0]
+    columns["y0_mm"] = np.asarray(columns["y0_mm"], float) + shift[1]
+    return dataclasses.replace(test, columns=columns)
+
+
+def mirrorable(test: Test) -> bool:
+    """Whether a measurement can be read from a mirrored run (:func:`on_sheet`'s ``plane``)."""
+    return _lab(test) is None
+
+
+def on_sheet(test: Test, sheet: FormedGrid, model: Model, shift: np.ndarray | None = None,
+             plane: str | None = None) -> np.ndarray:
+    """A forming measurement's model values on one formed sheet (as :data:`FORMING` compares).
+
+    Args:
+        test: The measurement (a grid or a lab measurement).
+        sheet: The formed part (:func:`~fenicsx_drape.diagnosis.forming_runs.form_many`'s).
+        model: The model it was formed with (a force curve is read from its run).
+        shift: A blank offset (mm) the flat positions are read at (:func:`moved`).
+        plane: The sheet is the run of the mirror image in this symmetry plane ("x" or "y"):
+            the grid is read at its image and mirrored back (grids only: :func:`mirrorable`).
+    """
+    test = moved(test, np.zeros(2) if shift is None else np.asarray(shift, float))
+    if _lab(test) is not None:
+        if plane is not None:
+            raise ValueError(f"test {test.id!r}: a lab measurement is not read mirrored")
+        return np.asarray(lab_kind.match(test, sheet, model)["values"], float)
+    M = np.ones(3) if plane is None else np.where(np.arange(3) == "xy".index(plane), -1.0, 1.0)
+    P = fk.reference_points(test) * M[:2]
+    part = sheet if all(bool((P[:, "xy".index(q)] >= -1e-9).all()) for q in sheet.planes) \
+        else sheet.full()
+    return (fk.sample(part, P, test.id) * M).ravel()
+
+
 def _sd_column(test: Test) -> str:
     from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
 
@@ -100,7 +158,7 @@ def _residuals(tests: Sequence[Test], model: Model, names: Sequence[str],
     out = []
     for test in tests:
         values = np.atleast_2d(FORMING.simulate(test, vectorised))
-        sd = _by_measurement(value_noise, "row_sd")(test)
+        sd = value_sd(test)
         w = 1.0 / sd / math.sqrt(sd.size)
         r = (values - FORMING.measured(test)) * w
         out.append(np.where(np.isfinite(r), r, 0.0))

@@ -61,7 +61,9 @@ Per candidate (the same definitions as an effect's, ``diagnose``'s module doc):
    (the stated set-up on the case's own model), ``evidence_on_model`` the same against the
    stated set-up on the model the candidate needs (a whole blank may form a little unlike the
    mirrored quarter: that difference is not the set-up's); significant when both are
-   ``>= EVIDENCE_THRESHOLD`` (the effects' rule). Ranked by held-out error;
+   ``>= EVIDENCE_THRESHOLD`` (the effects' rule) and the fitted value lies more than
+   :data:`DISTINCT_SD` sd from the stated one (a missing effect that a set-up parameter takes
+   up by wandering within its own uncertainty names no set-up error). Ranked by held-out error;
    near-ties (``PARSIMONY``) go to the fewer parameters, then to the order of
    :data:`SETUP_PARAMETERS`. ``setup_error`` is the first if significant.
 
@@ -86,6 +88,7 @@ import numpy as np
 
 from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.compare import compare_tests, error_record, normalised_error
+from fenicsx_drape.diagnosis.forming_fit import FORMING, mirrorable, moved, on_sheet, value_sd
 from fenicsx_drape.diagnosis.forming_runs import cached, form_many
 from fenicsx_drape.errors import DrapeInputError, SolverError
 from fenicsx_drape.forming.case.format import FormingCase, broken_planes, with_overrides
@@ -125,6 +128,8 @@ FOLDS = 3
 # further run is a whole blank for a ply or an offset).
 GAIN_BELOW = 0.1
 CONFOUNDED = {"holder_force_N": "mu", "mu": "holder_force_N"}
+# A set-up error is named only when its fitted value lies this many sd from the stated one.
+DISTINCT_SD = 2.0
 
 Progress = Callable[[str], None]
 
@@ -233,10 +238,16 @@ class _Runs:
 
     def __init__(self, tests: Sequence[Test], model: Model, name: str | None):
         self.tests, self.model, self.name = list(tests), model, name
-        self.noise = {t.id: fk.noise(t) for t in self.tests}
-        self.regions = {t.id: fk.part_regions(t) for t in self.tests}
-        self.measured = {t.id: fk.measured_positions(t).ravel() for t in self.tests}
-        self.weights = {t.id: np.repeat(1.0 / fk.row_noise(t), 3) for t in self.tests}
+        # Every measurement kind as the comparison reads it: its values, its one noise
+        # function (forming_fit.value_sd), its regions.
+        self.noise = {t.id: FORMING.noise(t) for t in self.tests}
+        self.regions = {t.id: FORMING.regions(t) for t in self.tests}
+        self.measured = {t.id: np.asarray(FORMING.measured(t), float) for t in self.tests}
+        self.weights = {t.id: 1.0 / value_sd(t) for t in self.tests}
+        # Compared values per row: a grid's x, y, z; an edge with draw-in, two; else one.
+        self.per_row = {t.id: self.measured[t.id].size // max(1, t.n_rows) for t in self.tests}
+        self.size = sum(v.size for v in self.measured.values())
+        self.mirrorable = all(mirrorable(t) for t in self.tests)
         self.formed = 0  # new forming runs asked of form_many (not in its cache)
         self.known: dict[tuple[float, ...], dict[str, np.ndarray]] = {}  # values by point
         # The stated cases' common symmetry planes (a case keeps them with a ply at a
@@ -252,7 +263,7 @@ class _Runs:
         is formed in the same batch is read from that run, mirrored (module doc, 1.).
         """
         new = list(dict.fromkeys(p for p in map(tuple, points) if p not in self.known))
-        images = self._images(new) if mirror else {}
+        images = self._images(new) if mirror and self.mirrorable else {}
         for batch in ([p for p in new if p not in images], list(images)):
             for p, v in zip(batch, self._formed(batch, images)):
                 self.known[p] = v
@@ -285,14 +296,11 @@ class _Runs:
         self.formed += sum(not cached(c, m) for c, m in jobs)
         sheets = form_many(jobs)
         out: list[dict[str, np.ndarray]] = [{} for _ in points]
-        for k, (sheet, (test, shift, plane)) in enumerate(zip(sheets, reads)):
-            # The part of a mirrored set-up is the mirrored part: its point X is the
-            # image's point M X, moved by M.
-            M = np.ones(3) if plane is None else np.where(np.arange(3) == "xy".index(plane),
-                                                          -1.0, 1.0)
-            P = (fk.reference_points(test) + shift) * M[:2]
-            part = sheet if _in_part(P, sheet.planes) else sheet.full()
-            out[k // len(self.tests)][test.id] = (fk.sample(part, P, test.id) * M).ravel()
+        for k, (sheet, (test, shift, plane), (case, _)) in enumerate(zip(sheets, reads, jobs)):
+            # A force curve is read from its own run: the test on the case it was formed as.
+            formed = dataclasses.replace(test, forming_case=case, case_keys={})
+            out[k // len(self.tests)][test.id] = on_sheet(formed, sheet, self.model, shift,
+                                                          plane)
         return out
 
     def residual(self, values: dict[str, np.ndarray], rows: dict[str, np.ndarray] | None = None
@@ -302,9 +310,13 @@ class _Runs:
         for test in self.tests:
             r = (values[test.id] - self.measured[test.id]) * self.weights[test.id]
             if rows is not None:
-                r = np.where(np.repeat(rows[test.id], 3), r, 0.0)
+                r = np.where(self.by_value(test, rows[test.id]), r, 0.0)
             out.append(np.where(np.isfinite(r), r, 0.0) / math.sqrt(r.size))
         return np.concatenate(out)
+
+    def by_value(self, test: Test, rows: np.ndarray) -> np.ndarray:
+        """A mask over a test's rows as a mask over its compared values."""
+        return np.repeat(rows, self.per_row[test.id])
 
     def compare(self, values: dict[str, np.ndarray]):
         return compare_tests(self.tests, values, self.regions, self.noise)
@@ -322,10 +334,6 @@ def _mirrored(name: str | None, p: tuple[float, ...], plane: str) -> tuple[float
         a = "xy".index(plane)
         return tuple(-v if i == a else v for i, v in enumerate(p))
     return None
-
-
-def _in_part(P: np.ndarray, planes: Sequence[str]) -> bool:
-    return all(bool((P[:, {"x": 0, "y": 1}[p]] >= -1e-9).all()) for p in planes)
 
 
 # --------------------------------------------------------------------------------------------
@@ -360,7 +368,8 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     if min(costs) > (1.0 - GAIN_BELOW) * float(r0 @ r0):
         stopped = _nothing_to_gain(runs, start, r0, scanned, axes, say)
         if stopped is not None:
-            return {**stopped, "after": runs.compare(base_values), "sensitivity": change,
+            return {**stopped, "start": start, "after": runs.compare(base_values),
+                    "sensitivity": change,
                     "values": base_values, "heldout_normalised": base_ho,
                     "stated_normalised": base_ho}
     p = start.copy()
@@ -398,7 +407,7 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     # Beyond the noise: A² of pure noise is 1 ± √(2/n) over n coordinates (2 sd allowed).
     sd_fit = sd
     A, S = normalised_error(after), base_ho
-    floor = 1.0 + 2.0 * math.sqrt(2.0 / sum(3 * t.n_rows for t in runs.tests))
+    floor = 1.0 + 2.0 * math.sqrt(2.0 / runs.size)
     lack = np.abs(p - start) * math.sqrt(max(0.0, A**2 - floor) / max(S**2 - 1.0, 1e-12))
     sd = np.sqrt(sd**2 + unresolved**2 / 3.0 + lack**2)
     # 3. Held-out: each fold refits from the full fit without its rows (one Gauss-Newton
@@ -408,26 +417,37 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     masks = [{t.id: np.arange(t.n_rows) % FOLDS != b for t in runs.tests} for b in range(FOLDS)]
     steps = []
     for rows in masks:
-        keep = np.concatenate([np.repeat(rows[t.id], 3) for t in runs.tests])
+        keep = np.concatenate([runs.by_value(t, rows[t.id]) for t in runs.tests])
         step = _gauss_newton(J[keep], r[keep], name)
         steps.append(np.clip(p + step, lo, hi) - p)
     far = [b for b, step in enumerate(steps) if np.any(np.abs(step) > sd_fit)]
     formed = dict(zip(far, runs.values([p + steps[b] for b in far])))
-    predicted = {t.id: np.full(3 * t.n_rows, np.nan) for t in runs.tests}
+    predicted = {t.id: np.full(runs.measured[t.id].size, np.nan) for t in runs.tests}
     for b, step in enumerate(steps):
         values = formed.get(b) or {t.id: fitted_values[t.id] + Jv[t.id] @ step
                                    for t in runs.tests}
         own, full = runs.residual(values, masks[b]), runs.residual(fitted_values, masks[b])
         chosen = values if own @ own < full @ full else fitted_values
         for t in runs.tests:
-            held = np.repeat(~masks[b][t.id], 3)
+            held = runs.by_value(t, ~masks[b][t.id])
             predicted[t.id][held] = chosen[t.id][held]
     heldout = normalised_error(runs.compare(predicted))
     evidence = base_ho / heldout if heldout > 0 else math.inf
-    return {"untestable": False, "p": p, "sd_internal": sd, "sd_fit": sd_fit, "after": after,
+    return {"untestable": False, "p": p, "start": start, "sd_internal": sd, "sd_fit": sd_fit,
+            "after": after,
             "heldout_normalised": heldout, "evidence": evidence, "sensitivity": change,
             "values": fitted_values, "stated_normalised": base_ho,
             "folds_formed": len(far)}
+
+
+def _distinct(c: dict[str, Any]) -> bool:
+    """Whether a fitted set-up lies more than :data:`DISTINCT_SD` sd from the stated one.
+
+    A set-up error is named only when its value is told apart from the stated one: a fit
+    that lowers the error by wandering within its own uncertainty (a missing effect taken up
+    by the force, 8 ± 59 N against 100 N stated) sizes nothing.
+    """
+    return bool(np.any(np.abs(c["p"] - c["start"]) > DISTINCT_SD * c["sd_internal"]))
 
 
 def _nothing_to_gain(runs: _Runs, start: np.ndarray, r0: np.ndarray,
@@ -506,9 +526,9 @@ def _linearised(runs: _Runs, p: np.ndarray, h: np.ndarray):
 
 def _sd_of(runs: _Runs, J: np.ndarray, r: np.ndarray) -> np.ndarray:
     """The fit's sd per axis: √diag((JᵀJ)⁻¹ · max(1, χ²/dof)), residuals per coordinate."""
-    n, k = sum(3 * t.n_rows for t in runs.tests), J.shape[1]
+    n, k = runs.size, J.shape[1]
     # Undo the residuals' 1/√n (per test) to have them in noise units per coordinate.
-    scale = np.concatenate([np.full(3 * t.n_rows, math.sqrt(3 * t.n_rows)) for t in runs.tests])
+    scale = np.concatenate([np.full(v.size, math.sqrt(v.size)) for v in runs.measured.values()])
     Jn, rn = J * scale[:, None], r * scale
     try:
         cov = np.linalg.inv(Jn.T @ Jn) * max(1.0, float(rn @ rn) / max(1, n - k))
@@ -595,7 +615,9 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                        "held-out error is its error)"),
                rule=(f"significant when evidence (stated held-out / candidate held-out, on "
                      f"the forming tests) and evidence_on_model (the same with the stated "
-                     f"set-up on the model the candidate needs) are >= {rules.evidence}; "
+                     f"set-up on the model the candidate needs) are >= {rules.evidence} "
+                     f"and the fitted value lies more than {DISTINCT_SD:g} sd from the "
+                     f"stated one; "
                      f"ranked by held-out error, "
                      f"near-ties ({100 * rules.parsimony:g} %) to fewer parameters, then to the "
                      f"order {', '.join(SETUP_PARAMETERS)}"))
@@ -642,7 +664,7 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                  "evidence": base_ho / c["heldout_normalised"],
                  "evidence_on_model": c["evidence"],
                  "significant": bool(min(base_ho / c["heldout_normalised"], c["evidence"])
-                                     >= rules.evidence),
+                                     >= rules.evidence and _distinct(c)),
                  "sensitivity": c["sensitivity"],
                  "stated_on_model": c["stated_normalised"],
                  "n_parameters": len(c["p"]),
@@ -714,7 +736,8 @@ def _tied_mu(entry: dict[str, Any], c: dict[str, Any], test: Test, model: Model)
     tied = {**entry, "parameter": "mu", "stated": mu, "fitted": mu * factor, "sd": mu * sd,
             "sd_fit": mu * float(c["sd_fit"][0]),
             "confounded_with": "holder_force_N", "tied_to": "holder_force_N", "runs": 0}
-    return tied, {**c, "p": np.array([mu * factor]), "sd_internal": np.array([mu * sd])}
+    return tied, {**c, "p": np.array([mu * factor]), "start": np.array([mu]),
+                  "sd_internal": np.array([mu * sd])}
 
 
 def _planes(tests: Sequence[Test], name: str, p, model: Model) -> tuple[str, ...]:
@@ -769,13 +792,7 @@ def corrected(bundle: Bundle, name: str, p: Sequence[float], model: Model) -> Bu
     tests = []
     for test in bundle.tests:
         if test.id in named:
-            t, shift = applied(named[test.id], name, p, model)
-            if shift.any():
-                columns = dict(t.columns)
-                columns["x0_mm"] = np.asarray(columns["x0_mm"]) + shift[0]
-                columns["y0_mm"] = np.asarray(columns["y0_mm"]) + shift[1]
-                t = dataclasses.replace(t, columns=columns)
-            test = t
+            test = moved(*applied(named[test.id], name, p, model))
         tests.append(test)
     return dataclasses.replace(bundle, tests=tuple(tests))
 
