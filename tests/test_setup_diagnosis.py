@@ -168,6 +168,9 @@ class _LinearRuns:
         self.base = rng.normal(size=3 * n) + other * e_other / np.linalg.norm(e_other) * \
             np.sqrt(3 * n)
         self.d, self.n = np.asarray(d, float), 3 * n
+        # what _Runs gives of the measurements: their compared values and how many
+        self.measured = {t.id: np.zeros(3 * n) for t in self.tests}
+        self.size = 3 * n
 
     def point(self, p):
         return {"r": (self.A @ (np.asarray(p) - self.d) + self.base) / np.sqrt(self.n)}

@@ -76,6 +76,8 @@ from fenicsx_drape.diagnosis.compare import (
 )
 from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM
 from fenicsx_drape.diagnosis.kinds import Comparison, sd_column_of
+from fenicsx_drape.diagnosis.resolution import check_resolution, explained
+from fenicsx_drape.diagnosis.resolution import sentence as resolution_sentence
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
@@ -431,6 +433,11 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     base_ho = normalised_error(base_ho_cmp)
     say(f"  held-out normalised error {base_ho:.3g}")
 
+    # Resolution before physics (spec version 4): the net's own error on each measurement.
+    checked = check_resolution(data.tests, baseline, base, ADEQUATE, say)
+    resolved = explained(checked)
+    if resolved:
+        say(f"  the net explains the residual of {', '.join(sorted(resolved))}")
     groups = _consistency(details.get("coupons"), say)
     tried, untestable = [], []
     base_active = set(baseline.active_parameters())
@@ -483,7 +490,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
         heldout_cmp = data_c.compare(_heldout(data_c, refit, say))
         heldout = normalised_error(heldout_cmp)
-        evidence = _evidence(base_ho_cmp, heldout_cmp, added)
+        evidence = _evidence(base_ho_cmp, heldout_cmp, added, resolved)
         say(f"  held-out normalised error {heldout:.3g}, evidence {evidence:.3g}")
         tried.append({
             "effect": label, "effects": list(added), "acts_on": effect.acts_on,
@@ -527,10 +534,12 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
                     "the best, the one adding the fewest parameters first"),
         "missing_rule": (f"the first candidate if significant and its refit reaches "
                          f"normalised <= {ADEQUATE}"),
-        "conclusion": _groups_conclusion(groups, missing) or (
-            _conclusion(missing, best, base, pattern, optimiser, details.get("coupons"))
-            + _groups_sentence(groups)),
+        "conclusion": resolution_sentence(checked) + (
+            _groups_conclusion(groups, missing) or (
+                _conclusion(missing, best, base, pattern, optimiser, details.get("coupons"),
+                            resolved) + _groups_sentence(groups))),
         "consistency": groups,
+        "resolution": checked,
         "metrics": {label: kind_metrics(data.tests, comparisons[label], models[label])
                     for label in models} if any(KINDS[t.kind].metrics for t in data.tests)
         else {},
@@ -551,16 +560,21 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
 
 
 def _evidence(baseline: list[Comparison], candidate: list[Comparison],
-              effects: Sequence[str]) -> float:
+              effects: Sequence[str], resolved: set[str] = frozenset()) -> float:
     """Baseline / candidate held-out normalised error on the tests the effects act on.
 
     Tests of other kinds (coupons, for a forming effect) are predicted alike by both and
-    would only dilute the ratio (module doc, 6.); with none of them, all tests count.
+    would only dilute the ratio (module doc, 6.); with none of them, all tests count. The
+    measurements whose residual the net explains (``resolved``) are no evidence: with
+    nothing else, the evidence is 1.
     """
     from fenicsx_drape.effects import describe_effect
 
     kinds = {k for name in effects for k in describe_effect(name).test_kinds}
     pick = [i for i, c in enumerate(baseline) if c.kind in kinds] or range(len(baseline))
+    pick = [i for i in pick if baseline[i].id not in resolved]
+    if not pick:
+        return 1.0
     after = normalised_error([candidate[i] for i in pick])
     return normalised_error([baseline[i] for i in pick]) / after if after > 0 else math.inf
 
@@ -720,8 +734,13 @@ def _groups_sentence(groups: dict[str, Any] | None) -> str:
 
 
 def _conclusion(missing, best, base: list[Comparison], pattern: str,
-                optimiser: dict[str, Any] | None = None, coupons=None) -> str:
+                optimiser: dict[str, Any] | None = None, coupons=None,
+                resolved: set[str] = frozenset()) -> str:
     normalised = normalised_error(base)
+    rest = [c for c in base if c.id not in resolved]
+    if resolved and not missing and (not rest or normalised_error(rest) <= ADEQUATE):
+        return ("No effect is named: the residual the model leaves is its net's own "
+                "discretisation error (resolution).")
     noise = ""
     floored = [k for k, v in (coupons.noise.items() if coupons is not None else ())
                if v["source"] == "relative_floor"]

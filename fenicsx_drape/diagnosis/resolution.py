@@ -1,0 +1,132 @@
+"""Resolution before physics: the model's own discretisation error on each measurement.
+
+A model on a coarse net differs from the same model on a fine one, and a lab's measurement is
+not made on the model's net (spec version 4, "resolution before physics"). Before an effect
+is named, :func:`check_resolution` forms the fitted baseline again on a net of half the cell
+and estimates, per forming measurement, the discretisation error of the net it ran on:
+
+    e_Δ ≈ 2 · RMS(v_Δ − v_Δ/2)
+
+(Richardson's estimate for a first-order scheme: the shear of the truss is one angle per
+cell, its positions bilinear in the cells, so the error falls at least as Δ); the finer net
+keeps e_Δ/2 ≈ RMS(v_Δ − v_Δ/2) of it. The residual is **explained** by the net when refining
+brings the model nearer the measurement (the residual on the finer net is the smaller) and
+what the finer net still leaves beyond the noise, √max(0, RMSE_Δ/2² − σ²), is within the
+error that net still has, e_Δ/2: a net fine enough would remove it, and adding physics is not
+what it asks for. A residual that stays as the net is refined (a missing effect larger than
+the net's error) is not explained. The net that would resolve it is the cell ``Δ / 2^k`` at
+which the error, falling as Δ, drops below half the noise (``suggested_cell_mm``).
+
+Only measurements the baseline misses (normalised error above ``adequate``) are checked:
+the others have nothing to explain.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fenicsx_drape.diagnosis import forming_kind as fk
+from fenicsx_drape.diagnosis.forming_fit import FORMING
+from fenicsx_drape.diagnosis.forming_runs import cell_override, resolution
+from fenicsx_drape.errors import DrapeInputError, SolverError
+
+if TYPE_CHECKING:
+    from fenicsx_drape.diagnosis.kinds import Comparison
+    from fenicsx_drape.measurements.bundle import Test
+    from fenicsx_drape.model import Model
+
+ORDER = 1  # the net's order of convergence assumed by the Richardson estimate
+REFINE = 2  # the check's net: the cell divided by this
+# Cells the suggestion goes down to at most (a net of 2^4 times fewer mm per cell).
+MAX_HALVINGS = 4
+
+
+def cell_of(test: Test) -> float:
+    """The unit cell (mm) the test's runs are formed on."""
+    return float(cell_override() or fk.forming_case_of(test).blank.cell_mm)
+
+
+def check_resolution(tests: Sequence[Test], model: Model, comparisons: Sequence[Comparison],
+                     adequate: float, progress: Callable[[str], None] | None = None
+                     ) -> list[dict[str, Any]]:
+    """The spec's ``resolution`` entries of every forming measurement the baseline misses.
+
+    Args:
+        tests: The compared tests (forming measurements are checked, coupons are not).
+        model: The fitted baseline.
+        comparisons: The baseline's comparisons with ``tests`` (same order).
+        adequate: A measurement within this many times its noise is not checked.
+        progress: Called with a line of text per net.
+
+    Returns:
+        One entry per checked measurement: ``measurement, cell_mm, discretisation_error,
+        residual, fine_cell_mm, fine_residual, noise, unit, explains, suggested_cell_mm``
+        (and ``reason`` when the finer net could not be formed).
+    """
+    say = progress or (lambda line: None)
+    checked = [(t, c) for t, c in zip(tests, comparisons)
+               if t.kind == "forming" and c.normalised > adequate]
+    by_cell: dict[float, list] = {}
+    for t, c in checked:
+        by_cell.setdefault(cell_of(t), []).append((t, c))
+    out = []
+    for cell, pairs in sorted(by_cell.items()):
+        fine = cell / REFINE
+        say(f"resolution: the baseline again on {fine:g} mm cells (it ran on {cell:g} mm) "
+            f"for {len(pairs)} measurement(s)")
+        for t, c in pairs:
+            entry = {"measurement": t.id, "cell_mm": cell, "residual": c.rmse,
+                     "noise": c.noise, "unit": c.unit}
+            try:
+                with resolution(fine):
+                    values = np.asarray(FORMING.simulate(t, model), float)
+            except (SolverError, DrapeInputError) as err:
+                out.append({**entry, "discretisation_error": None, "explains": False,
+                            "suggested_cell_mm": None,
+                            "reason": f"the {fine:g} mm net could not be formed: {err}"})
+                continue
+            coarse, measured = np.asarray(c.simulated, float), np.asarray(c.measured, float)
+            left = float(np.sqrt(np.nanmean((values - coarse) ** 2)))  # e_Δ/2
+            error = REFINE**ORDER / (REFINE**ORDER - 1) * left  # e_Δ
+            fine_residual = float(np.sqrt(np.nanmean((values - measured) ** 2)))
+            beyond = math.sqrt(max(0.0, fine_residual**2 - c.noise**2))
+            out.append({**entry, "discretisation_error": error, "fine_cell_mm": fine,
+                        "fine_residual": fine_residual,
+                        "explains": bool(fine_residual < c.rmse and beyond <= left),
+                        "suggested_cell_mm": suggested_cell(cell, error, c.noise)})
+    return out
+
+
+def suggested_cell(cell_mm: float, error: float, noise: float) -> float:
+    """The cell at which a discretisation error falls below half the noise.
+
+    The cell ``Δ / 2^k`` at which ``error`` at Δ, falling as Δ^ORDER, is below half the
+    noise (at most :data:`MAX_HALVINGS` halvings; Δ itself when already below).
+    """
+    k = 0
+    while error / 2 ** (ORDER * k) > noise / 2 and k < MAX_HALVINGS:
+        k += 1
+    return cell_mm / 2**k
+
+
+def explained(entries: Sequence[dict[str, Any]]) -> set[str]:
+    """The ids of the measurements whose residual the net explains."""
+    return {e["measurement"] for e in entries if e["explains"]}
+
+
+def sentence(entries: Sequence[dict[str, Any]]) -> str:
+    """The conclusion's words on the measurements the net explains ("" when none)."""
+    hits = [e for e in entries if e["explains"]]
+    if not hits:
+        return ""
+    parts = [f"{e['measurement']} (residual {e['residual']:.3g} {e['unit']}, the "
+             f"{e['cell_mm']:g} mm net's own error {e['discretisation_error']:.3g} {e['unit']})"
+             for e in hits]
+    cell = min(e["suggested_cell_mm"] for e in hits)
+    return (f"Resolution: the model's net explains the residual of {', '.join(parts)}; no "
+            f"effect is named on that evidence. Compare again on {cell:g} mm cells "
+            f"(--forming-cell-mm {cell:g}) to resolve it. ")
