@@ -87,3 +87,27 @@ def test_from_nodes_rejects_scattered_points():
 
     with pytest.raises(DrapeInputError, match="not a structured"):
         FormedGrid.from_nodes(X[:-1], X[:-1], 10.0, True)
+
+
+def test_shear_on_a_quarters_mirror_lines_is_the_whole_parts():
+    """A symmetric part's shear is 0 on its symmetry planes, the quarter's nodes there too.
+
+    u_x = c x y², u_y = c x² y is symmetric in both planes; its shear (odd in x and in y) is 0
+    on them. The quarter's nodes on a plane see the mirrored cells as the whole part does, not
+    only the one cell beside the plane (a drawn grid of a quarter model written by drape form
+    would tell a lab measuring along a symmetry line that its part disagrees).
+    """
+    c = 2e-5
+    quarter = flat(half=60.0)
+    X, Y = quarter[..., 0], quarter[..., 1]
+    x = quarter + np.stack([c * X * Y**2, c * X**2 * Y, 0 * X], axis=-1)
+    part = FormedGrid(quarter, x, True)
+    γ = part.shear_nodes()
+    np.testing.assert_allclose(γ[0, :], 0.0, atol=1e-12)
+    np.testing.assert_allclose(γ[:, 0], 0.0, atol=1e-12)
+    assert np.abs(part.shear_deg()[0, 1:]).max() > 0.5  # the cell beside the plane is sheared
+    whole = part.full().shear_nodes()
+    np.testing.assert_allclose(γ, whole[-γ.shape[0]:, -γ.shape[1]:], atol=1e-12)
+    table = part.drawn_grid(10.0)
+    on_plane = table["x0_mm"] == 0.0
+    np.testing.assert_allclose(table["shear_deg"][on_plane], 0.0, atol=1e-12)

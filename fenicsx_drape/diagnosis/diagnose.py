@@ -78,6 +78,7 @@ from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM
 from fenicsx_drape.diagnosis.kinds import Comparison, sd_column_of
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained
 from fenicsx_drape.diagnosis.resolution import sentence as resolution_sentence
+from fenicsx_drape.diagnosis.setup import DISTINCT_SD as SETUP_DISTINCT_SD
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
@@ -546,6 +547,8 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         "notes": list(data.notes),
         "seconds": time.perf_counter() - start,
     })
+    if missing and missing.get("setup_refitted") and stage and stage["setup_error"]:
+        _setup_with_effect(stage, missing)
     add_setup(report, stage)
     if missing and missing.get("setup_refitted"):
         from fenicsx_drape.diagnosis.setup import value_text
@@ -553,10 +556,32 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         j = missing["setup_refitted"]
         report["conclusion"] += (f" With {missing['effect']} added, {j['parameter']} is fitted "
                                  f"again: {value_text(j['fitted'])}.")
+        if stage and stage.get("setup_withdrawn"):
+            report["conclusion"] += (f" That is within {SETUP_DISTINCT_SD:g} sd of the stated "
+                                     f"set-up: the effect, not the set-up, was missing "
+                                     f"(setup_error withdrawn).")
     report.models, report.comparisons = models, comparisons
     report.tests = data.tests
     say(report["conclusion"])
     return report
+
+
+def _setup_with_effect(stage: dict[str, Any], missing: dict[str, Any]) -> None:
+    """The set-up error as it stands once the missing effect is in.
+
+    A missing effect can be taken up by a set-up parameter when the set-up is fitted alone
+    (a holding force that lowers a hidden friction's error); refitted with the effect, it
+    goes back to the stated value. The set-up entry records its value with the effect
+    (``fitted_with_effect``), and the set-up error is withdrawn when that value lies within
+    :data:`SETUP_DISTINCT_SD` of its sd from the stated one.
+    """
+    entry, j = stage["setup"][0], missing["setup_refitted"]
+    entry["fitted_with_effect"] = j["fitted"]
+    fitted, stated, sd = (np.atleast_1d(np.asarray(v, float)) for v in
+                          (j["fitted"], entry["stated"], entry["sd"]))
+    if np.all(np.abs(fitted - stated) <= SETUP_DISTINCT_SD * sd):
+        stage["setup_error"] = None
+        stage["setup_withdrawn"] = entry["parameter"]
 
 
 def _evidence(baseline: list[Comparison], candidate: list[Comparison],

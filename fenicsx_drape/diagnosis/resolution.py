@@ -15,7 +15,7 @@ what the finer net still leaves beyond the noise, √max(0, RMSE_Δ/2² − σ²
 error that net still has, e_Δ/2: a net fine enough would remove it, and adding physics is not
 what it asks for. A residual that stays as the net is refined (a missing effect larger than
 the net's error) is not explained. The net that would resolve it is the cell ``Δ / 2^k`` at
-which the error, falling as Δ, drops below half the noise (``suggested_cell_mm``).
+which the error, falling as Δ, drops below the noise (``suggested_cell_mm``).
 
 Only measurements the baseline misses (normalised error above ``adequate``) are checked:
 the others have nothing to explain.
@@ -102,13 +102,13 @@ def check_resolution(tests: Sequence[Test], model: Model, comparisons: Sequence[
 
 
 def suggested_cell(cell_mm: float, error: float, noise: float) -> float:
-    """The cell at which a discretisation error falls below half the noise.
+    """The cell at which a discretisation error falls below the noise.
 
-    The cell ``Δ / 2^k`` at which ``error`` at Δ, falling as Δ^ORDER, is below half the
+    The cell ``Δ / 2^k`` at which ``error`` at Δ, falling as Δ^ORDER, is below the
     noise (at most :data:`MAX_HALVINGS` halvings; Δ itself when already below).
     """
     k = 0
-    while error / 2 ** (ORDER * k) > noise / 2 and k < MAX_HALVINGS:
+    while error / 2 ** (ORDER * k) > noise and k < MAX_HALVINGS:
         k += 1
     return cell_mm / 2**k
 

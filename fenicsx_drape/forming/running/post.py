@@ -208,7 +208,15 @@ class FormedGrid:
         return np.where(self.present, w, np.nan)
 
     def shear_nodes(self) -> np.ndarray:
-        """Per node, the mean shear angle (deg) of the cells around it."""
+        """Per node, the mean shear angle (deg) of the cells around it.
+
+        The cells of the whole part: on a symmetry plane of a quarter or half model the
+        mirrored cells count too (their signed shear is the opposite, so the field is 0 on
+        the plane, as the whole part's is), not only the one cell beside the plane.
+        """
+        if self.planes:
+            n_i, n_j = self.X.shape[:2]
+            return self.full().shear_nodes()[-n_i:, -n_j:]  # the part: the last rows, columns
         γ = self.shear_deg()
         ok = np.isfinite(γ)
         γ = np.where(ok, γ, 0.0)
