@@ -82,6 +82,38 @@ def test_a_hemisphere_test_gets_its_case():
     assert t.forming_case.planes == ()
 
 
+def test_a_set_up_key_means_the_same_on_a_hemisphere_test_and_on_a_case_test(tmp_path):
+    """ply_angle_deg and the offsets turn and move the part whether the test names its case
+    or says geometry = "hemisphere" (they were once kept as a condition and ignored there)."""
+    hemisphere = Path(__file__).parents[1] / "meshes" / "hemisphere"
+    cases = {}
+    for name, where in (("h", 'geometry = "hemisphere"\nsheet_mm = 240.0\n'
+                               "holder_force_N = 133.0\nduration_s = 40.0\ntravel_mm = 80.0"),
+                        ("c", 'case = "case/case.toml"')):
+        folder = tmp_path / name
+        (folder / "case").mkdir(parents=True)
+        (folder / "case" / "case.toml").write_text((hemisphere / "case.toml").read_text())
+        write_bundle(Bundle(name=name, tests=(grid_test(None),)), folder)
+        text = (folder / "bundle.toml").read_text()
+        text = text.replace('case = "case/case.toml"', where)
+        text = text.replace('kind = "forming"', 'kind = "forming"\nply_angle_deg = 4.0\n'
+                            "blank_offset_mm = [3.0, -1.0]")
+        (folder / "bundle.toml").write_text(text)
+        from fenicsx_drape.forming.case.format import case_for_test
+
+        (test,) = st.forming_tests(load_bundle(folder, read_case=case_for_test))
+        cases[name] = fk.forming_case_of(test)
+        assert test.conditions == {}
+    for case in cases.values():
+        assert case.blank.ply_angle_deg == 4.0
+        assert tuple(case.blank.origin_mm) == (3.0, -1.0)
+        assert case.planes == ()
+    bad = tmp_path / "h" / "bundle.toml"
+    bad.write_text(bad.read_text().replace("ply_angle_deg = 4.0", 'ply_angle_deg = "four"'))
+    with pytest.raises(BundleError, match="ply_angle_deg"):
+        load_bundle(tmp_path / "h")
+
+
 def test_the_report_and_the_ledger_record_the_set_up(tmp_path):
     from fenicsx_drape.diagnosis.ledger import history, table
 

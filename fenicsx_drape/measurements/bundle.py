@@ -75,6 +75,9 @@ CASE_DESCRIPTIVE_KEYS = ("grid_mm",)
 # The set-up keys a forming test naming its case gives as [x, y] in mm (spec version 3: the
 # blank's or the punch's displacement from where the case puts it).
 PAIR_KEYS = ("blank_offset_mm", "tool_offset_mm")
+# The set-up a forming test may state, on a hemisphere test as on a test naming its case (the
+# case format's set-up overrides: a turned ply, a blank or punch placed off-centre).
+SETUP_OVERRIDE_KEYS = ("ply_angle_deg", *PAIR_KEYS)
 
 # A reader of forming cases (the forming layer's ``case_for_test``, passed to
 # :func:`load_bundle`): ``read_case(case_path, keys) -> (case, used)`` reads and checks the
@@ -498,6 +501,15 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
                 setup[key] = [float(v) for v in value]
             else:
                 setup[key] = float(value)
+        elif kind == "forming" and not names_case and key in SETUP_OVERRIDE_KEYS:
+            if key in PAIR_KEYS and not _is_pair(value):
+                problems.add(fname, at, f"{label}: {key} = {value!r} must be [x, y]: two "
+                                        "finite numbers (mm)")
+            elif key not in PAIR_KEYS and not (_is_number(value) and math.isfinite(value)):
+                problems.add(fname, at, f"{label}: {key} = {value!r} must be a finite number "
+                                        "(degrees)")
+            else:
+                setup[key] = [float(v) for v in value] if key in PAIR_KEYS else float(value)
         elif key in SETUP_KEYS[kind] and (not names_case or key in CASE_DESCRIPTIVE_KEYS):
             if not (_is_number(value) and 0 < value < math.inf):
                 problems.add(fname, at, f"{label}: {key} = {value!r} must be a positive number")
