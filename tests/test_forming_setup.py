@@ -248,3 +248,30 @@ def test_a_cut_back_does_not_make_the_formed_part_jump_with_the_set_up():
               for s, c in zip(sheets, cases)]
     assert abs(mean_x[1] - (mean_x[0] + mean_x[2]) / 2) < 0.002
     assert 0.01 < mean_x[2] - mean_x[0] < 0.06  # the part moves with the blank
+
+
+def test_a_stated_force_means_the_same_press_on_a_quarter_and_on_the_whole_sheet():
+    """The hemisphere's holder shares its force over the model's own nodes ("model", the
+    paper's reading kept): the whole sheet formed for a set-up is pressed as the quarter
+    was (its force × 4), so the two agree, as a symmetric part must (they were 12° of
+    maximum shear apart at the same force_N)."""
+    hemisphere = Path(__file__).parents[1] / "meshes" / "hemisphere" / "case.toml"
+    quarter = load_case(hemisphere, cell_mm=20.0, step_mm=4.0)
+    whole = with_overrides(quarter, symmetry=[])
+    assert quarter.holder.force_share == "model"
+    assert whole.holder.force_N == pytest.approx(4.0 * quarter.holder.force_N)
+    half = with_overrides(quarter, symmetry=["x"])
+    assert half.holder.force_N == pytest.approx(2.0 * quarter.holder.force_N)
+    # a share over the symmetric part is already the whole sheet's force: unchanged
+    symmetric = with_overrides(quarter, holder_force_share="symmetric_part")
+    assert with_overrides(symmetric, symmetry=[]).holder.force_N == symmetric.holder.force_N
+
+    from fenicsx_drape.diagnosis.forming_runs import form_many
+    from fenicsx_drape.model import default_model
+
+    a, b = form_many([(quarter, default_model()), (whole, default_model())])
+    γa, γb = np.nanmax(np.abs(a.full().shear_deg())), np.nanmax(np.abs(b.shear_deg()))
+    assert abs(γa - γb) < 1.0, (γa, γb)
+    P = np.column_stack([a.full().X[..., 0].ravel(), a.full().X[..., 1].ravel()])
+    d = a.full().sample(P) - b.sample(P)
+    assert np.sqrt(np.nanmean(d ** 2)) < 0.5  # mm

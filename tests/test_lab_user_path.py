@@ -67,7 +67,7 @@ def stl_case(folder: Path) -> Path:
         text = text.replace(f'name = "{name}"\nrole = "{name}"\ngeometry = "builtin:hemisphere"\n'
                             f"parameters = {{ {TOOLS} }}",
                             f'name = "{name}"\nrole = "{name}"\ngeometry = "{name}.stl"')
-    assert text.count(".stl") == 3 and "builtin" not in text
+    assert text.count(".stl") == 3 and "builtin:" not in text
     # The punch's travel as the builtin tools' (travel_mm): a motion table on the STL punch.
     text = text.replace('geometry = "punch.stl"', 'geometry = "punch.stl"\n'
                         '[tool.motion]\ntime_s = [0.0, 20.0]\nz_mm = [0.0, 55.0]')

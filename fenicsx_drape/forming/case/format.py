@@ -763,6 +763,10 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     removes that plane (the model needs the part of the blank the plane would mirror) unless
     ``symmetry`` is given too; :func:`broken_planes` says which.
 
+    A holder whose ``force_share`` is ``"model"`` (the force shared over the model's own nodes)
+    keeps its press when planes are dropped: its force is doubled per plane dropped, so that
+    the whole blank formed for a set-up is held as the stated quarter was.
+
     When a case symmetric in both planes loses one (``symmetry``, a set-up), the net's node
     at ``origin_mm`` (the blank's centre; it moves with ``blank_offset_mm``) is held in plane
     (``hold_origin``, unless given), as the planes held it. Without it a sheet on
@@ -847,6 +851,12 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
             holder, force_N=float(overrides.get("holder_force_N", holder.force_N)),
             mu=overrides.get("holder_mu", holder.mu),
             force_share=overrides.get("holder_force_share", holder.force_share))
+        if holder.force_share == "model" and "holder_force_share" not in overrides:
+            # "model" shares F over the model's own nodes: the same press on a model with
+            # fewer symmetry planes keeps each node's force, F × 2 per plane dropped (a whole
+            # blank formed for a set-up is pressed as the stated quarter was).
+            dropped = len(case.blank.symmetry) - len(blank.symmetry)
+            holder = dataclasses.replace(holder, force_N=holder.force_N * 2.0**dropped)
     params = {k: float(v) for k, v in overrides.items() if k in param_names | builtin_names}
     if "travel_mm" in overrides:
         travel = float(overrides["travel_mm"])
