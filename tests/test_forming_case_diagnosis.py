@@ -25,41 +25,7 @@ from fenicsx_drape.measurements.bundle import BundleError, Test, load_bundle, wr
 ROOT = Path(__file__).resolve().parents[1]
 TOOLS = ("punch_radius_mm = 40.0, fillet_radius_mm = 15.0, shoulder_radius_mm = 58.0, "
          "holder_opening_mm = 120.0, travel_mm = 55.0")
-OCTAGON = f"""# An octagonal blank (half model) over a smaller builtin hemisphere punch and die.
-[case]
-name = "octagon"
-duration_s = 20.0
-step_mm = 2.0
-
-[blank]
-outline = "polygon"
-points_mm = [[-40.0, -95.0], [40.0, -95.0], [95.0, -40.0], [95.0, 40.0], [40.0, 95.0],
-             [-40.0, 95.0], [-95.0, 40.0], [-95.0, -40.0]]
-cell_mm = 20.0
-symmetry = ["x"]
-
-[holder]
-tool = "holder"
-force_N = 100.0
-
-[[tool]]
-name = "punch"
-role = "punch"
-geometry = "builtin:hemisphere"
-parameters = {{ {TOOLS} }}
-
-[[tool]]
-name = "die"
-role = "die"
-geometry = "builtin:hemisphere"
-parameters = {{ {TOOLS} }}
-
-[[tool]]
-name = "holder"
-role = "holder"
-geometry = "builtin:hemisphere"
-parameters = {{ {TOOLS} }}
-"""
+OCTAGON = (ROOT / "meshes" / "octagon" / "case.toml").read_text()
 NO_BUCKLING = ('effects = ["rate_dependence", "strain_dependent_viscosity", "decrimping", '
                '"holder_friction"]\n')
 
