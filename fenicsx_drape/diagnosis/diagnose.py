@@ -46,6 +46,21 @@ The procedure follows the diagnosis contract of ``docs/measurements.md``:
    left out of the baseline's coupon fit in turn and predicted by the rest
    (:mod:`fenicsx_drape.calibration.consistency`): ``consistency`` in the report, and the
    conclusion says a lab offset, size effect or kind mismatch beside the physics.
+8. **Resolution before physics** (spec version 4, :mod:`~fenicsx_drape.diagnosis.
+   resolution`). Before any effect is named, each forming measurement the baseline misses is
+   compared with the same model on half the cell; a measurement whose residual the net
+   explains is no evidence for an effect (:func:`_evidence` leaves it out), and the conclusion
+   says which net would resolve it.
+
+**The stages, in the order** :func:`diagnose` **runs them**, each a function with its inputs
+and its result: the set-up stage (:func:`~fenicsx_drape.diagnosis.setup.setup_stage`, on the
+forming tests as given: the stated set-up's own fits are its baseline, and the best set-up is
+applied to the bundle for what follows); prepare (:func:`_prepare`: each test's noise from its
+kind's one noise function, its regions, the held-out folds); the baseline with its outliers
+left out (:func:`_baseline_stage`); resolution
+(:func:`~fenicsx_drape.diagnosis.resolution.check_resolution`); the effects, one candidate at a
+time (:func:`_try_effect`); the report and its decision (:func:`_report`). The confirmation on
+a finer net is ``drape diagnose --confirm-cell-mm`` (:func:`confirm`).
 """
 
 from __future__ import annotations
@@ -400,27 +415,63 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         ``ranking``, ``trends``, ``conclusion``, ``notes`` and ``seconds``.
     """
     from fenicsx_drape.calibration.coupons import declare_noise
-    from fenicsx_drape.diagnosis.compare import kind_metrics
-    from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS, add_setup, setup_stage
-    from fenicsx_drape.effects import describe_effect
+    from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS, setup_stage
 
     start = time.perf_counter()
     say = progress or (lambda line: None)
-    # Set-up before physics (spec version 3): the best set-up fitted, then the effects.
+    # 1. Set-up before physics (spec version 3): the best set-up fitted, then the effects.
+    # It runs on the bundle as given (the stated set-up's own fits are its baseline).
     stage, bundle = setup_stage(bundle, model, SETUP_PARAMETERS if setup is None
                                 and candidates is None else setup, setup_rules(), say)
+    # 2. Prepare: each test's noise from its kind's one noise function, regions, folds.
     data = _prepare(declare_noise(bundle, model.noise))
+    # 3. Baseline, and 4. outliers left out of it.
+    base = _baseline_stage(data, model, bundle.path, say)
+    # 5. Resolution before physics (spec version 4): the net's own error on each measurement.
+    checked = check_resolution(base.data.tests, base.model, base.compared, ADEQUATE, say)
+    resolved = explained(checked)
+    if resolved:
+        say(f"  the net explains the residual of {', '.join(sorted(resolved))}")
+    # 6. Effects: every candidate refitted, judged on held-out rows.
+    tried, untestable = [], []
+    for name in candidate_names(model):
+        if candidates is None or name in candidates:
+            entry = _try_effect(name, model, base, stage, resolved, say)
+            (untestable if "reason" in entry else tried).append(entry)
+    # 7. The report (the confirmation on a finer net is drape diagnose's --confirm-cell-mm).
+    report = _report(bundle, base, tried, untestable, stage, checked, resolved, say)
+    report["seconds"] = time.perf_counter() - start
+    say(report["conclusion"])
+    return report
+
+
+@dataclasses.dataclass
+class _Base:
+    """The baseline stage's result: the model fitted as given, on the bundle less outliers."""
+
+    data: _Data  # the bundle compared (without the outliers' rows)
+    model: Model  # fitted
+    compared: list[Comparison]
+    heldout: list[Comparison]  # every row predicted by the fold that held it out
+    outliers: list[dict[str, Any]]
+    error_with_outliers: dict[str, Any]
+    optimiser: dict[str, Any]
+    details: dict[str, Any]  # the coupon fit's (optimiser, noise notes, groups)
+
+
+def _baseline_stage(data: _Data, model: Model, path, say: Progress) -> _Base:
+    """The model as given fitted to the bundle, its outliers left out, its held-out error."""
     say(f"baseline ({', '.join(model.effects) or 'no effects'}): fitting (global stage)")
     details: dict[str, Any] = {}
     baseline = _fit(data.bundle, model, max_iterations=BASELINE_ITERATIONS, from_features=True,
                     details=details)
     optimiser = optimiser_record(details.get("coupons"))
     say(f"  {optimiser['statement']}")
-    base = data.compare(simulate(data.tests, baseline))
+    compared = data.compare(simulate(data.tests, baseline))
     # Bad and odd rows (spec version 3): one row never decides a diagnosis. The rows beyond
     # OUTLIER_SD robust sd after the fit are listed and left out; the baseline is refitted.
-    outliers = find_outliers(base, data.tests, bundle.path)
-    error_with = error_record(base)
+    outliers = find_outliers(compared, data.tests, path)
+    error_with = error_record(compared)
     if outliers:
         say(f"  {len(outliers)} outlier row(s) ("
             + ", ".join(f"{o['file']}:{o['line']}" for o in outliers[:5])
@@ -428,103 +479,111 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         data = _prepare(_without_outliers(data.bundle, outliers))
         baseline = _fit(data.bundle, model, max_iterations=BASELINE_ITERATIONS,
                         from_features=True, details=details)
-        base = data.compare(simulate(data.tests, baseline))
-    say(f"  normalised error {normalised_error(base):.3g}; held-out folds")
-    base_ho_cmp = data.compare(_heldout(data, baseline, say))
-    base_ho = normalised_error(base_ho_cmp)
-    say(f"  held-out normalised error {base_ho:.3g}")
+        compared = data.compare(simulate(data.tests, baseline))
+    say(f"  normalised error {normalised_error(compared):.3g}; held-out folds")
+    heldout = data.compare(_heldout(data, baseline, say))
+    say(f"  held-out normalised error {normalised_error(heldout):.3g}")
+    return _Base(data, baseline, compared, heldout, outliers, error_with, optimiser, details)
 
-    # Resolution before physics (spec version 4): the net's own error on each measurement.
-    checked = check_resolution(data.tests, baseline, base, ADEQUATE, say)
-    resolved = explained(checked)
-    if resolved:
-        say(f"  the net explains the residual of {', '.join(sorted(resolved))}")
-    groups = _consistency(details.get("coupons"), say)
-    tried, untestable = [], []
+
+def _try_effect(name: str, model: Model, base: _Base, stage: dict[str, Any] | None,
+                resolved: set[str], say: Progress) -> dict[str, Any]:
+    """One candidate effect: its untestable entry, or its refit, held-out error and evidence."""
+    from fenicsx_drape.effects import describe_effect
+
+    data, baseline = base.data, base.model
+    effect = describe_effect(name)
+    prerequisites = tuple(p for p in effect.prerequisites if p not in model.effects)
+    added = (*prerequisites, name)
+    label = "+".join(added)
+    try:
+        reference = baseline.with_effects(*prerequisites)
+        start_model = baseline.with_effects(*added)
+    except DrapeInputError as err:
+        return {"effect": label, "reason": f"cannot be added: {err}"}
+    change, per_test = _sensitivity(data, reference, start_model)
+    if change < UNTESTABLE_BELOW:
+        say(f"candidate {label}: untestable (change {change:.2g} × noise)")
+        return {"effect": label, "effects": list(added),
+                "reason": _untestable_reason(effect, data, change, per_test),
+                "sensitivity": change}
+    say(f"candidate {label}: refitting")
+    names = _refit_parameters(start_model, name)
+    # Its own parameters: those it brings that the baseline does not use.
     base_active = set(baseline.active_parameters())
-    for name in candidate_names(model):
-        if candidates is not None and name not in candidates:
-            continue
-        effect = describe_effect(name)
-        prerequisites = tuple(p for p in effect.prerequisites if p not in model.effects)
-        added = (*prerequisites, name)
-        label = "+".join(added)
-        try:
-            reference = baseline.with_effects(*prerequisites)
-            start_model = baseline.with_effects(*added)
-        except DrapeInputError as err:
-            untestable.append({"effect": label, "reason": f"cannot be added: {err}"})
-            continue
-        change, per_test = _sensitivity(data, reference, start_model)
-        if change < UNTESTABLE_BELOW:
-            untestable.append({"effect": label, "effects": list(added),
-                               "reason": _untestable_reason(effect, data, change, per_test),
-                               "sensitivity": change})
-            say(f"candidate {label}: untestable (change {change:.2g} × noise)")
-            continue
-        say(f"candidate {label}: refitting")
-        names = _refit_parameters(start_model, name)
-        # Its own parameters: those it brings that the baseline does not use.
-        own = [p for p in names if p not in base_active
-               and any(p in describe_effect(a).parameters for a in added)]
-        best_start = _best_start(data, start_model, own, names)
-        refit = _no_worse(data, _fit(data.bundle, best_start, parameters=names,
-                                     max_iterations=REFIT_ITERATIONS), best_start)
-        after = data.compare(simulate(data.tests, refit))
-        joint, data_c = None, data
-        if stage and stage.get("best") and normalised_error(after) < normalised_error(base):
-            # The set-up fitted again with the effect, then the effect again at that set-up,
-            # in turn (a set-up error and an effect can act alike).
-            alone = (refit, after)
-            for _ in range(SETUP_ROUNDS):
-                again, data_c = _with_setup_refitted(stage, refit, data_c, model.noise,
-                                                     outliers, joint, say)
-                if again is None:
-                    break
-                joint = again
-                refit = _no_worse(data_c, _fit(data_c.bundle, refit, parameters=names,
-                                               max_iterations=REFIT_ITERATIONS), refit)
-            after = data_c.compare(simulate(data_c.tests, refit))
-            if normalised_error(after) > normalised_error(alone[1]):
-                # The rounds ended worse than the effect at the set-up fitted alone: keep that.
-                (refit, after), joint, data_c = alone, None, data
-        say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
-        heldout_cmp = data_c.compare(_heldout(data_c, refit, say))
-        heldout = normalised_error(heldout_cmp)
-        evidence = _evidence(base_ho_cmp, heldout_cmp, added, resolved)
-        say(f"  held-out normalised error {heldout:.3g}, evidence {evidence:.3g}")
-        tried.append({
-            "effect": label, "effects": list(added), "acts_on": effect.acts_on,
-            "summary": effect.summary,
-            "parameters": {p: float(refit.parameters[p]) for p in own},
-            "error_after": error_record(after), "heldout_normalised": heldout,
-            "evidence": evidence, "significant": bool(evidence >= EVIDENCE_THRESHOLD),
-            "sensitivity": change, "where_after": where(after)[:3],
-            **({"setup_refitted": {k: v for k, v in joint.items() if k != "p"}}
-               if joint else {}),
-            "_n_parameters": len(own), "_after": after, "_model": refit,
-        })
+    own = [p for p in names if p not in base_active
+           and any(p in describe_effect(a).parameters for a in added)]
+    best_start = _best_start(data, start_model, own, names)
+    refit = _no_worse(data, _fit(data.bundle, best_start, parameters=names,
+                                 max_iterations=REFIT_ITERATIONS), best_start)
+    after = data.compare(simulate(data.tests, refit))
+    joint, data_c = None, data
+    if stage and stage.get("best") and normalised_error(after) < normalised_error(
+            base.compared):
+        # The set-up fitted again with the effect, then the effect again at that set-up,
+        # in turn (a set-up error and an effect can act alike).
+        alone = (refit, after)
+        for _ in range(SETUP_ROUNDS):
+            again, data_c = _with_setup_refitted(stage, refit, data_c, model.noise,
+                                                 base.outliers, joint, say)
+            if again is None:
+                break
+            joint = again
+            refit = _no_worse(data_c, _fit(data_c.bundle, refit, parameters=names,
+                                           max_iterations=REFIT_ITERATIONS), refit)
+        after = data_c.compare(simulate(data_c.tests, refit))
+        if normalised_error(after) > normalised_error(alone[1]):
+            # The rounds ended worse than the effect at the set-up fitted alone: keep that.
+            (refit, after), joint, data_c = alone, None, data
+    say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
+    heldout_cmp = data_c.compare(_heldout(data_c, refit, say))
+    heldout = normalised_error(heldout_cmp)
+    evidence = _evidence(base.heldout, heldout_cmp, added, resolved)
+    say(f"  held-out normalised error {heldout:.3g}, evidence {evidence:.3g}")
+    return {
+        "effect": label, "effects": list(added), "acts_on": effect.acts_on,
+        "summary": effect.summary,
+        "parameters": {p: float(refit.parameters[p]) for p in own},
+        "error_after": error_record(after), "heldout_normalised": heldout,
+        "evidence": evidence, "significant": bool(evidence >= EVIDENCE_THRESHOLD),
+        "sensitivity": change, "where_after": where(after)[:3],
+        **({"setup_refitted": {k: v for k, v in joint.items() if k != "p"}} if joint else {}),
+        "_n_parameters": len(own), "_after": after, "_model": refit,
+    }
+
+
+def _report(bundle: Bundle, base: _Base, tried: list[dict[str, Any]],
+            untestable: list[dict[str, Any]], stage: dict[str, Any] | None,
+            checked: list[dict[str, Any]], resolved: set[str], say: Progress) -> Report:
+    """The contract's report from the stages' results: the decision, and its words."""
+    from fenicsx_drape.diagnosis.compare import kind_metrics
+    from fenicsx_drape.diagnosis.setup import add_setup, value_text
+
+    data, compared = base.data, base.compared
+    coupons = base.details.get("coupons")
+    groups = _consistency(coupons, say)
+    base_ho = normalised_error(base.heldout)
     ranked = rank(tried)
     best = ranked[0] if ranked else None
     missing = None
     if best and best["significant"] and best["error_after"]["normalised"] <= ADEQUATE:
         missing = best
-    pattern = _pattern(base)
-    models, comparisons = {"baseline": baseline}, {"baseline": base}
+    pattern = _pattern(compared)
+    models, comparisons = {"baseline": base.model}, {"baseline": compared}
     for c in ranked:
-        c["explanation"] = _explain(c, pattern, normalised_error(base), base_ho)
+        c["explanation"] = _explain(c, pattern, normalised_error(compared), base_ho)
         models[c["effect"]], comparisons[c["effect"]] = c.pop("_model"), c.pop("_after")
         del c["_n_parameters"]
     report = Report({
         "contract": CONTRACT,
         "bundle": bundle.name,
-        "baseline": {**model_record(baseline), "error": error_record(base),
-                     "heldout_normalised": base_ho, "optimiser": optimiser},
-        "noise_floor": noise_record(base) | _noise_notes(details.get("coupons")),
-        "outliers": outliers,
-        "error_with_outliers": error_with,
-        "where": where(base),
-        "trends": trends(base),
+        "baseline": {**model_record(base.model), "error": error_record(compared),
+                     "heldout_normalised": base_ho, "optimiser": base.optimiser},
+        "noise_floor": noise_record(compared) | _noise_notes(coupons),
+        "outliers": base.outliers,
+        "error_with_outliers": base.error_with_outliers,
+        "where": where(compared),
+        "trends": trends(compared),
         "candidates": ranked,
         "untestable": untestable,
         "missing_effect": missing["effect"] if missing else None,
@@ -537,7 +596,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
                          f"normalised <= {ADEQUATE}"),
         "conclusion": resolution_sentence(checked) + (
             _groups_conclusion(groups, missing) or (
-                _conclusion(missing, best, base, pattern, optimiser, details.get("coupons"),
+                _conclusion(missing, best, compared, pattern, base.optimiser, coupons,
                             resolved) + _groups_sentence(groups))),
         "consistency": groups,
         "resolution": checked,
@@ -545,14 +604,11 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
                     for label in models} if any(KINDS[t.kind].metrics for t in data.tests)
         else {},
         "notes": list(data.notes),
-        "seconds": time.perf_counter() - start,
     })
     if missing and missing.get("setup_refitted") and stage and stage["setup_error"]:
         _setup_with_effect(stage, missing)
     add_setup(report, stage)
     if missing and missing.get("setup_refitted"):
-        from fenicsx_drape.diagnosis.setup import value_text
-
         j = missing["setup_refitted"]
         report["conclusion"] += (f" With {missing['effect']} added, {j['parameter']} is fitted "
                                  f"again: {value_text(j['fitted'])}.")
@@ -562,7 +618,6 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
                                      f"(setup_error withdrawn).")
     report.models, report.comparisons = models, comparisons
     report.tests = data.tests
-    say(report["conclusion"])
     return report
 
 
