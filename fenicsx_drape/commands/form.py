@@ -60,8 +60,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--full", action="store_true",
                         help="model the whole blank, without the case's symmetry planes")
     parser.add_argument("--ply-angle-deg", type=float, default=None, metavar="THETA",
-                        help="initial ply angle: the tows at THETA to x (degrees; needs a "
-                        "model without symmetry planes, --full)")
+                        help="initial ply angle: the tows at THETA to x (degrees; a ply "
+                        "that breaks a symmetry plane of the case is formed without it)")
     parser.add_argument("--blank-offset-mm", type=float, nargs=2, default=None,
                         metavar=("X", "Y"), help="the blank (and its net) placed X, Y mm off "
                         "where the case puts it")
