@@ -166,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
         FormingOutputError,
         form_case,
         is_paper_hemisphere,
+        kinematic_text,
     )
     from fenicsx_drape.forming.running.run import case_model
 
@@ -189,13 +190,16 @@ def run(args: argparse.Namespace) -> int:
               f"{result['snes_iterations']} Newton iterations, {result['wall_time_s']:.1f} s",
               file=sys.stderr if args.quiet else sys.stdout)
         hemisphere = is_paper_hemisphere(case)
+        partial = not result.get("kinematic_complete", True)
         if hemisphere and not args.quiet:
             from fenicsx_drape.forming.paper.numbers import paper_comparison
 
             print(paper_comparison(result))  # the kinematic drape's shear among its rows
-        elif result.get("kinematic_max_shear_deg") is not None:
-            print(f"kinematic drape (pin-jointed net) on the same tools: max shear "
-                  f"{result['kinematic_max_shear_deg']:.1f}°")
+        if (not hemisphere or partial) and result.get("kinematic_max_shear_deg") is not None:
+            print(f"kinematic drape (pin-jointed net) on the same tools: "
+                  f"{kinematic_text(result)}")
+        for note in result.get("tool_force_notes", []):
+            print(f"note: {note}")
         pictures = ["shear.png", "wrinkling.png", "kinematic_shear.png",
                     *(["paths.png"] if hemisphere else [])]
         print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "
