@@ -143,7 +143,7 @@ def test_a_partial_kinematic_drape_says_how_much_it_placed(tmp_path, monkeypatch
     assert numbers["kinematic_max_shear_deg"] == pytest.approx(
         np.nanmax(np.abs(net.shear_deg())))
     text = outputs.kinematic_text(numbers)
-    assert f"PARTIAL: {placed} of 169 nodes" in text and "on the placed part only" in text
+    assert f"PARTIAL: {placed} of 169 nodes" in text and "on them only" in text
     assert titles and text in titles[0]
     complete = {"kinematic_max_shear_deg": 27.7, "kinematic_complete": True}
     assert outputs.kinematic_text(complete) == "max shear 27.7°"

@@ -197,7 +197,8 @@ def run(args: argparse.Namespace) -> int:
             print(paper_comparison(result))  # the kinematic drape's shear among its rows
         if (not hemisphere or partial) and result.get("kinematic_max_shear_deg") is not None:
             print(f"kinematic drape (pin-jointed net) on the same tools: "
-                  f"{kinematic_text(result)}")
+                  f"{kinematic_text(result)}"
+                  + (" (the tools end before the blank, or the net locks)" if partial else ""))
         for note in result.get("tool_force_notes", []):
             print(f"note: {note}")
         pictures = ["shear.png", "wrinkling.png", "kinematic_shear.png",

@@ -360,7 +360,7 @@ def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None
     if pictures is not None and numbers["max_shear_deg"] is not None:
         pictures.mkdir(parents=True, exist_ok=True)
         plot_shear(net, pictures / "kinematic_shear.png",
-                   f"{case.name}: kinematic drape (pin-jointed net), {kinematic_text(result)}")
+                   f"{case.name}: kinematic drape (pin-jointed net)\n{kinematic_text(result)}")
     return net, result
 
 
@@ -376,8 +376,7 @@ def kinematic_text(result: dict) -> str:
         return f"max shear {shear}"
     placed, total = result["kinematic_placed_nodes"], result["kinematic_blank_nodes"]
     return (f"PARTIAL: {placed} of {total} nodes of the blank placed "
-            f"({100 * placed / max(total, 1):.0f} %; the surface ends or the net locks), "
-            f"max shear {shear} on the placed part only")
+            f"({100 * placed / max(total, 1):.0f} %), max shear {shear} on them only")
 
 
 def write_case_tools(run: FormingRun, folder: str | os.PathLike) -> list[Path]:
