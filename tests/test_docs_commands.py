@@ -1,4 +1,4 @@
-"""Every command the README and the docs show is a real one (issue 28).
+"""Every command the README and the docs show is a real one.
 
 The command lines (``./drape ...``, ``make ...``, ``python3 -m fenicsx_drape ...``) are collected
 from the code blocks and the inline code of README.md and docs/*.md and checked against the

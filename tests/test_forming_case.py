@@ -1,4 +1,4 @@
-"""Forming cases as files (issue 13): case.toml errors, overrides, blanks of any outline."""
+"""Forming cases as files: case.toml errors, overrides, blanks of any outline."""
 
 import dataclasses
 import itertools

@@ -1,4 +1,4 @@
-"""The square box (meshes/square_box): a deep-drawn box formed to full travel (issue 13)."""
+"""The square box (meshes/square_box): a deep-drawn box formed to full travel."""
 
 from pathlib import Path
 

@@ -46,7 +46,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="eq. 1's reading: a symmetric model carries its share of the "
                         "force, symmetry-plane nodes counting ½ (symmetric_part, a case file's "
                         "default), or the whole force over the model's own nodes (model, as "
-                        "the hemisphere's file says: docs/paper.md, issue 15)")
+                        "the hemisphere's file says: docs/paper.md)")
     parser.add_argument("--mu", type=float, default=None,
                         help="textile-tool friction coefficient of eq. 1 (default: the case's "
                         "holder mu, else the model's)")

@@ -53,7 +53,7 @@ OVERRIDES = ("duration_s", "step_mm", "penalty_factor", "stabilisation_N_per_mm"
 HOLDER_OVERRIDES = {"holder_force_N": "force_N", "mu": "mu", "holder_force_share": "force_share"}
 # Earlier spellings of an override, read as the new name with a warning.
 OLD_OVERRIDES = {"holder_mu": "mu"}
-# Set-up overrides that move or turn something off the case's symmetry planes (issue 27).
+# Set-up overrides that move or turn something off the case's symmetry planes.
 SETUP_OVERRIDES = ("ply_angle_deg", "blank_offset_mm", "tool_offset_mm")
 
 
@@ -172,7 +172,7 @@ class HolderSpec:
     tool: str  # name of the clamping tool (role holder)
     force_N: float  # total holding force on the whole part (N)
     mu: float | None = None  # overrides the model's μ (eq. 1)
-    force_share: str = "symmetric_part"  # "symmetric_part" | "model" (issue 15)
+    force_share: str = "symmetric_part"  # "symmetric_part" | "model"
 
 
 @dataclasses.dataclass(frozen=True)

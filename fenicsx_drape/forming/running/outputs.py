@@ -118,7 +118,7 @@ def case_summary(run: FormingRun) -> dict:
         "max_shear_deg": float(np.nanmax(np.abs(g.shear_deg()))),
         "total_wrinkling_strain": g.total_wrinkling_strain(),
         # The paper's literal measure: length change of the compressed tows over the length
-        # of all tow bars (issue 15; FormedGrid.total_wrinkling_strain).
+        # of all tow bars (FormedGrid.total_wrinkling_strain).
         "total_wrinkling_engineering": g.total_wrinkling_strain("engineering", "bars"),
         "min_wrinkling_strain": float(min(np.nanmin(warp), np.nanmin(weft), 0.0)),
         "max_tow_strain": float(max(np.nanmax(warp), np.nanmax(weft))),
