@@ -116,9 +116,10 @@ def check(line: str, where: str) -> str | None:
     rest = words[1:]
     while rest[:1] in (["--np"], ["--mount"]):
         if rest[0] == "--np":
-            assert rest[1].isdigit(), f"{where}: --np needs a number"
+            assert rest[1].isdigit() or is_placeholder(rest[1]), f"{where}: --np needs a number"
         else:
-            assert Path(rest[1]).is_absolute() or (ROOT / rest[1]).is_dir(), \
+            assert (is_placeholder(rest[1]) or Path(rest[1]).is_absolute()
+                    or (ROOT / rest[1]).is_dir()), \
                 f"{where}: --mount {rest[1]}: no such folder"
         rest = rest[2:]
     if rest[:1] != ["exec"]:
