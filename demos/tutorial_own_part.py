@@ -145,7 +145,7 @@ Mesh.MeshSizeMax = 20.0;
 # The punch rises 25 mm in 20 s; the die and the holder stand still. The blank is a 200 mm
 # square of 10 mm cells, a quarter model; 200 N on the holder (the whole blank's, as
 # `force_share = "symmetric_part"`, the default, reads it). Every key is in the
-# [case format](../case-format.md).
+# {doc}`case format </case-format>`.
 
 (part / "case.toml").write_text("""\
 [case]
@@ -243,4 +243,4 @@ if not SCRIPT:
 # - A finer sheet: `./drape form results/own_part/part/case.toml --out DIR --cell-mm 5`; the
 #   whole blank rather than a quarter: `--full`; a turned ply: `--ply-angle-deg 30`.
 # - Measured parts compared with the model, and a diagnosis of what the model lacks:
-#   [the diagnosis](../diagnosis.md).
+#   {doc}`the diagnosis </diagnosis>`.

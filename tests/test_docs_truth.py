@@ -99,6 +99,8 @@ def test_the_readme_loop_gives_the_numbers_it_quotes(tmp_path, monkeypatch, caps
     # history: v1 -> v2 adds the one effect, at the errors quoted
     v2 = [line for line in history.splitlines() if line.startswith("v2 ")]
     assert v2 and f"+{effect} " in v2[0] and f" {after} " in v2[0] and "," not in v2[0]
-    # docs/diagnosis.md's table quotes the same run
+    # docs/diagnosis.md's table and the getting-started page quote the same run
     table = (ROOT / "docs" / "diagnosis.md").read_text()
     assert f"evidence {evidence};" in table and f"| {after} | — |" in table
+    start = " ".join((ROOT / "docs" / "getting-started.md").read_text().split())
+    assert f"error {before} → {after}, evidence {evidence}" in start
