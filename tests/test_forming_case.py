@@ -196,7 +196,7 @@ def test_the_holders_friction_coefficient_has_one_name(tmp_path):
     # A bundle's test key: the same, and the warning names the case file.
     with pytest.warns(FutureWarning, match="case.toml: test key: holder_mu"):
         case, used = case_for_test(tmp_path / "case.toml", {"holder_mu": 0.45})
-    assert case.holder.mu == 0.45 and used == {"mu": 0.45}
+    assert case.holder.mu == 0.45 and used == {"holder_mu": 0.45}
     no_holder = write(tmp_path, GOOD.replace('[holder]\ntool = "clamp"\nforce_N = 100.0\n', ""),
                       "bare.toml")
     with pytest.raises(CaseError, match="no \\[holder\\]"):

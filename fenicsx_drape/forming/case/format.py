@@ -1016,15 +1016,15 @@ def case_for_test(path: str | os.PathLike, keys: Mapping[str, Any]
     used: dict[str, Any] = {}
     changes: dict[str, Any] = {}
     problems = []
-    for key, value in keys.items():
-        key = renamed(key, f"{path}: test key")
+    for written, value in keys.items():
+        key = renamed(written, f"{path}: test key")
         if key not in names:
             if key in SPEC_FORMING_KEYS:
                 problems.append(f"{path}: test key {key} = {value!r}: the case has no such "
                                 "value (a tool parameter of that name, or an override: "
                                 f"{', '.join(OVERRIDES)})")
             continue
-        used[key] = value
+        used[written] = value  # as the bundle spells it (the loader looks its keys up)
         own = case_value(case, key)
         same = (own == value if isinstance(value, str) or isinstance(own, str) or own is None
                 else math.isclose(float(own), float(value), rel_tol=1e-9, abs_tol=1e-12))
