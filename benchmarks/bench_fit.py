@@ -1,6 +1,6 @@
 # Time of a full coupon fit (tensile + three bias rates) of the paper's model to the demo
 # bundle, from the curve-feature initial guess: with the global stage (the default; target
-# under 30 s on one core, issue 14) and without it, and the starts that found the best.
+# under 30 s on one core) and without it, and the starts that found the best.
 #
 #   python3 benchmarks/bench_fit.py [BUNDLE]
 

@@ -3,14 +3,14 @@
     ./drape exec python3 benchmarks/bench_forming.py                  # quarter 10 and 5 mm
     ./drape exec python3 benchmarks/bench_forming.py --full           # + the full 2.5 mm sheet
     ./drape --np 2 exec python3 benchmarks/bench_forming.py --full    # the same on two ranks
-    ./drape exec python3 benchmarks/bench_forming.py --before         # the solver of issue 17
+    ./drape exec python3 benchmarks/bench_forming.py --before         # the first solver
     ./drape exec python3 benchmarks/bench_forming.py --single-factor  # factor in single precision
     ./drape exec python3 benchmarks/bench_forming.py --petsc-option "-snes_type newtontr"
     ./drape exec python3 benchmarks/bench_forming.py --save-nodes ref           # nodes to ref/
     ./drape exec python3 benchmarks/bench_forming.py --reference ref --petsc-option ...
     ./drape exec python3 benchmarks/bench_forming.py --max-wall-s 600 ...      # stop runs at 600 s
 
-A JIT warm-up run (30 mm cells) comes first. ``--before`` runs the solver as issue 17 found it
+A JIT warm-up run (30 mm cells) comes first. ``--before`` runs the first solver
 (backtracking line search, exact geometric stiffness, penetrating nodes projected onto the
 tool surface) for the tables of docs/solver-notes.md. Every line: nodes, unknowns, ranks, wall
 time, accepted steps, cut-backs, SNES iterations (per step), Jacobians, Krylov iterations, residual
@@ -40,7 +40,7 @@ parser.add_argument("--full", action="store_true", help="also the full sheet at 
 parser.add_argument("--only-full", action="store_true", help="only the full sheet at 2.5 mm")
 parser.add_argument("--cells", type=float, nargs="*", default=[10.0, 5.0],
                     help="cell sizes of the quarter model (mm)")
-parser.add_argument("--before", action="store_true", help="the solver as issue 17 found it")
+parser.add_argument("--before", action="store_true", help="the first solver")
 parser.add_argument("--petsc-option", action="append", default=[], metavar="OPTION",
                     help="PETSc options for SNES, e.g. '-snes_type newtontr' (repeatable)")
 parser.add_argument("--save-nodes", metavar="DIR", help="write the formed nodes to DIR")
@@ -81,7 +81,7 @@ if args.before:
 
     options.update(line_search="bt", limit_geometric_stiffness=False, node_atol_N=0.0)
 
-    def project(self, x, t):  # the predictor of issue 17: penetrating nodes onto the surface
+    def project(self, x, t):  # the first solver's predictor: penetrating nodes onto the surface
         g = self.tool.gap(x, t)
         return x - np.minimum(g.phi, 0.0)[:, None] * g.normal
 

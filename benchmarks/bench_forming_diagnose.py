@@ -1,4 +1,4 @@
-"""Time of a forming ``diagnose`` with three candidates at Δ = 10 mm (issue 8).
+"""Time of a forming ``diagnose`` with three candidates at Δ = 10 mm.
 
 Quarter-hemisphere grids (10 mm) "measured" with 0.3 mm noise per coordinate, formed and
 diagnosed on 10 mm cells, candidates ``tow_buckling``, ``tool_friction`` and

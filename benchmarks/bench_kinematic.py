@@ -1,4 +1,4 @@
-"""Wall time of the kinematic drape (issue 13: any case under 1 s at Δ = 5 mm on one core).
+"""Wall time of the kinematic drape (any case under 1 s at Δ = 5 mm on one core).
 
     ./drape exec python3 benchmarks/bench_kinematic.py
     ./drape exec python3 benchmarks/bench_kinematic.py --cells 10 5 2.5 --repeat 5

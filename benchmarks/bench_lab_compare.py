@@ -1,4 +1,4 @@
-"""Lab measurements (issue 26): the cost of comparing a scan, and of diagnosing lab data.
+"""Lab measurements: the cost of comparing a scan, and of diagnosing lab data.
 
     ./drape exec nice python3 benchmarks/bench_lab_compare.py            # compare only
     ./drape exec nice python3 benchmarks/bench_lab_compare.py --diagnose # and both diagnoses

@@ -1,4 +1,4 @@
-"""Speed of the meshed hemisphere against the closed form (issue 13), and contact's share.
+"""Speed of the meshed hemisphere against the closed form, and contact's share.
 
 Forms the quarter of ``meshes/hemisphere/case.toml`` (closed-form tools) and of
 ``case_meshed.toml`` (tools meshed from Gmsh) at each Δ, with the tools built beforehand (the

@@ -1,4 +1,4 @@
-"""Time of a forming diagnosis with and without the set-up candidates (issue 27, speed).
+"""Time of a forming diagnosis with and without the set-up candidates (speed).
 
 A quarter-model double-dome bundle (the case's own 10 mm cells and 1 mm steps; the grid
 "measured" on the whole blank with 0.3 mm noise, by a run formed with the ply turned by

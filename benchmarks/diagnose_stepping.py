@@ -1,7 +1,7 @@
 """Why Newton needs many iterations on the hemisphere: what switches, where the residual sits.
 
     ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 10            # this solver
-    ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 10 --before   # issue 17's
+    ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 10 --before   # the first
     ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 2.5 --full --json out.json
     ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 10 --show 73 74
     ./drape exec python3 benchmarks/diagnose_stepping.py --cell-mm 2.5 --along-step 78
@@ -22,7 +22,7 @@ than half, and every iteration of a failed (cut-back) attempt is wasted. A waste
 blamed on the switches in it (shared equally), or on "no switch" (the smooth nonlinearity, a
 poor predictor). The table gives each cause's share of the wasted iterations.
 
-``--before`` runs the solver as issue 17 found it: backtracking line search (``bt``), the
+``--before`` runs the first solver: backtracking line search (``bt``), the
 exact geometric stiffness and a predictor that projected penetrating nodes onto the tool
 surface (lifting pressed nodes off). The attribution is by coincidence, not cause: a switch
 that happens in a wasted iteration is blamed. docs/solver-notes.md gives, beside it, what
@@ -211,7 +211,7 @@ def main() -> None:
     parser.add_argument("--full", action="store_true", help="the full sheet (else a quarter)")
     parser.add_argument("--step-mm", type=float, default=1.0, help="punch travel per step")
     parser.add_argument("--before", action="store_true",
-                        help="issue 17's solver: bt line search, contact projected onto the tool")
+                        help="the first solver: bt line search, contact projected onto the tool")
     parser.add_argument("--show", type=int, nargs="*", default=[],
                         help="print the iterates of these attempts (1-based)")
     parser.add_argument("--json", help="write the per-attempt records here")
@@ -228,7 +228,7 @@ def main() -> None:
         options.line_search, options.limit_geometric_stiffness = "bt", False
         options.node_atol_N = 0.0
 
-        def project(self, x, t):  # the predictor as issue 17 found it
+        def project(self, x, t):  # the first solver's predictor
             g = self.tool.gap(x, t)
             return x - np.minimum(g.phi, 0.0)[:, None] * g.normal
 

@@ -1,4 +1,4 @@
-"""Held-out checks of the set-up candidates (issue 27.3): bundles with a hidden set-up error.
+"""Held-out checks of the set-up candidates: bundles with a hidden set-up error.
 
 Double-dome bundles "measured" by a run the diagnosis does not make the same way: the solver's
 residual tolerances 100× tighter than the diagnosis's forming runs (``snes_atol`` 1e-8 N,
@@ -25,7 +25,7 @@ Each is diagnosed in full (set-up candidates, then the effects ``tool_friction``
 per bundle: the set-up table, ``setup_error`` with its fitted value ± sd against the truth,
 ``missing_effect``, and the wall time; ``--json`` writes them.
 
-``--drift`` first prints why the whole blank and the mirrored quarter differ (issue 27.2):
+``--drift`` first prints why the whole blank and the mirrored quarter differ:
 per model (the paper's; with tool friction μ_tool = 0.8) the centre node's formed position
 on each, their difference over the drawn grid and the whole blank's own asymmetry in x = 0,
 in units of the noise (0.3 mm).

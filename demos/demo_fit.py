@@ -43,7 +43,7 @@ print(f"{bundle.name}: {', '.join(t.id for t in bundle.tests)}")
 # Fit the paper's model. The start comes from curve features (knees, slopes, the spread
 # with rate), not from Table 2; the default model's Table 2 values are ignored as a start.
 
-result = fit(bundle, default_model(), progress=print)
+result = fit(bundle, default_model(), progress=print if SCRIPT else None)
 
 # Errors per test kind, as the paper reports them (7.1 N tensile, 0.6 N bias, 7-9 %), and
 # the normalised error (1 = at the noise floor).
@@ -70,3 +70,11 @@ print(format_table(result.sensitivity))
 out = Path(args[0]) if args else here.parent / "results" / "demo_fit"
 write_fit(result, out)
 print(f"wrote {out}")
+
+# ## The pictures
+
+if not SCRIPT:  # as a page of the docs: the pictures inline
+    from IPython.display import Image, display
+
+    for png in sorted(out.glob("fit_*.png")):
+        display(Image(filename=str(png)))

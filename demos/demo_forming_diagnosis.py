@@ -8,7 +8,7 @@
 #     name: python3
 # ---
 
-# # Diagnosis on a formed hemisphere: a grid "measured" with a hidden effect (issue 8)
+# # Diagnosis on a formed hemisphere: a grid "measured" with a hidden effect
 #
 # 1. A quarter-hemisphere grid (10 mm drawn grid) is "measured": formed by the paper's model,
 #    which has `tow_buckling` (tows carry no compression, eq. 4), plus 0.3 mm of noise per

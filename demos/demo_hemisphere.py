@@ -51,10 +51,14 @@ print("effects:", ", ".join(model.effects))
 
 # ## Form it
 #
-# `form_case` runs the load steps (printing step, travel and Newton iterations) and writes
-# the summary, the ParaView fields, the forming bundle and the pictures.
+# `form_case` runs the load steps (as a script printing step, travel and Newton iterations
+# of each) and writes the summary, the ParaView fields, the forming bundle and the pictures.
 
-run, summary = form_case(out, case, model, progress=print if MPI.COMM_WORLD.rank == 0 else None)
+rank0 = MPI.COMM_WORLD.rank == 0
+run, summary = form_case(out, case, model, progress=print if SCRIPT and rank0 else None)
+if rank0:
+    print(f"{summary['steps']} load steps ({summary['cutbacks']} cut back), "
+          f"{summary['snes_iterations']} Newton iterations, {summary['wall_time_s']:.0f} s")
 
 # ## Compare with the paper and with the kinematic drape (Fig. 11)
 #
@@ -62,8 +66,19 @@ run, summary = form_case(out, case, model, progress=print if MPI.COMM_WORLD.rank
 # paper's hemisphere numbers are in `fenicsx_drape.forming.paper.numbers`; the studies that compare
 # them all are `demos/study_*.py`).
 
-if MPI.COMM_WORLD.rank == 0:
+if rank0:
     from fenicsx_drape.forming.paper.numbers import paper_comparison
 
     print(paper_comparison(summary))  # the kinematic drape's maximum shear included
-    print(f"pictures in {out}: shear.png, wrinkling.png, paths.png")
+
+# ## The pictures
+#
+# The formed sheet coloured by shear angle (the quarter mirrored to the whole part), the
+# wrinkled tows, the paper's Figs. 10-11 (shear along the diagonal path and wrinkling along
+# the normal path, with the kinematic drape beside the FE result) and the press's force.
+
+if not SCRIPT:  # as a page of the docs: the pictures inline
+    from IPython.display import Image, display
+
+    for name in ("shear.png", "wrinkling.png", "paths.png", "tool_forces.png"):
+        display(Image(filename=str(out / name)))

@@ -33,6 +33,9 @@
 #    (here called through the Python API with three candidates, to keep it short).
 #
 #     ./drape exec python3 demos/demo_lab_diagnosis.py [OUT]
+#
+# It takes a few minutes on two cores: the docs show it without running it
+# (`tests/test_demos_diagnosis.py` runs it).
 
 # +
 import sys

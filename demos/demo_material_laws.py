@@ -106,3 +106,11 @@ for speed in (10.0, 160.0):
 
 files = write_curves(model, out)
 print("wrote", ", ".join(str(out / name) for name in files))
+
+# ## The pictures
+
+if not SCRIPT:  # as a page of the docs: the pictures inline
+    from IPython.display import Image, display
+
+    for png in (out / name for name in files if name.endswith(".png")):
+        display(Image(filename=str(png)))

@@ -184,3 +184,11 @@ summary = {"frames": {"normalised": pf.normalised, "verdict": frames_check["verd
 write_json(out / "summary.json", summary)
 print(json.dumps({k: {"normalised": round(v["normalised"], 3), "verdict": v["verdict"]}
                   for k, v in summary.items() if k in ("frames", "joint")}))
+
+# ## The pictures
+
+if not SCRIPT:  # as a page of the docs: the pictures inline
+    from IPython.display import Image, display
+
+    for png in [out / "normalised_shear_force.png"]:
+        display(Image(filename=str(png)))

@@ -110,3 +110,11 @@ if comm.rank == 0:
     write_provenance(out, model={"effects": list(model.effects)},
                      patch={"size_mm": SIZE, "cell_mm": CELL, "rotation_deg": 45.0})
     print(f"wrote {out}/bias_patch.csv, bias_patch.png, patch_160mm_per_min.xdmf")
+
+# ## The pictures
+
+if not SCRIPT:  # as a page of the docs: the pictures inline
+    from IPython.display import Image, display
+
+    for png in [out / "bias_patch.png"]:
+        display(Image(filename=str(png)))

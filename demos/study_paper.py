@@ -1,4 +1,4 @@
-# # The paper's hemisphere, number by number: eq. 1's force share × μ (issue 15)
+# # The paper's hemisphere, number by number: eq. 1's force share × μ
 #
 # Eq. 1 shares the holding force F over the n_s nodes under the holder, but the paper's model
 # is a quarter of the sheet. Two readings: "symmetric_part" (the quarter carries F/4, the

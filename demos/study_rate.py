@@ -1,4 +1,4 @@
-# # Why the maximum shear moves with forming speed: every lead measured (issue 15)
+# # Why the maximum shear moves with forming speed: every lead measured
 #
 # Over 8-240 s the paper's maximum shear moves by about 3° (Fig. 12a); ours moved by 22°
 # with the "symmetric_part" reading of eq. 1. This study runs each candidate explanation at

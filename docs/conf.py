@@ -88,7 +88,32 @@ def escape_bars(lines):
         lines[i] = "``".join(parts)
 
 
+def cli_reference():
+    """A directive writing every command's ``--help``, from the real parsers (``cli.md``)."""
+    import os
+
+    from docutils import nodes
+    from sphinx.util.docutils import SphinxDirective
+
+    from fenicsx_drape import cli
+
+    class CommandLine(SphinxDirective):
+        def run(self):
+            os.environ["COLUMNS"] = "100"  # argparse wraps at the terminal's width
+            out = []
+            for name in cli.COMMANDS:
+                _, parser = cli.command_parser(name)
+                section = nodes.section(ids=[f"drape-{name}"])
+                section += nodes.title(text=f"drape {name}")
+                section += nodes.literal_block(text=parser.format_help())
+                out.append(section)
+            return out
+
+    return CommandLine
+
+
 def setup(app):
-    """Run :func:`escape_bars` after napoleon has turned the docstrings into reST."""
+    """Run :func:`escape_bars` on the docstrings; add the ``drape-commands`` directive."""
     app.connect("autodoc-process-docstring",
                 lambda app, what, name, obj, options, lines: escape_bars(lines), priority=900)
+    app.add_directive("drape-commands", cli_reference())

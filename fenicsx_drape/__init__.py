@@ -8,12 +8,6 @@ DOLFINx >= 0.10 and is imported only when used.
 
 __version__ = "0.1.0"
 
-# The module names from before the subpackages (``fenicsx_drape.fit``, ``.bundle``, ...)
-# stay importable as the modules at their new places (fenicsx_drape/compat.py).
-from fenicsx_drape import compat as _compat
-
-_compat.install()
-
 # The public API, imported on first use so that ``drape --help`` stays fast and the NumPy
 # parts work without DOLFINx. ``fit``, ``compare`` and ``diagnose`` are modules of the same
 # names: call them as ``from fenicsx_drape.calibration.fit import fit`` (a package attribute

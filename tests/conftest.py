@@ -59,7 +59,7 @@ def tight_solver():
     """Solver options for comparing runs on different numbers of ranks.
 
     At the forming tolerance (1e-3 N per node) a solve stops anywhere in a ball of about
-    2e-3 mm around the equilibrium, and round-off picks the iterates that get there (issue 17:
+    2e-3 mm around the equilibrium, and round-off picks the iterates that get there (
     1.3e-4 to 1.9e-3 mm over four 3-rank runs of a coarse case); at 1e-5 N the ranks agree to
     1e-7 mm. LU: valid for unsymmetric Jacobians too.
     """

@@ -9,7 +9,7 @@ statement names (``from pkg import name`` names ``pkg.name`` when that is a modu
 
 The layers, lowest first (docs/development.md, Layout)::
 
-    base (errors, compat, the package root) < provenance < materials < model (effects, model,
+    base (errors, the package root) < provenance < materials < model (effects, model,
     unitcell, nodal) < fe | measurements < forming < calibration < diagnosis < command line
 
 ``fe`` and ``measurements`` are side by side: neither imports the other; ``forming`` may
@@ -51,7 +51,6 @@ LAYER_OF = (
     ("fenicsx_drape.errors", "base"),
     ("fenicsx_drape.trust", "base"),
     ("fenicsx_drape.limits", "base"),
-    ("fenicsx_drape.compat", "base"),
     ("fenicsx_drape", "base"),
 )
 
@@ -339,7 +338,7 @@ def test_physics_imports_no_dolfinx_or_files_and_only_the_cli_parses_arguments(g
 
 
 def test_imports_name_modules_of_this_tree(graph):
-    """The package uses the new names only (the old ones are for scripts, via compat)."""
+    """The package imports only modules of its own tree."""
     _, _, imports = graph
     known = module_names(ROOT, PACKAGE)
     found = unknown_imports(imports, known)
@@ -440,18 +439,14 @@ def test_the_walk_reads_every_kind_of_import(tmp_path):
 # The old names
 
 
-def test_old_module_names_are_the_new_modules():
-    from fenicsx_drape import compat
-
+def test_no_module_answers_to_a_name_no_release_had():
+    """The flat names of the package before its subpackages are gone: no alias, no file."""
     known = module_names(ROOT, PACKAGE)
-    for old, new in compat.OLD_NAMES.items():
-        assert old not in known and new in known  # no flat file left behind
-        assert importlib.import_module(old) is importlib.import_module(new)
-        assert sys.modules[old].__spec__.name == new
-    # the README's and the scripts' forms
-    from fenicsx_drape.bundle import load_bundle
-    from fenicsx_drape.calibration.fit import fit as new_fit
-    from fenicsx_drape.fit import fit
-    from fenicsx_drape.measurements import load_bundle as new_load_bundle
+    import fenicsx_drape  # noqa: F401
 
-    assert fit is new_fit and load_bundle is new_load_bundle
+    # no import hook of the package's own
+    assert not any(type(f).__module__.startswith(PACKAGE) for f in sys.meta_path)
+    for old in ("fenicsx_drape.fit", "fenicsx_drape.bundle", "fenicsx_drape.forming.run"):
+        assert old not in known
+        with pytest.raises(ModuleNotFoundError):
+            importlib.import_module(old)

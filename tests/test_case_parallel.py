@@ -1,4 +1,4 @@
-"""Forming cases on meshed tools: every rank count forms the same part (issue 13)."""
+"""Forming cases on meshed tools: every rank count forms the same part."""
 
 from pathlib import Path
 

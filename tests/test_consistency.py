@@ -1,4 +1,4 @@
-"""One parameter set for several labs, sizes and kinds: leave-one-group-out (issue 29)."""
+"""One parameter set for several labs, sizes and kinds: leave-one-group-out."""
 
 import dataclasses
 

@@ -10,6 +10,7 @@ import pytest
 from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
 from fenicsx_drape.cli import main
 from fenicsx_drape.diagnosis.diagnose import (
+    CONTRACT,
     EVIDENCE_THRESHOLD,
     _without_rows,
     candidate_names,
@@ -102,7 +103,7 @@ def null_case():
 def test_null_bundle_gives_no_missing_effect(null_case):
     _, _, report = null_case
     assert set(report) >= CONTRACT_FIELDS
-    assert report["contract"] == 3
+    assert report["contract"] == CONTRACT
     assert set(report["baseline"]) >= {"effects", "error"}
     assert set(report["baseline"]["error"]) >= ERROR_FIELDS
     assert set(report["noise_floor"]) >= {"rmse_N", "per_test", "source"}

@@ -1,4 +1,4 @@
-"""Every command the README and the docs show is a real one (issue 28).
+"""Every command the README and the docs show is a real one.
 
 The command lines (``./drape ...``, ``make ...``, ``python3 -m fenicsx_drape ...``) are collected
 from the code blocks and the inline code of README.md and docs/*.md and checked against the
@@ -114,8 +114,13 @@ def check(line: str, where: str) -> str | None:
     if words[0] == "python3":
         return check_cli(words[3:], where)
     rest = words[1:]
-    if rest[:1] == ["--np"]:
-        assert rest[1].isdigit(), f"{where}: --np needs a number"
+    while rest[:1] in (["--np"], ["--mount"]):
+        if rest[0] == "--np":
+            assert rest[1].isdigit() or is_placeholder(rest[1]), f"{where}: --np needs a number"
+        else:
+            assert (is_placeholder(rest[1]) or Path(rest[1]).is_absolute()
+                    or (ROOT / rest[1]).is_dir()), \
+                f"{where}: --mount {rest[1]}: no such folder"
         rest = rest[2:]
     if rest[:1] != ["exec"]:
         return check_cli(rest, where)
@@ -149,6 +154,7 @@ def test_a_wrong_command_is_caught():
     with pytest.raises(AssertionError, match="no target"):
         check("make everything", "x")
     assert check("./drape --np 2 exec python3 -m fenicsx_drape mesh --out DIR", "x") == "mesh"
+    assert check("./drape --mount /tmp --np 2 form hemisphere --out out", "x") == "form"
 
 
 def test_every_command_shown_is_run_by_a_test():

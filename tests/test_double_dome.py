@@ -1,4 +1,4 @@
-"""The double dome (meshes/double_dome): a meshed-tool case formed to full travel (issue 13)."""
+"""The double dome (meshes/double_dome): a meshed-tool case formed to full travel."""
 
 from pathlib import Path
 

@@ -1,4 +1,4 @@
-"""PETSc SNES on the load steps (fe/newton.py, issues 17 and 28) on the hemisphere and a patch."""
+"""PETSc SNES on the load steps (fe/newton.py) on the hemisphere and a patch."""
 
 import itertools
 import json
@@ -24,7 +24,7 @@ from fenicsx_drape.model import default_model
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# The solver as issue 17 found it: backtracking line search, exact geometric stiffness.
+# The first solver: backtracking line search, exact geometric stiffness.
 BEFORE = {"line_search": "bt", "limit_geometric_stiffness": False}
 OPTIONS = {"snes_atol": 1e-6, "petsc_options": {"pc_type": "cholesky"}}
 
@@ -96,7 +96,7 @@ def test_the_coarse_hemisphere_is_formed_as_before_within_the_discretisation_tol
 @pytest.mark.skip_in_parallel
 @pytest.mark.parametrize("cell_mm", [10.0, 5.0])
 def test_snes_forms_the_default_hemisphere_as_the_hand_written_newton(cell_mm):
-    """SNES against the hand-written Newton it replaced (issue 28), on the default quarter.
+    """SNES against the hand-written Newton it replaced, on the default quarter.
 
     The reference is that solver's run (tests/data/hemisphere_hand_newton.json): iterations
     within 10 % and nodes within 0.1 mm asked; the full-l2 pre-check gives the same iterates,
@@ -267,7 +267,7 @@ def test_the_per_node_tolerance_stops_where_the_sheet_no_longer_moves():
 def test_a_full_step_that_lowers_the_residual_is_taken():
     """F(x) = sign(x)|x|^0.6: each Newton step overshoots to −⅔ x and lowers |F| by 22 %.
 
-    ``full-l2`` takes it (issue 17: asking the full step to halve ‖F‖ sent such steps to the
+    ``full-l2`` takes it (asking the full step to halve ‖F‖ sent such steps to the
     parabola); PETSc's ``l2`` line search does not, which shows the test can fail.
     """
     from petsc4py import PETSc

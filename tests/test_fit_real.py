@@ -191,7 +191,7 @@ def _costs(res, X):
 # 3 % of each value -- the fit is deterministic (seeded Sobol points), the margin covers
 # BLAS and platform differences in the last iterations.
 REAL_FITS = {
-    "cao2008-plain-frames": {  # picture frames and bias extension (issue 29)
+    "cao2008-plain-frames": {  # picture frames and bias extension
         "pf-hkust": (10.43, 84.61),
         "pf-kul-1st": (7.149, 75.75),
         "pf-kul-3rd": (4.162, 65.94),

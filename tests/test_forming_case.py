@@ -1,4 +1,4 @@
-"""Forming cases as files (issue 13): case.toml errors, overrides, blanks of any outline."""
+"""Forming cases as files: case.toml errors, overrides, blanks of any outline."""
 
 import dataclasses
 import itertools
@@ -175,6 +175,32 @@ def test_overrides_are_a_measured_tests_keys(tmp_path):
     assert slow.tool("punch").motion.time_s == (0.0, 40.0)
     assert slow.tool("punch").motion.z_mm == pytest.approx((0.0, 30.0))
     assert slow.max_speed_mm_per_s == pytest.approx(30.0 / 40.0)
+
+
+
+def test_the_holders_friction_coefficient_has_one_name(tmp_path):
+    """``mu``: the case's [holder] key, the override, drape form's option, the set-up
+    candidate of the spec; the earlier override ``holder_mu`` is read as it, with a warning."""
+    from fenicsx_drape.cli import command_parser
+    from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS
+    from fenicsx_drape.forming.case.format import OVERRIDES, case_for_test, case_value
+
+    assert "mu" in OVERRIDES and "mu" in SETUP_PARAMETERS and "holder_mu" not in OVERRIDES
+    assert "--mu" in command_parser("form")[1]._option_string_actions
+    plate = load_case(write(tmp_path, GOOD))
+    assert plate.holder.mu is None and case_value(plate, "mu") is None
+    rough = with_overrides(plate, mu=0.45)
+    assert rough.holder.mu == 0.45 and case_value(rough, "mu") == 0.45
+    with pytest.warns(FutureWarning, match="holder_mu is now called mu"):
+        assert with_overrides(plate, holder_mu=0.45) == rough
+    # A bundle's test key: the same, and the warning names the case file.
+    with pytest.warns(FutureWarning, match="case.toml: test key: holder_mu"):
+        case, used = case_for_test(tmp_path / "case.toml", {"holder_mu": 0.45})
+    assert case.holder.mu == 0.45 and used == {"holder_mu": 0.45}
+    no_holder = write(tmp_path, GOOD.replace('[holder]\ntool = "clamp"\nforce_N = 100.0\n', ""),
+                      "bare.toml")
+    with pytest.raises(CaseError, match="no \\[holder\\]"):
+        with_overrides(load_case(no_holder), mu=0.2)
 
 
 def test_write_case_copies_the_geometry_and_reads_back(tmp_path):

@@ -112,7 +112,7 @@ def test_without_holder_friction_the_plates_only_clamp():
     assert np.abs(f).max() == 0.0
 
 
-# -- a clamping surface of any shape (issue 13) and eq. 1's force share (issue 15) ------------
+# -- a clamping surface of any shape and eq. 1's force share ------------
 
 
 class SquareOpening:
@@ -236,7 +236,7 @@ def test_the_hemisphere_case_shares_the_whole_force_over_its_quarter():
     from fenicsx_drape.forming.case.format import load_case
     from fenicsx_drape.forming.terms.holder import part_force_N
 
-    # The reading docs/paper.md's table chose (issue 15): the paper's numbers are reproduced best
+    # The reading docs/paper.md's table chose: the paper's numbers are reproduced best
     # when the quarter's own nodes share the whole 133 N. A case file's default is the other.
     case = load_case("hemisphere")
     assert (case.holder.force_N, case.holder.force_share) == (133.0, "model")

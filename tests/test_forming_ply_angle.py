@@ -1,4 +1,4 @@
-"""The initial ply angle: a tow net turned by θ inside the square sheet (issue 6).
+"""The initial ply angle: a tow net turned by θ inside the square sheet.
 
 The net is clipped to the square cell by cell; these tests check the clipped grid against an
 independent count, its use by the bending stencils and the post-processing, and hemisphere

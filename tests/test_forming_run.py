@@ -1,4 +1,4 @@
-"""Running any forming case (issue 13): the hemisphere's case file, blanks, holders, ranks."""
+"""Running any forming case: the hemisphere's case file, blanks, holders, ranks."""
 
 import dataclasses
 import json

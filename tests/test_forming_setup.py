@@ -1,4 +1,4 @@
-"""Every set-up can be formed (issue 27): a turned ply, an offset blank, a misaligned punch.
+"""Every set-up can be formed: a turned ply, an offset blank, a misaligned punch.
 
 Overrides are applied before the case is checked, a set-up that breaks a symmetry plane is
 formed without it, and a failure after the solve still writes what was computed. The runs

@@ -15,7 +15,7 @@ from fenicsx_drape.forming.running.kinematic import (
 from fenicsx_drape.forming.tools.shapes import HemisphereTools
 
 TOOLS = HemisphereTools()
-# Today's (PR before issue 13) net, built from a mirrored quadrant: max shear at Δ = 10, 5, 2.5.
+# The first kinematic net, built from a mirrored quadrant: max shear at Δ = 10, 5, 2.5.
 TODAY_DEG = {10.0: 62.547440, 5.0: 63.489816, 2.5: 63.755384}
 
 

@@ -92,3 +92,58 @@ def test_the_tool_forces_are_written_as_a_table_a_picture_and_peaks(tmp_path):
     assert (tmp_path / "tool_forces.csv").read_text().startswith("time_s,travel_mm,punch,die")
     assert np.allclose(table[:, 3], [-4.0, -8.0, -12.0])
     assert (tmp_path / "tool_forces.png").stat().st_size > 1000
+
+
+def test_a_step_whose_force_stands_out_of_its_neighbours_is_noted(tmp_path):
+    """A one-step spike (the holder's −94 N among −37 N) is listed and the peak without it
+    given; a steep but steady rise (a die closing) and the ends of the curve are not."""
+    from types import SimpleNamespace
+
+    from fenicsx_drape.forming.running.outputs import outliers, write_tool_forces
+
+    travel = np.arange(0.0, 20.0, 1.0)
+    holder = -37.0 - 0.1 * travel
+    holder[12] = -94.0
+    punch = np.where(travel < 10.0, 2.0 * travel, 20.0 + 40.0 * (travel - 10.0))  # a kink
+    punch[-1] += 200.0  # the last step has one neighbour: never listed
+    assert list(outliers(travel, holder)) == [12]
+    assert list(outliers(travel, punch)) == []
+    # The neighbours' line is in travel: a step at an uneven spacing is not a spike.
+    assert list(outliers(np.array([0.0, 0.1, 10.0]), np.array([0.0, 1.0, 100.0]))) == []
+    rows = [{"time_s": s, "travel_mm": s, "punch": p, "holder": h}
+            for s, p, h in zip(travel, punch, holder)]
+    result = write_tool_forces(SimpleNamespace(tool_forces=rows), tmp_path, "part")
+    assert result["max_tool_force_N"]["holder"] == -94.0  # every converged step counts ...
+    (spike,) = result["tool_force_outliers"]  # ... and the spike is said
+    assert spike == {"tool": "holder", "step": 13, "travel_mm": 12.0, "force_N": -94.0,
+                     "neighbours_N": [pytest.approx(-38.1), pytest.approx(-38.3)]}
+    notes = "\n".join(result["tool_force_notes"])
+    assert "step 13" in notes and "-38.9 N without the steps" in notes
+
+
+def test_a_partial_kinematic_drape_says_how_much_it_placed(tmp_path, monkeypatch):
+    """The square box's 240 mm blank on 20 mm cells: 13 × 13 nodes, not all on the tools."""
+    import warnings
+    from types import SimpleNamespace
+
+    from fenicsx_drape.forming.case.format import load_case
+    from fenicsx_drape.forming.running import outputs
+
+    titles = []
+    monkeypatch.setattr(outputs, "plot_shear", lambda grid, path, title: titles.append(title))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # said in the summary, not as a Python warning
+        net, numbers = outputs._kinematic_beside(load_case("square_box", cell_mm=20.0),
+                                                 SimpleNamespace(tools=None), tmp_path)
+    placed = int(net.present.sum())
+    assert numbers["kinematic_blank_nodes"] == 13 * 13
+    assert numbers["kinematic_placed_nodes"] == placed < 13 * 13
+    assert numbers["kinematic_unplaced_nodes"] == 13 * 13 - placed
+    assert numbers["kinematic_complete"] is False
+    assert numbers["kinematic_max_shear_deg"] == pytest.approx(
+        np.nanmax(np.abs(net.shear_deg())))
+    text = outputs.kinematic_text(numbers)
+    assert f"PARTIAL: {placed} of 169 nodes" in text and "on them only" in text
+    assert titles and text in titles[0]
+    complete = {"kinematic_max_shear_deg": 27.7, "kinematic_complete": True}
+    assert outputs.kinematic_text(complete) == "max shear 27.7°"

@@ -3,7 +3,7 @@ and the hemisphere formed with them (meshes/hemisphere/case_meshed.toml: punch a
 second order, holder 4 mm) against the closed-form tools (case.toml).
 
 Forming tolerances: max shear within 0.5° and every node within 0.1 mm of the closed-form run
-(issue 13); the kinematic drape's max shear within 0.5° at the case's Δ = 10 mm (measured
+; the kinematic drape's max shear within 0.5° at the case's Δ = 10 mm (measured
 62.537° against 62.547°; at Δ = 20 mm the drape on the meshed punch leaves 76 of 169 nodes
 unplaced: docs/cases.md).
 """

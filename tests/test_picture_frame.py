@@ -1,4 +1,4 @@
-"""Picture-frame tests: kinematics, force through the frame, bundles, fits (issue 29)."""
+"""Picture-frame tests: kinematics, force through the frame, bundles, fits."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Set-up candidates of the diagnosis (issue 27, spec version 3 "set-up before physics").
+"""Set-up candidates of the diagnosis (spec version 3 "set-up before physics").
 
 The set-up applied to a test (case, symmetry planes, where the grid is read), the report's
 fields and the ledger's versions; on a coarse double dome (Δ = 20 mm), a turned ply hidden in a
@@ -308,7 +308,7 @@ def force_and_friction(truth, seed: int) -> Bundle:
 
 @pytest.mark.skip_in_parallel
 def test_the_set_up_is_fitted_again_with_a_candidate_effect():
-    """A set-up fitted without the friction the part had is refitted with it (issue 27.3).
+    """A set-up fitted without the friction the part had is refitted with it.
 
     The part: the quarter double dome (Δ = 20 mm) with twice the stated holding force and
     tool friction μ_tool = 0.8. With the model that has the friction, the force is refitted

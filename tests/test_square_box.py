@@ -1,4 +1,4 @@
-"""The square box (meshes/square_box): a deep-drawn box formed to full travel (issue 13)."""
+"""The square box (meshes/square_box): a deep-drawn box formed to full travel."""
 
 from pathlib import Path
 
@@ -100,3 +100,25 @@ def test_the_square_box_is_symmetric_about_the_diagonal(quarter):
     assert abs(i - j) <= 1
     assert np.nanmax(np.abs(γ)) > 20.0
     assert np.nanmax(np.abs(γ[0, :])) < 5.0 and np.nanmax(np.abs(γ[:, 0])) < 5.0
+
+
+@pytest.mark.slow
+@pytest.mark.skip_in_parallel
+def test_drape_form_says_the_kinematic_drape_is_partial(tmp_path, capsys):
+    """On 20 mm cells the kinematic net leaves the box's tools before it covers the blank:
+    the command, the summary and the picture say how much it placed."""
+    import json
+
+    from fenicsx_drape.cli import main
+
+    out = tmp_path / "box"
+    assert main(["form", "square_box", "--out", str(out), "--cell-mm", "20", "--no-fields",
+                 "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    placed, total = summary["kinematic_placed_nodes"], summary["kinematic_blank_nodes"]
+    assert total == 13 * 13 and 0 < placed < total and not summary["kinematic_complete"]
+    assert summary["kinematic_unplaced_nodes"] == total - placed
+    printed = capsys.readouterr().out
+    assert f"PARTIAL: {placed} of {total} nodes" in printed
+    assert f"max shear {summary['kinematic_max_shear_deg']:.1f}° on them only" in printed
+    assert (out / "kinematic_shear.png").stat().st_size > 0

@@ -1,4 +1,4 @@
-"""Untrusted input (issue 30): data runs no code, sizes before memory, plausible numbers,
+"""Untrusted input: data runs no code, sizes before memory, plausible numbers,
 nothing silently dropped, the launcher mounts what a case names.
 
 Every input here is written for the test: a small case with a Python punch, a Gmsh holder, a

@@ -46,7 +46,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="eq. 1's reading: a symmetric model carries its share of the "
                         "force, symmetry-plane nodes counting ½ (symmetric_part, a case file's "
                         "default), or the whole force over the model's own nodes (model, as "
-                        "the hemisphere's file says: docs/paper.md, issue 15)")
+                        "the hemisphere's file says: docs/paper.md)")
     parser.add_argument("--mu", type=float, default=None,
                         help="textile-tool friction coefficient of eq. 1 (default: the case's "
                         "holder mu, else the model's)")
@@ -60,8 +60,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--full", action="store_true",
                         help="model the whole blank, without the case's symmetry planes")
     parser.add_argument("--ply-angle-deg", type=float, default=None, metavar="THETA",
-                        help="initial ply angle: the tows at THETA to x (degrees; needs a "
-                        "model without symmetry planes, --full)")
+                        help="initial ply angle: the tows at THETA to x (degrees; a ply "
+                        "that breaks a symmetry plane of the case is formed without it)")
     parser.add_argument("--blank-offset-mm", type=float, nargs=2, default=None,
                         metavar=("X", "Y"), help="the blank (and its net) placed X, Y mm off "
                         "where the case puts it")
@@ -166,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
         FormingOutputError,
         form_case,
         is_paper_hemisphere,
+        kinematic_text,
     )
     from fenicsx_drape.forming.running.run import case_model
 
@@ -189,13 +190,17 @@ def run(args: argparse.Namespace) -> int:
               f"{result['snes_iterations']} Newton iterations, {result['wall_time_s']:.1f} s",
               file=sys.stderr if args.quiet else sys.stdout)
         hemisphere = is_paper_hemisphere(case)
+        partial = not result.get("kinematic_complete", True)
         if hemisphere and not args.quiet:
             from fenicsx_drape.forming.paper.numbers import paper_comparison
 
             print(paper_comparison(result))  # the kinematic drape's shear among its rows
-        elif result.get("kinematic_max_shear_deg") is not None:
-            print(f"kinematic drape (pin-jointed net) on the same tools: max shear "
-                  f"{result['kinematic_max_shear_deg']:.1f}°")
+        if (not hemisphere or partial) and result.get("kinematic_max_shear_deg") is not None:
+            print(f"kinematic drape (pin-jointed net) on the same tools: "
+                  f"{kinematic_text(result)}"
+                  + (" (the tools end before the blank, or the net locks)" if partial else ""))
+        for note in result.get("tool_force_notes", []):
+            print(f"note: {note}")
         pictures = ["shear.png", "wrinkling.png", "kinematic_shear.png",
                     *(["paths.png"] if hemisphere else [])]
         print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "

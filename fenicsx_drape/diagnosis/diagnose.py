@@ -1,4 +1,4 @@
-"""Which physical effect is a model missing? (``drape diagnose``, contract 2).
+"""Which physical effect is a model missing? (``drape diagnose``).
 
 The procedure follows the diagnosis contract of ``docs/measurements.md``:
 
@@ -410,7 +410,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
             ``candidates`` restricts the effects.
 
     Returns:
-        The report: a dict with every field of the diagnosis contract (version 2) plus
+        The report: a dict with every field of the diagnosis contract (:data:`CONTRACT`) plus
         ``add_effects`` (the effects to add), ``heldout_scheme``, ``significance``,
         ``ranking``, ``trends``, ``conclusion``, ``notes`` and ``seconds``.
     """

@@ -195,7 +195,7 @@ def applied(test: Test, name: str | None, p: Sequence[float], model: Model
     elif name == "holder_force_N":
         changes = {"holder_force_N": case.holder.force_N * float(p[0])}
     elif name == "mu":
-        changes = {"holder_mu": float(p[0])}
+        changes = {"mu": float(p[0])}
     else:
         raise DrapeInputError(f"set-up parameter {name!r} is not one of "
                               f"{', '.join(SETUP_PARAMETERS)}")
@@ -822,8 +822,7 @@ def value_text(v) -> str:
 def fitted_case(case: FormingCase, entry: dict[str, Any]) -> FormingCase:
     """A case with a report's fitted set-up applied (``entry``: one of ``report["setup"]``)."""
     name, value = entry["parameter"], entry["fitted"]
-    key = {"holder_force_N": "holder_force_N", "mu": "holder_mu"}.get(name, name)
-    return with_overrides(case, **{key: value})
+    return with_overrides(case, **{name: value})
 
 
 # --------------------------------------------------------------------------------------------

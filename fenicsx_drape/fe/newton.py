@@ -10,14 +10,14 @@ objects; SNES drives the iteration (``newtonls`` with a direct factorisation by 
   and 1, whatever ‖F‖ is there (PETSc's ``l2``, one secant iteration). Backtracking (``bt``)
   crawls at λ = 0.1 for tens of iterations where the Newton step straightens a buckled tow
   (eq. 4) or drives a node into a tool: the residual of such a step is large but cheap to
-  correct at the next iteration (issue 17; on the full 2.5 mm sheet ``bt`` cut fifteen steps
+  correct at the next iteration (on the full 2.5 mm sheet ``bt`` cut fifteen steps
   back, ``full-l2`` two). The residual at the point taken is handed to the line search, not
   evaluated twice. Any PETSc line search can be chosen instead (``line_search``, or
   ``-snes_linesearch_type``).
 - **The convergence test** (``setConvergenceTest``) is SNES's ``‖F‖ ≤ atol`` or
   ``‖F‖ ≤ rtol ‖F₀‖`` plus ``node_atol``: converged when no unknown carries an out-of-balance
   force above it, ‖F‖∞ ≤ ``node_atol`` (reported as ``CONVERGED_FNORM_NODE``). Unlike the
-  2-norm it does not tighten as the mesh is refined (issue 17: the forming cases use 1e-3 N).
+  2-norm it does not tighten as the mesh is refined (the forming cases use 1e-3 N).
   There is no step-length test (``snes_stol`` 0) and ``DIVERGED_MAX_IT`` after ``max_it``.
 - **A hook per iterate** (``setMonitor``) hands an :class:`Iterate` to a monitor, for
   diagnostics (``benchmarks/diagnose_stepping.py``); it costs nothing when unused.

@@ -8,7 +8,7 @@ the laws and of the nodal terms, a failed one reverts both. Load stepping with c
 :mod:`~fenicsx_drape.fe.stepping`, outputs in :mod:`~fenicsx_drape.fe.output`.
 
 Two choices make the Newton iteration of forming robust without changing its solution
-(issue 17; the residual is exact, only the path to its zero changes):
+(the residual is exact, only the path to its zero changes):
 
 - **The geometric stiffness is limited** to the largest bar force of the last converged step
   (``limit_geometric_stiffness``). A Newton step that straightens a buckled tow or rotates a
@@ -78,7 +78,7 @@ SINGLE_PRECISION_FACTOR = {
     "ksp_norm_type": "unpreconditioned", "ksp_rtol": 1e-3, "ksp_atol": 0.0, "ksp_max_it": 30}
 """``petsc_options`` that factorise the Jacobian in single precision (PETSc's mixed-precision
 MUMPS) and solve to 10⁻³ with GMRES on that factor: 7-15 % faster on the hemisphere
-(docs/solver-notes.md, issue 17). Alone the single factor solves the forming Jacobians to
+(docs/solver-notes.md). Alone the single factor solves the forming Jacobians to
 about 10⁻¹."""
 
 

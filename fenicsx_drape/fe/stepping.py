@@ -9,7 +9,7 @@ saved.
 Steps never cross the run's grid of ``dt_max_s`` (its start plus whole steps): after a cut-back
 the steps come back onto it. A run that cut one step back then takes the same steps as one
 that did not everywhere else, so that its result does not jump when a parameter moves the
-cut-back in or out (issue 27: a blank moved by 0.01 mm cut the hemisphere's first contact step
+cut-back in or out (a blank moved by 0.01 mm cut the hemisphere's first contact step
 back; the shifted steps after it moved the formed grid by 0.02 mm, as much as the fit's sd).
 """
 

@@ -1,6 +1,6 @@
 """Is a measured number one a measurement could give? Checks shared by every measurement kind.
 
-The spec (``shared/spec/measurements.md``, version 3, "Bad and odd rows"): a value no
+The spec (``docs/measurements.md``, version 3, "Bad and odd rows"): a value no
 measurement could give -- a position farther from the tools than the blank's size, NaN or
 infinite numbers -- is bad input (exit status 2, with the file and line), not an outlier.
 Each check here returns the problems as ``(line, message)`` pairs for the caller to name its

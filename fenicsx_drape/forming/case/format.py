@@ -45,10 +45,15 @@ DEFAULT_SHEET_SIDE = {"punch": "+z", "die": "-z", "holder": "+z", "surface": "+z
 
 # Names a measured test (or a command line) may override, besides tool parameter names.
 OVERRIDES = ("duration_s", "step_mm", "penalty_factor", "stabilisation_N_per_mm", "cell_mm",
-             "ply_angle_deg", "symmetry", "sheet_mm", "holder_force_N", "holder_mu",
+             "ply_angle_deg", "symmetry", "sheet_mm", "holder_force_N", "mu",
              "holder_force_share", "travel_mm", "blank_offset_mm", "tool_offset_mm", "die",
              "hold_origin")
-# Set-up overrides that move or turn something off the case's symmetry planes (issue 27).
+# The overrides of the holder's values: override name -> HolderSpec field. The friction
+# coefficient is ``mu`` everywhere: [holder] mu, drape form --mu, the set-up candidate.
+HOLDER_OVERRIDES = {"holder_force_N": "force_N", "mu": "mu", "holder_force_share": "force_share"}
+# Earlier spellings of an override, read as the new name with a warning.
+OLD_OVERRIDES = {"holder_mu": "mu"}
+# Set-up overrides that move or turn something off the case's symmetry planes.
 SETUP_OVERRIDES = ("ply_angle_deg", "blank_offset_mm", "tool_offset_mm")
 
 
@@ -167,7 +172,7 @@ class HolderSpec:
     tool: str  # name of the clamping tool (role holder)
     force_N: float  # total holding force on the whole part (N)
     mu: float | None = None  # overrides the model's μ (eq. 1)
-    force_share: str = "symmetric_part"  # "symmetric_part" | "model" (issue 15)
+    force_share: str = "symmetric_part"  # "symmetric_part" | "model"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -751,7 +756,8 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     Names (:data:`OVERRIDES`): ``duration_s`` (motion tables are stretched to it),
     ``step_mm``, ``penalty_factor``, ``stabilisation_N_per_mm``, ``cell_mm``,
     ``ply_angle_deg``, ``symmetry`` (a list of planes; ``[]`` for the full blank),
-    ``sheet_mm`` (a square rectangle blank), ``holder_force_N``, ``holder_mu``,
+    ``sheet_mm`` (a square rectangle blank), ``holder_force_N``, ``mu`` (the holder's
+    friction coefficient; ``holder_mu``, its earlier name, is read as ``mu`` with a warning),
     ``holder_force_share``, ``travel_mm`` (builtin tools' parameter; motion tables are
     scaled so that the fastest tool travels it), ``blank_offset_mm`` ([x, y]: the blank and
     its net moved on the tools), ``tool_offset_mm`` ([x, y]: the punch moved off the die and
@@ -776,8 +782,8 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     the hold is exact; with an offset it stands for the friction that keeps a placed blank
     in place.
     """
-    overrides = {k: v for k, v in overrides.items() if v is not None}
     where = str(case.path) if case.path is not None else f"case {case.name!r}"
+    overrides = {renamed(k, where): v for k, v in overrides.items() if v is not None}
     param_names = {k for t in case.tools for k, _ in t.parameters}
     builtin_names = set()
     if any(t.builtin for t in case.tools):
@@ -844,12 +850,12 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
             raise CaseError([f"{where}: override sheet_mm: the blank is not a rectangle"])
         s = float(overrides["sheet_mm"])
         blank = dataclasses.replace(blank, size_mm=(s, s))
-    if holder is None and any(k.startswith("holder_") and k in OVERRIDES for k in overrides):
+    if holder is None and any(k in HOLDER_OVERRIDES for k in overrides):
         raise CaseError([f"{where}: holder overrides given, but the case has no [holder]"])
     if holder is not None:
         holder = dataclasses.replace(
             holder, force_N=float(overrides.get("holder_force_N", holder.force_N)),
-            mu=overrides.get("holder_mu", holder.mu),
+            mu=overrides.get("mu", holder.mu),
             force_share=overrides.get("holder_force_share", holder.force_share))
         if holder.force_share == "model" and "holder_force_share" not in overrides:
             # "model" shares F over the model's own nodes: the same press on a model with
@@ -970,6 +976,14 @@ def override_names(case: FormingCase) -> set[str]:
     return names
 
 
+def renamed(key: str, where: str) -> str:
+    """An override's name, an earlier spelling (:data:`OLD_OVERRIDES`) read as today's."""
+    if key in OLD_OVERRIDES:
+        warnings.warn(f"{where}: {key} is now called {OLD_OVERRIDES[key]} (read as "
+                      f"{OLD_OVERRIDES[key]})", FutureWarning, stacklevel=3)
+    return OLD_OVERRIDES.get(key, key)
+
+
 def case_value(case: FormingCase, key: str) -> Any:
     """The case's own value of an override name (None when it has none to compare)."""
     if key in ("duration_s", "step_mm", "penalty_factor", "stabilisation_N_per_mm"):
@@ -983,11 +997,8 @@ def case_value(case: FormingCase, key: str) -> Any:
     if key == "sheet_mm" and case.blank.outline == "rectangle":
         a, b = case.blank.size_mm
         return a if a == b else None
-    if key.startswith("holder_") and key in OVERRIDES:
-        if case.holder is None:
-            return None
-        return getattr(case.holder, {"holder_force_N": "force_N", "holder_mu": "mu",
-                                     "holder_force_share": "force_share"}[key])
+    if key in HOLDER_OVERRIDES:
+        return None if case.holder is None else getattr(case.holder, HOLDER_OVERRIDES[key])
     values = {dict(t.parameters).get(key) for t in case.tools if key in dict(t.parameters)}
     return values.pop() if len(values) == 1 else None
 
@@ -1015,14 +1026,15 @@ def case_for_test(path: str | os.PathLike, keys: Mapping[str, Any]
     used: dict[str, Any] = {}
     changes: dict[str, Any] = {}
     problems = []
-    for key, value in keys.items():
+    for written, value in keys.items():
+        key = renamed(written, f"{path}: test key")
         if key not in names:
             if key in SPEC_FORMING_KEYS:
                 problems.append(f"{path}: test key {key} = {value!r}: the case has no such "
                                 "value (a tool parameter of that name, or an override: "
                                 f"{', '.join(OVERRIDES)})")
             continue
-        used[key] = value
+        used[written] = value  # as the bundle spells it (the loader looks its keys up)
         own = case_value(case, key)
         same = (own == value if isinstance(value, str) or isinstance(own, str) or own is None
                 else math.isclose(float(own), float(value), rel_tol=1e-9, abs_tol=1e-12))

@@ -1,4 +1,4 @@
-"""The paper's hemisphere numbers (section 4) and how a run compares with them (issue 15).
+"""The paper's hemisphere numbers (section 4) and how a run compares with them.
 
 Every number the paper states about the hemisphere, with where it states it, so that studies
 and ``make demo`` print the paper beside this model. Wrinkling strains are Green-Lagrange and,

@@ -1,4 +1,4 @@
-"""Parameter studies of the hemisphere (the paper's Figs. 9 and 12, issue 15): run, tabulate, plot.
+"""Parameter studies of the hemisphere (the paper's Figs. 9 and 12): run, tabulate, plot.
 
 A study is a list of :class:`Variant` s (a labelled case, model and solver options) run with
 :func:`run_variants`, which returns one row of :func:`metrics` per variant and the formed
@@ -31,11 +31,11 @@ from fenicsx_drape.forming.running.post import FormedGrid, mean_distance
 from fenicsx_drape.forming.running.run import draw_in, run_case
 from fenicsx_drape.provenance import atomic_write_bytes, atomic_write_text, write_json
 
-# The two readings of eq. 1 on a symmetric part model (issue 15): "symmetric_part" gives the
+# The two readings of eq. 1 on a symmetric part model: "symmetric_part" gives the
 # quarter F/4 (the whole sheet's force per node), "model" the whole F over the quarter's own
 # n_s nodes (four times the force per node), as a model built of the quarter alone would.
 READINGS = ("symmetric_part", "model")
-# μ of prepreg on (release-agent-coated) steel: the literature range (docs/paper.md, issue 15).
+# μ of prepreg on (release-agent-coated) steel: the literature range (docs/paper.md).
 MU_LITERATURE = (0.1, 0.2, 0.3, 0.4)
 # The paper's sweeps (section 4): Fig. 12a durations at 133 N, Fig. 12b forces at 40 s, and
 # Fig. 9 quarter models of 9 to 225 nodes (cells of 120 mm / 2 ... 120 mm / 14).

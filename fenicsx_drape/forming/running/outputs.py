@@ -6,19 +6,25 @@
 - ``summary.json``: max shear angle, total and minimum wrinkling strain, the free edge's
   in-plane displacement (and a rectangle's mid-side and corner draw-in), nodes, steps,
   cut-backs, Newton iterations, wall time, penetration, ranks, travel and the case, and the
-  kinematic drape's max shear on the same tools (``kinematic_max_shear_deg``);
+  kinematic drape on the same tools: ``kinematic_placed_nodes`` of ``kinematic_blank_nodes``
+  placed (``kinematic_complete`` false when the surface ends or the net locks before every
+  node of the blank is placed) and ``kinematic_max_shear_deg``, the maximum over the placed
+  nodes only;
 - ``fields.xdmf`` (+ ``.h5``) every 5 mm of the fastest tool's travel; ``tools/*.vtk``: the
   tools at the end of their motion;
 - ``bundle/``: the formed part's drawn grid as a forming bundle whose test names a copy of
   the case (``case = "case/case.toml"``, with its geometry files in ``bundle/case/``), so that
   it can be compared later like a measured part;
-- ``kinematic_shear.png``: the kinematic drape (pin-jointed net) beside the FE result;
+- ``kinematic_shear.png``: the kinematic drape (pin-jointed net) beside the FE result; a
+  partial net says how many nodes it placed in its title;
 - ``shear.png``, ``wrinkling.png``: the formed sheet (mirrored to the whole part for a
   symmetric model) coloured by shear angle, and the wrinkled tows;
 - ``provenance.json``: version, command, model, solver options and the case;
 - ``tool_forces.csv`` and ``tool_forces.png``: the force of every tool along its motion
-  against the travel, for the whole part (the press's force curve; ``summary.json`` gives
-  each tool's peak, ``max_tool_force_N``; :func:`write_tool_forces`).
+  against the travel, for the whole part, one point per converged step (the press's force
+  curve; ``summary.json`` gives each tool's peak, ``max_tool_force_N``, and the steps whose
+  force stands out of both neighbours', ``tool_force_outliers``, each with a note in
+  ``tool_force_notes``; :func:`write_tool_forces`).
 
 The paper's hemisphere (``drape form hemisphere``, ``meshes/hemisphere/case.toml``: tools that
 are all builtin) is a case like any other; its folder also holds ``paths.png``: shear along
@@ -112,7 +118,7 @@ def case_summary(run: FormingRun) -> dict:
         "max_shear_deg": float(np.nanmax(np.abs(g.shear_deg()))),
         "total_wrinkling_strain": g.total_wrinkling_strain(),
         # The paper's literal measure: length change of the compressed tows over the length
-        # of all tow bars (issue 15; FormedGrid.total_wrinkling_strain).
+        # of all tow bars (FormedGrid.total_wrinkling_strain).
         "total_wrinkling_engineering": g.total_wrinkling_strain("engineering", "bars"),
         "min_wrinkling_strain": float(min(np.nanmin(warp), np.nanmin(weft), 0.0)),
         "max_tow_strain": float(max(np.nanmax(warp), np.nanmax(weft))),
@@ -265,7 +271,9 @@ def write_tool_forces(run: FormingRun, out: str | os.PathLike, part: str, *,
 
     Returns:
         For ``summary.json``: ``max_tool_force_N`` (each tool's largest force in magnitude,
-        signed) and ``tool_forces_file``.
+        signed, over the converged steps) and ``tool_forces_file``; where a step's force
+        stands out of its neighbours' (:func:`outliers`), ``tool_force_outliers`` and
+        ``tool_force_notes``, which say it and give the peak without those steps.
     """
     from fenicsx_drape.forming.running.plots import plot_tool_forces
     from fenicsx_drape.provenance import atomic_write_text
@@ -278,12 +286,55 @@ def write_tool_forces(run: FormingRun, out: str | os.PathLike, part: str, *,
         ",".join(repr(float(r[n])) for n in names) + "\n" for r in rows)
     atomic_write_text(Path(out) / "tool_forces.csv", text)
     curves = {n: np.array([r[n] for r in rows]) for n in names}
+    travel = curves["travel_mm"]
+    tools = {n: v for n, v in curves.items() if n not in ("time_s", "travel_mm")}
+    found = {n: outliers(travel, v) for n, v in tools.items()}
     if pictures:
         plot_tool_forces(curves, Path(out) / "tool_forces.png",
-                         f"{part}: force of each tool along its motion")
-    peak = {n: float(v[np.argmax(np.abs(v))]) for n, v in curves.items()
-            if n not in ("time_s", "travel_mm")}
-    return {"max_tool_force_N": peak, "tool_forces_file": "tool_forces.csv"}
+                         f"{part}: force of each tool along its motion",
+                         marked={n: i for n, i in found.items() if len(i)})
+    peak = {n: float(v[np.argmax(np.abs(v))]) for n, v in tools.items()}
+    result = {"max_tool_force_N": peak, "tool_forces_file": "tool_forces.csv"}
+    listed, notes = [], []
+    for name, steps in found.items():
+        v = tools[name]
+        for i in steps:
+            listed.append({"tool": name, "step": int(i) + 1, "travel_mm": float(travel[i]),
+                           "force_N": float(v[i]),
+                           "neighbours_N": [float(v[i - 1]), float(v[i + 1])]})
+            notes.append(f"{name}: the force of step {i + 1} ({travel[i]:.1f} mm of travel), "
+                         f"{v[i]:.3g} N, stands out of its neighbours' ({v[i - 1]:.3g} and "
+                         f"{v[i + 1]:.3g} N)")
+        if len(steps):
+            rest = np.delete(v, steps)
+            notes.append(f"{name}: peak {peak[name]:.3g} N over all converged steps, "
+                         f"{rest[np.argmax(np.abs(rest))]:.3g} N without the steps that "
+                         "stand out")
+    if listed:
+        result.update(tool_force_outliers=listed, tool_force_notes=notes)
+    return result
+
+
+def outliers(travel: np.ndarray, force: np.ndarray, *, factor: float = 3.0,
+             share: float = 0.1) -> np.ndarray:
+    """The steps whose force stands out of both neighbours' (indices into ``force``).
+
+    A step stands out when its force departs from the line through its two neighbours (in
+    travel) by more than ``factor`` times the neighbours' own difference and by more than
+    ``share`` of the curve's largest magnitude: a one-step spike or dip, as a step that
+    converged on a transient contact or friction state gives, and not a steep but steady
+    rise (where the neighbours differ by as much) or the noise of a curve near zero. The
+    first and last steps have one neighbour and are never listed.
+    """
+    s, f = np.asarray(travel, float), np.asarray(force, float)
+    if len(f) < 3:
+        return np.zeros(0, int)
+    a, b, m = f[:-2], f[2:], f[1:-1]
+    span = s[2:] - s[:-2]
+    w = np.divide(s[1:-1] - s[:-2], span, out=np.full(len(m), 0.5), where=span > 0)
+    departure = np.abs(m - (a + w * (b - a)))
+    big = (departure > factor * np.abs(b - a)) & (departure > share * np.abs(f).max())
+    return np.flatnonzero(big) + 1
 
 
 def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None
@@ -298,17 +349,34 @@ def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None
     from fenicsx_drape.forming.running.kinematic import drape_case
 
     try:
-        net = drape_case(case, tools=run.tools)
+        net = drape_case(case, tools=run.tools, warn=False)  # summary and console say it
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
         return None, {"kinematic_error": str(err)}
     numbers = net.summary()
+    placed, unplaced = numbers["nodes"], numbers["unplaced_nodes"]
+    result = {"kinematic_max_shear_deg": numbers["max_shear_deg"],
+              "kinematic_placed_nodes": placed, "kinematic_blank_nodes": placed + unplaced,
+              "kinematic_unplaced_nodes": unplaced, "kinematic_complete": unplaced == 0}
     if pictures is not None and numbers["max_shear_deg"] is not None:
         pictures.mkdir(parents=True, exist_ok=True)
         plot_shear(net, pictures / "kinematic_shear.png",
-                   f"{case.name}: kinematic drape (pin-jointed net), shear angle "
-                   f"(max {numbers['max_shear_deg']:.1f}°)")
-    return net, {"kinematic_max_shear_deg": numbers["max_shear_deg"],
-                 "kinematic_unplaced_nodes": numbers["unplaced_nodes"]}
+                   f"{case.name}: kinematic drape (pin-jointed net)\n{kinematic_text(result)}")
+    return net, result
+
+
+def kinematic_text(result: dict) -> str:
+    """The kinematic drape's maximum shear as a phrase, saying so when the net is partial.
+
+    Args:
+        result: A ``summary.json`` with the ``kinematic_*`` keys of :func:`form_case`.
+    """
+    γ = result.get("kinematic_max_shear_deg")
+    shear = "no cell" if γ is None else f"{γ:.1f}°"
+    if result.get("kinematic_complete", True):
+        return f"max shear {shear}"
+    placed, total = result["kinematic_placed_nodes"], result["kinematic_blank_nodes"]
+    return (f"PARTIAL: {placed} of {total} nodes of the blank placed "
+            f"({100 * placed / max(total, 1):.0f} %), max shear {shear} on them only")
 
 
 def write_case_tools(run: FormingRun, folder: str | os.PathLike) -> list[Path]:

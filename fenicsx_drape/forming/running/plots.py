@@ -133,7 +133,8 @@ def plot_paths(grids: Mapping[str, FormedGrid], path: str | os.PathLike) -> Path
 
 
 def plot_tool_forces(curves: Mapping[str, np.ndarray], path: str | os.PathLike,
-                     title: str = "", measured: Mapping[str, np.ndarray] | None = None) -> Path:
+                     title: str = "", measured: Mapping[str, np.ndarray] | None = None,
+                     marked: Mapping[str, np.ndarray] | None = None) -> Path:
     """Each tool's force along its motion against the travel (N; the press's force curve).
 
     Args:
@@ -141,14 +142,20 @@ def plot_tool_forces(curves: Mapping[str, np.ndarray], path: str | os.PathLike,
         path: The PNG to write.
         title: The picture's title.
         measured: A measured curve beside them: ``travel_mm``, ``force_N`` and ``label``.
+        marked: Steps (indices) of a tool whose force stands out of its neighbours', circled.
     """
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     travel = np.asarray(curves["travel_mm"])
+    marked = marked or {}
     for name, values in curves.items():
         if name not in ("time_s", "travel_mm"):
             ax.plot(travel, values, "-", label=f"model: {name}")
+            if name in marked:
+                i = np.asarray(marked[name])
+                ax.plot(travel[i], np.asarray(values)[i], "o", mfc="none", mec="red", ms=8,
+                        label=f"{name}: step out of its neighbours")
     if measured is not None:
         ax.plot(measured["travel_mm"], measured["force_N"], ".", ms=3, color="0.3",
                 label=str(measured.get("label", "measured")))

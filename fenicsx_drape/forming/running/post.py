@@ -234,7 +234,7 @@ class FormedGrid:
         The magnitude at every node (:meth:`shear_nodes`) against its value at the node's
         mirror image, bilinear in the cells of the tow frame (images are nodes when the tows
         lie along the edges; images outside the net are left out). 0 for a sheet symmetric in
-        the plane x = 0; a ply at an angle θ is not (issue 6).
+        the plane x = 0; a ply at an angle θ is not.
         """
         g = self.full()
         γ = np.abs(g.shear_nodes())

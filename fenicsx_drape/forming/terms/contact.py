@@ -152,7 +152,7 @@ class PenaltyContact:
         A node pressed on the tool at the last converged step is moved along the normal to the
         same (negative) gap: an extrapolated position off the surface would leave the first
         Newton iteration without its contact stiffness (the quadratic penalty has none at
-        φ ≥ 0), and the step would push it deep into the tool (issue 17). Other nodes that
+        φ ≥ 0), and the step would push it deep into the tool. Other nodes that
         penetrate are moved onto the surface.
         """
         g = self.tool.gap(x, t)

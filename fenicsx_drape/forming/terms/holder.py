@@ -32,7 +32,7 @@ interior point of the surface: the node lies under it, not beyond its edge or op
 is re-evaluated from the converged positions after every step (so it lags by one step, which
 keeps Newton's residual smooth within a step). A node that leaves the holder loses its bar.
 
-**Force share** (issue 15: the paper does not say how a symmetric model shares F_tot).
+**Force share** (the paper does not say how a symmetric model shares F_tot).
 ``force_N`` is the force the modelled part carries, and a node's share is its weight w in
 n_s = Σ w:
 
