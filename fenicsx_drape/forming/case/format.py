@@ -1188,6 +1188,17 @@ def _meshed_tool(case: FormingCase, spec: ToolSpec):
         require_trust(spec.path, "the Python geometry of tool " + repr(spec.name), case.origin)
     surface = load_surface(spec.path, spec.params or None, spec.mesh_mm, spec.order or 1,
                            sheet_side=spec.side)
+    if spec.role != "holder":  # a holder's opening is a hole by design
+        from fenicsx_drape.forming.tools.checks import holes
+
+        found = holes(surface)
+        if found:
+            centre, size = found[0]
+            at = ", ".join(f"{v:g}" for v in np.round(centre, 1) + 0.0)
+            raise CaseError([f"{where}: {spec.path.name}: the {spec.role}'s surface has "
+                             f"{len(found)} hole(s): one of {size:.3g} mm across at ({at}) "
+                             f"mm (a {spec.role} must be closed or one surface without "
+                             "holes: the sheet would sink into it)"])
     coarse = coarse_mesh_problem(surface, case.blank.cell_mm)
     if coarse:
         warnings.warn(f"{where}: {coarse}", stacklevel=3)
