@@ -504,6 +504,7 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
             raise CaseError([f"{fname}: [blank]: {err}"]) from None
     try:
         check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
+        check_run_size(case)  # and the run's length
     except DrapeInputError as err:
         raise CaseError([str(err)]) from None
     return case
@@ -879,6 +880,7 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
                                        **changes)
         new_case.blank.grid()
         check_tool_sizes(new_case, warn=False)
+        check_run_size(new_case)
         for t in new_case.tools:
             if t.builtin:
                 _builtin_tools(t)
@@ -1139,6 +1141,35 @@ def check_tool_sizes(case: FormingCase, skip: tuple[str, ...] = (), warn: bool =
                           "accuracy", stacklevel=3)
     if total:
         check_triangles(total, f"{where}: tools ({', '.join(named)})")
+
+
+def run_size(case: FormingCase) -> dict[str, float]:
+    """A run's length from the case alone: load steps, nodes and seconds (one rank).
+
+    The steps are the fastest tool's travel over ``step_mm`` (cut-backs add a few); the
+    nodes the net's lattice; the time :func:`fenicsx_drape.limits.run_seconds`.
+    """
+    from fenicsx_drape.limits import run_seconds
+
+    grid = case.blank.grid()
+    steps = float(math.ceil(case.total_travel_mm / case.step_mm - 1e-9))
+    nodes = float((grid.nx + 1) * (grid.ny + 1))
+    return {"steps": steps, "nodes": nodes, "seconds": run_seconds(steps, nodes),
+            "travel_mm": case.total_travel_mm}
+
+
+def check_run_size(case: FormingCase) -> dict[str, float]:
+    """Refuse a run longer than the step limit at once (:func:`fenicsx_drape.limits.check_steps`).
+
+    Returns:
+        :func:`run_size`.
+    """
+    from fenicsx_drape.limits import check_steps
+
+    size = run_size(case)
+    check_steps(size["steps"], size["nodes"], str(case.path or f"case {case.name!r}"),
+                f"{size['travel_mm']:g} mm of travel at step_mm = {case.step_mm:g}")
+    return size
 
 
 def coarse_mesh_problem(surface, cell_mm: float) -> str | None:

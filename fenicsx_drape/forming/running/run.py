@@ -34,7 +34,12 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from fenicsx_drape.errors import SolverError
-from fenicsx_drape.forming.case.format import CaseError, FormingCase, build_tools
+from fenicsx_drape.forming.case.format import (
+    CaseError,
+    FormingCase,
+    build_tools,
+    check_run_size,
+)
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.terms.contact import PenaltyContact
 from fenicsx_drape.forming.terms.holder import BlankHolder
@@ -149,7 +154,9 @@ def run_case(case: FormingCase, model=None, options=None, *,
     from fenicsx_drape.fe.mesh import grid_to_sheet
     from fenicsx_drape.fe.solver import TrussProblem
     from fenicsx_drape.fe.stepping import RunReport
+    from fenicsx_drape.limits import duration_text
 
+    size = check_run_size(case)  # a run past the step limit stops before anything is built
     model = model or case_model(case)
     if case.holder is not None and case.holder.mu is not None:
         model = model.with_parameters(mu=case.holder.mu)
@@ -196,12 +203,21 @@ def run_case(case: FormingCase, model=None, options=None, *,
                              f"origin_mm = {list(case.blank.origin_mm)} (inside the blank)"])
         problem.fix(origin, (0, 1))
 
+    if progress is not None and comm.rank == 0:
+        progress(f"{case.name}: about {size['steps']:.0f} load steps ({size['travel_mm']:g} mm "
+                 f"at {case.step_mm:g} mm) on {size['nodes']:.0f} nodes, about "
+                 f"{duration_text(size['seconds'])} (estimate)")
+
     def report(step) -> None:
         if progress is not None and comm.rank == 0:
             travel = case.travel_mm(step.time_s)
             state = "ok" if step.converged else f"cut back ({step.reason})"
+            # Time left at the rate so far (wall time per mm of travel).
+            spent = time.perf_counter() - stepping
+            left = (f"  ~{duration_text(spent * (size['travel_mm'] - travel) / travel)} left"
+                    if travel > 0 and step.converged else "")
             progress(f"step {len(problem.steps):4d}  t = {step.time_s:7.3f} s  travel = "
-                     f"{travel:6.2f} mm  Newton {step.iterations:2d}  {state}")
+                     f"{travel:6.2f} mm  Newton {step.iterations:2d}  {state}{left}")
 
     touched = False  # whether a node ever touched a punch, die or surface
     forces_of_tools = record_tool_forces(case, problem, contact, holder)
@@ -217,6 +233,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
 
     dt = case.step_mm / case.max_speed_mm_per_s
     stopped = None
+    stepping = time.perf_counter()
     try:
         problem.run(case.duration_s, dt, dt_max_s=dt, easy_iterations=15, progress=report,
                     on_step=after_step, failure_dir=failure_dir)
