@@ -40,6 +40,7 @@ from fenicsx_drape.forming.case.format import (
     build_tools,
     check_run_size,
 )
+from fenicsx_drape.forming.running.geometry import geometry_problems
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.terms.contact import PenaltyContact
 from fenicsx_drape.forming.terms.holder import BlankHolder
@@ -166,6 +167,11 @@ def run_case(case: FormingCase, model=None, options=None, *,
             raise CaseError([f"run_case: tool {name!r} is not a tool of case {case.name!r}"])
     built = {**build_tools(case, skip=tuple(given)), **given}
     built = {t.name: built[t.name] for t in case.tools}  # in the case's order
+    errors, warns = geometry_problems(case, built, case.blank.grid().nodes)
+    if errors:  # before the first step, in the user's terms
+        raise CaseError([f"case {case.path or case.name}: {e}" for e in errors])
+    for text in warns:
+        warnings.warn(f"case {case.path or case.name}: {text}", stacklevel=2)
     holder_surface = built[case.holder.tool] if case.holder is not None else None
     μ_t = tool_friction(model)
     if options is None:
