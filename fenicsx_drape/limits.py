@@ -207,27 +207,47 @@ def run_script(function: Callable[..., Any], args: tuple, path: str | os.PathLik
         job, out = Path(tmp) / "job.pickle", Path(tmp) / "result.pickle"
         job.write_bytes(pickle.dumps(((function.__module__, function.__qualname__), args,
                                       memory_bytes())))
+        # The script's temporary files go into this folder, removed with it, also when the
+        # script is stopped; its own children are stopped with it (one process group).
+        env.update(TMPDIR=tmp, TMP=tmp, TEMP=tmp)
+        child = subprocess.Popen(
+            [sys.executable, "-c", "import sys; from fenicsx_drape.limits import _child; "
+             "_child(sys.argv[1], sys.argv[2])", str(job), str(out)],
+            env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE, cwd=tmp, start_new_session=True)
         try:
-            done = subprocess.run(
-                [sys.executable, "-c", "import sys; from fenicsx_drape.limits import _child; "
-                 "_child(sys.argv[1], sys.argv[2])", str(job), str(out)],
-                env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                stderr=subprocess.PIPE, timeout=timeout, cwd=tmp)
+            _, stderr = child.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
+            _stop(child)
             raise DrapeInputError(
                 f"{path}: the geometry script did not finish in {timeout:g} s and was stopped "
-                "(DRAPE_SCRIPT_TIMEOUT_S sets the limit)") from None
+                "(DRAPE_SCRIPT_TIMEOUT_S sets the limit; its temporary files are removed)"
+            ) from None
+        except BaseException:  # interrupted: leave nothing running
+            _stop(child)
+            raise
         if not out.is_file():
-            tail = done.stderr.decode(errors="replace").strip().splitlines()[-3:]
+            tail = stderr.decode(errors="replace").strip().splitlines()[-3:]
             raise DrapeInputError(
                 f"{path}: the geometry script ended without a result (exit status "
-                f"{done.returncode}; a mesh beyond the memory limit of "
+                f"{child.returncode}; a mesh beyond the memory limit of "
                 f"{memory_bytes() / 1e9:.3g} GB ends so)" + (": " + " / ".join(tail)
                                                                if tail else ""))
         status, value = pickle.loads(out.read_bytes())
     if status == "error":
         raise DrapeInputError(value)
     return value
+
+
+def _stop(child: subprocess.Popen) -> None:
+    """Kill a script's process group (the child and anything it started) and reap it."""
+    import signal
+
+    try:
+        os.killpg(child.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    child.communicate()
 
 
 def _child(job: str, out: str) -> None:

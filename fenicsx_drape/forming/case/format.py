@@ -1329,13 +1329,17 @@ def case_toml(case: FormingCase, relative_to: str | os.PathLike | None = None,
 
 
 def write_case(case: FormingCase, folder: str | os.PathLike, *, name: str = "case.toml",
-               comment: str = "") -> Path:
+               comment: str = "", surfaces: Mapping[str, Any] | None = None) -> Path:
     """Write the case into ``folder`` with copies of its geometry files: a self-contained case.
 
     Tool geometry and the outline curve are copied next to the case file (renamed on a
     clash) and named relative to it; the model file is not copied (a bundle names no model).
+    A tool named in ``surfaces`` (its :class:`~fenicsx_drape.forming.tools.surfaces.
+    TriangleSurface`, as a run meshed it) is written as that mesh instead, ``<name>.msh``:
+    data that any reader takes without ``--trust``, at the resolution the run used.
     Returns the written case file.
     """
+    from fenicsx_drape.forming.tools.surfaces import write_msh
     from fenicsx_drape.provenance import atomic_write_bytes, atomic_write_text
 
     folder = Path(folder)
@@ -1356,7 +1360,17 @@ def write_case(case: FormingCase, folder: str | os.PathLike, *, name: str = "cas
         copies[p] = folder / target
         return copies[p]
 
-    tools = tuple(dataclasses.replace(t, path=copy(t.path)) if t.path else t for t in case.tools)
+    def meshed(t: ToolSpec) -> ToolSpec:
+        target = f"{t.name}.msh" if f"{t.name}.msh" not in used else f"{t.name}_tool.msh"
+        used.add(target)
+        write_msh(surfaces[t.name], folder / target)
+        return dataclasses.replace(t, geometry=target, path=folder / target, parameters=(),
+                                   mesh_mm=None, order=None)
+
+    surfaces = surfaces or {}
+    tools = tuple(meshed(t) if t.name in surfaces and t.path else
+                  dataclasses.replace(t, path=copy(t.path)) if t.path else t
+                  for t in case.tools)
     blank = case.blank
     if blank.path is not None:
         blank = dataclasses.replace(blank, path=copy(blank.path))

@@ -904,6 +904,23 @@ def _nodes_of(etype: int) -> int:
     return {2: 3, 9: 6, 3: 4, 10: 9}[etype]
 
 
+def write_msh(surface: TriangleSurface, path: str | os.PathLike) -> Path:
+    """Write a surface as a Gmsh mesh (format 2.2, ASCII, every number exact), atomically.
+
+    Read back (:func:`load_surface`) it is the same surface: the same points and triangles,
+    oriented by the same rule. A forming bundle's case carries its tools so (data, not code).
+    """
+    from fenicsx_drape.provenance import atomic_write_text
+
+    p, t = surface.points, surface.triangles
+    lines = ["$MeshFormat", "2.2 0 8", "$EndMeshFormat", "$Nodes", str(len(p))]
+    lines += [f"{k + 1} {x!r} {y!r} {z!r}" for k, (x, y, z) in enumerate(p.tolist())]
+    lines += ["$EndNodes", "$Elements", str(len(t))]
+    lines += [f"{k + 1} 2 2 0 1 {a + 1} {b + 1} {c + 1}" for k, (a, b, c) in enumerate(t.tolist())]
+    lines.append("$EndElements")
+    return atomic_write_text(path, "\n".join(lines) + "\n")
+
+
 # --------------------------------------------------------------------------------------------
 # Outline curves
 
