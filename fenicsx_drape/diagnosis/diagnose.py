@@ -394,6 +394,11 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
 
     start = time.perf_counter()
     say = progress or (lambda line: None)
+    # -- issue 41 hook (data before physics, spec version 4): each measurement checked
+    # against its case before any fit; applied to the report at the end.
+    from fenicsx_drape.diagnosis.data_check import apply_data_check, data_check
+
+    checked = data_check(bundle)
     # Set-up before physics (spec version 3): the best set-up fitted, then the effects.
     stage, bundle = setup_stage(bundle, model, SETUP_PARAMETERS if setup is None
                                 and candidates is None else setup, setup_rules(), say)
@@ -532,6 +537,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
                                  f"again: {value_text(j['fitted'])}.")
     report.models, report.comparisons = models, comparisons
     report.tests = data.tests
+    apply_data_check(report, checked)  # -- issue 41 hook: suspect data named first
     say(report["conclusion"])
     return report
 

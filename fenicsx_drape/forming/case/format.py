@@ -851,6 +851,10 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     params = {k: float(v) for k, v in overrides.items() if k in param_names | builtin_names}
     if "travel_mm" in overrides:
         travel = float(overrides["travel_mm"])
+        if not (math.isfinite(travel) and travel > 0):
+            raise CaseError([f"{where}: override travel_mm = {travel:g}: a travel against the "
+                             "tool's motion (travel is the distance the fastest tool moves "
+                             "along its motion, > 0)"])
         moving = [t for t in tools if not t.builtin and t.motion is not None]
         if moving:
             now = max(t.motion.travel_mm(t.motion.time_s[-1]) for t in moving)
