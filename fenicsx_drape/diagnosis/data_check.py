@@ -22,7 +22,9 @@ entries (``suspect`` with ``why``, the first reason found):
   plane, and its test has no plane to check: the ``why`` says which was chosen.
 
 A travel against the tool's motion (``travel_mm`` ≤ 0) is impossible input: the function
-raises :class:`~fenicsx_drape.errors.DrapeInputError` (exit 2).
+raises :class:`~fenicsx_drape.errors.DrapeInputError` (exit 2; the case's overrides refuse
+it first, when the bundle is read). A punch force has no positions to check, and a lab
+measurement whose frame is registered (``register = true``) is placed by the comparison.
 """
 
 from __future__ import annotations
@@ -185,8 +187,8 @@ def data_check(bundle) -> list[dict[str, Any]]:
         lab = getattr(test, "lab", None)
         parent = lab.parent if lab is not None else test.id
         measurement = lab.measurement if lab is not None else "file"
-        if measurement == "punch_force":
-            continue  # no positions to check
+        if measurement == "punch_force" or (lab is not None and lab.frame.register):
+            continue  # no positions to check; or in a frame the comparison fits
         why = check_measurement(test, forming_case_of(test))
         out.append({"test": parent, "measurement": measurement, "suspect": why is not None,
                     "why": why or "consistent with the case (extent, blank, tools, frame)"})
