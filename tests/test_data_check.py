@@ -94,6 +94,15 @@ def test_a_flat_frame_shifted_by_3_mm_is_named_with_the_shift(formed, tmp_path):
     assert report["data_check"] == [entry]
 
 
+def test_a_scan_in_metres_is_named(formed, tmp_path):
+    def metres(c, rows):
+        rows[:, [c["x_mm"], c["y_mm"], c["z_mm"]]] /= 1000.0
+
+    entry = check(variant(formed, tmp_path / "b", metres))
+    assert entry["suspect"] and entry["why"].endswith("the blank 300 mm: metres read as "
+                                                      "millimetres?")
+
+
 def test_a_travel_of_the_wrong_sign_is_bad_input(formed, tmp_path, capsys):
     folder = variant(formed, tmp_path / "b")
     toml = folder / "bundle.toml"

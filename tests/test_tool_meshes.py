@@ -90,6 +90,18 @@ def test_a_vertex_that_is_not_a_number_is_refused_with_file_and_line(tmp_path, c
     assert f"dome.stl:{k + 1}: vertex nan nan nan" in capsys.readouterr().err
 
 
+def test_a_binary_stl_with_a_vertex_that_is_not_a_number_is_refused(tmp_path):
+    facets = np.zeros(3, dtype=[("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    facets["v"] = [[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[1, 0, 0], [1, 1, 0], [0, 1, 0]],
+                   [[1, 0, 0], [2, 0, 0], [np.nan, 1, 0]]]
+    path = tmp_path / "binary.stl"
+    path.write_bytes(b"solid header of a binary file".ljust(80) + np.uint32(3).tobytes()
+                     + facets.tobytes())
+    with pytest.raises(DrapeInputError, match=r"binary\.stl: facet 3 \(of 3\) has a vertex "
+                                              r"that is not finite"):
+        load_surface(path, comm=None)
+
+
 def test_a_corner_welded_onto_a_far_vertex_is_a_spike(tmp_path):
     path = dome(tmp_path)
     items = facets(path)

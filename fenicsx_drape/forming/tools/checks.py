@@ -45,7 +45,8 @@ def stl_problems(path: str | os.PathLike) -> list[str]:
     path = Path(path)
     data = path.read_bytes()
     out = []
-    if data[:5].lower() == b"solid" and b"facet" in data[:1000]:
+    n = int(np.frombuffer(data[80:84], "<u4")[0]) if len(data) >= 84 else -1
+    if len(data) != 84 + 50 * n:  # not the size of a binary STL: ASCII
         for k, line in enumerate(data.decode(errors="replace").splitlines(), start=1):
             words = line.split()
             if not words or words[0].lower() != "vertex":
@@ -57,8 +58,7 @@ def stl_problems(path: str | os.PathLike) -> list[str]:
             if len(xyz) != 3 or not np.all(np.isfinite(xyz)):
                 out.append(f"{path}:{k}: vertex {' '.join(words[1:]) or '(empty)'} is not "
                            "three finite numbers")
-    elif len(data) >= 84:
-        n = int(np.frombuffer(data[80:84], "<u4")[0])
+    else:
         facets = np.frombuffer(data[84:84 + 50 * n], dtype=np.dtype(
             [("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")]))
         bad = np.flatnonzero(~np.isfinite(facets["v"]).all(axis=(1, 2)))
