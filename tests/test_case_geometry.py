@@ -120,3 +120,13 @@ def test_a_punch_that_never_reaches_the_die_is_warned_with_the_gap(tmp_path):
     assert errors == [] and warns == ["the punch 'punch' never reaches the die 'die': at the "
                                       "end of the motion they are still 61 mm apart (more "
                                       "than the sheet's cell 20 mm)"]
+
+
+def test_a_blank_within_the_holders_opening_is_named():
+    # The paper's hemisphere with a 110 mm sheet (corners at r = 78 mm): the opening is
+    # 170 mm across.
+    case = load_case("hemisphere", sheet_mm=110.0, cell_mm=40.0)
+    with pytest.raises(CaseError, match=r"the holder 'holder' does not reach the blank: its "
+                                        r"surface covers none of the blank's nodes at the "
+                                        r"start \(the blank lies within its opening\)"):
+        run_case(case)

@@ -79,9 +79,10 @@ def geometry_problems(case, tools: dict, nodes: np.ndarray) -> tuple[list[str], 
         holder = tools[case.holder.tool]
         if not np.any(holder.covers(x, 0.0)):
             gap = float(np.abs(_distance(holder, x, 0.0)).min())
+            where = (f"the nearest node is {gap:.3g} mm from it" if gap > 1e-6 else
+                     "the blank lies within its opening")
             errors.append(f"the holder {case.holder.tool!r} does not reach the blank: its "
-                          f"surface covers none of the blank's nodes at the start (the "
-                          f"nearest node is {gap:.3g} mm from it)")
+                          f"surface covers none of the blank's nodes at the start ({where})")
     end = case.duration_s
     for punch in (t for t in contact if t.role == "punch"):
         for die in (t for t in contact if t.role == "die"):
