@@ -16,6 +16,11 @@ core and steps it to the end of its motion (the paper's hemisphere is the case
 - the out-of-plane stabilisation of the slack net
   (:mod:`~fenicsx_drape.forming.terms.stabilisation`) along the nearest tool's normal.
 
+Before anything is built the run's length is checked (load steps, nodes, time:
+:func:`~fenicsx_drape.forming.case.format.check_run_size`), and before the first step where
+the blank and the tools are (:mod:`~fenicsx_drape.forming.running.geometry`); the progress
+lines give the estimate, then the time left at the rate so far.
+
 Load steps move the fastest tool ``step_mm``; a step whose Newton solve fails is halved, and
 steps grow back (×1.5, up to ``step_mm``) after solves of at most 15 iterations. A step has
 converged when ‖F‖ ≤ 1e-6 N or no node carries more than :data:`NODE_ATOL_N` out of balance
