@@ -1338,8 +1338,9 @@ def write_case(case: FormingCase, folder: str | os.PathLike, *, name: str = "cas
 
     Tool geometry and the outline curve are copied next to the case file (renamed on a
     clash) and named relative to it; the model file is not copied (a bundle names no model).
-    A tool named in ``surfaces`` (its :class:`~fenicsx_drape.forming.tools.surfaces.
-    TriangleSurface`, as a run meshed it) is written as that mesh instead, ``<name>.msh``:
+    A tool named in ``surfaces`` (its
+    :class:`~fenicsx_drape.forming.tools.surfaces.TriangleSurface`, as a run meshed it) is
+    written as that mesh instead, ``<name>.msh``:
     data that any reader takes without ``--trust``, at the resolution the run used.
     Returns the written case file.
     """
