@@ -60,7 +60,13 @@ def command_parser(name: str) -> tuple[ModuleType, argparse.ArgumentParser]:
 
 
 def petsc_option_argument(parser: argparse.ArgumentParser) -> None:
-    """``--petsc-option OPTION`` (repeatable): PETSc options for the load steps' SNES."""
+    """``--petsc-option OPTION`` (repeatable): PETSc options for the load steps' SNES.
+
+    With it, every forming command takes ``--max-steps`` (:mod:`fenicsx_drape.limits`).
+    """
+    from fenicsx_drape.limits import max_steps_argument
+
+    max_steps_argument(parser)
     parser.add_argument("--petsc-option", dest="petsc_options", action="append", default=[],
                         metavar="OPTION", help="PETSc options for the forming solves, e.g. "
                         "'-snes_type newtontr' or --petsc-option=-log_view (repeatable; "
@@ -87,6 +93,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(rest)  # exits 2 on bad options
     apply_trust_option(args)
     try:
+        from fenicsx_drape.limits import apply_max_steps
+
+        apply_max_steps(args)
         if getattr(args, "petsc_options", None):
             from fenicsx_drape.fe.newton import set_petsc_options
 

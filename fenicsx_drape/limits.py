@@ -12,6 +12,11 @@ with the estimate and the limit, when they are beyond what the machine's memory 
   ``docs/untrusted-input.md``); ``DRAPE_MAX_NODES`` and ``DRAPE_MAX_TRIANGLES`` set the limits
   directly.
 
+A run's *length* is known before it starts too: its load steps (the fastest tool's travel
+over ``step_mm``), its nodes and a time estimate from both (:func:`run_seconds`, measured
+per node and step). Past :data:`MAX_STEPS` load steps (``DRAPE_MAX_STEPS``, or a forming
+command's ``--max-steps``) the run is refused at once with the numbers (:func:`check_steps`).
+
 Geometry scripts (``.geo``, ``.py``) run in a child process (:func:`run_script`) with a time
 limit of ``DRAPE_SCRIPT_TIMEOUT_S`` seconds (default :data:`SCRIPT_TIMEOUT_S`) and an address
 space of the planned memory, so that a script that never returns, or a mesh that grows
@@ -35,6 +40,12 @@ from fenicsx_drape.errors import DrapeInputError
 BYTES_PER_NODE = 40_000  # peak memory per sheet node of a forming run (DOLFINx, MUMPS)
 BYTES_PER_TRIANGLE = 5_000  # peak memory per tool triangle (Gmsh meshing, distance field)
 SCRIPT_TIMEOUT_S = 300.0  # a geometry script that runs longer is stopped
+MAX_STEPS = 5000  # load steps of one forming run (the shipped cases: 25-80)
+# Wall time of a load step: a floor and a cost per sheet node, from the hemisphere's runs
+# (one rank, docs/solver-notes.md: 169 nodes 0.028 s a step, 625: 0.076 s, 2401: 0.32 s,
+# the full 9409: 2.1 s; 16 nodes: 0.031 s), rounded up.
+SECONDS_PER_STEP = 0.025
+SECONDS_PER_NODE_STEP = 2.2e-4
 # Triangles per mm² of surface per 1/h² (equilateral triangles of side h: area √3/4 h²).
 _TRIANGLES_PER_AREA = 4.0 / math.sqrt(3.0)
 
@@ -107,6 +118,59 @@ def check_triangles(triangles: float, where: str) -> None:
                               "mesh_mm")
 
 
+def max_steps() -> float:
+    """The most load steps a run may plan: ``DRAPE_MAX_STEPS``, else :data:`MAX_STEPS`."""
+    return _env_limit("DRAPE_MAX_STEPS") or MAX_STEPS
+
+
+def run_seconds(steps: float, nodes: float) -> float:
+    """About how long (s, one rank) ``steps`` load steps of a net of ``nodes`` nodes take."""
+    return steps * (SECONDS_PER_STEP + SECONDS_PER_NODE_STEP * nodes)
+
+
+def duration_text(seconds: float) -> str:
+    """``"40 s"``, ``"12 min"``, ``"3.2 h"``, ``"4.1 days"``."""
+    for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.2g} {unit}"
+    return f"{seconds:.2g} s"
+
+
+def check_steps(steps: float, nodes: float, where: str, why: str = "") -> None:
+    """Refuse a run of more than :func:`max_steps` load steps, with the numbers.
+
+    Args:
+        steps: The load steps planned.
+        nodes: The sheet's nodes.
+        where: The case (file) named in the message.
+        why: How the steps come about (e.g. "80 mm of travel at step_mm = 0.001").
+    """
+    limit = max_steps()
+    if not steps <= limit:
+        how = "set by DRAPE_MAX_STEPS" if os.environ.get("DRAPE_MAX_STEPS") else "the default"
+        raise DrapeInputError(
+            f"{where}: the run would take {steps:g} load steps{' (' + why + ')' if why else ''}"
+            f" on {nodes:g} nodes, about {duration_text(run_seconds(steps, nodes))}: more "
+            f"than the limit of {limit:g} steps ({how}); give a larger step_mm, or raise "
+            "the limit with --max-steps N (or DRAPE_MAX_STEPS=N)")
+
+
+def max_steps_argument(parser) -> None:
+    """``--max-steps N`` of the forming commands: the run-length limit (``DRAPE_MAX_STEPS``)."""
+    parser.add_argument("--max-steps", type=float, default=None, metavar="N",
+                        help=f"refuse a forming run of more than N load steps (default "
+                        f"{MAX_STEPS}, or DRAPE_MAX_STEPS; docs/untrusted-input.md)")
+
+
+def apply_max_steps(args) -> None:
+    """Set ``DRAPE_MAX_STEPS`` from ``--max-steps`` (worker processes inherit it)."""
+    value = getattr(args, "max_steps", None)
+    if value is not None:
+        if not (math.isfinite(value) and value > 0):
+            raise DrapeInputError(f"--max-steps {value:g}: must be a positive number")
+        os.environ["DRAPE_MAX_STEPS"] = repr(float(value))
+
+
 def triangles_for(area_mm2: float, mesh_mm: float, order: int = 1) -> float:
     """Triangles of a surface of ``area_mm2`` meshed with size ``mesh_mm`` (×4 for order 2)."""
     return _TRIANGLES_PER_AREA * area_mm2 / mesh_mm**2 * (4 if order == 2 else 1)
@@ -143,27 +207,47 @@ def run_script(function: Callable[..., Any], args: tuple, path: str | os.PathLik
         job, out = Path(tmp) / "job.pickle", Path(tmp) / "result.pickle"
         job.write_bytes(pickle.dumps(((function.__module__, function.__qualname__), args,
                                       memory_bytes())))
+        # The script's temporary files go into this folder, removed with it, also when the
+        # script is stopped; its own children are stopped with it (one process group).
+        env.update(TMPDIR=tmp, TMP=tmp, TEMP=tmp)
+        child = subprocess.Popen(
+            [sys.executable, "-c", "import sys; from fenicsx_drape.limits import _child; "
+             "_child(sys.argv[1], sys.argv[2])", str(job), str(out)],
+            env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE, cwd=tmp, start_new_session=True)
         try:
-            done = subprocess.run(
-                [sys.executable, "-c", "import sys; from fenicsx_drape.limits import _child; "
-                 "_child(sys.argv[1], sys.argv[2])", str(job), str(out)],
-                env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                stderr=subprocess.PIPE, timeout=timeout, cwd=tmp)
+            _, stderr = child.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
+            _stop(child)
             raise DrapeInputError(
                 f"{path}: the geometry script did not finish in {timeout:g} s and was stopped "
-                "(DRAPE_SCRIPT_TIMEOUT_S sets the limit)") from None
+                "(DRAPE_SCRIPT_TIMEOUT_S sets the limit; its temporary files are removed)"
+            ) from None
+        except BaseException:  # interrupted: leave nothing running
+            _stop(child)
+            raise
         if not out.is_file():
-            tail = done.stderr.decode(errors="replace").strip().splitlines()[-3:]
+            tail = stderr.decode(errors="replace").strip().splitlines()[-3:]
             raise DrapeInputError(
                 f"{path}: the geometry script ended without a result (exit status "
-                f"{done.returncode}; a mesh beyond the memory limit of "
+                f"{child.returncode}; a mesh beyond the memory limit of "
                 f"{memory_bytes() / 1e9:.3g} GB ends so)" + (": " + " / ".join(tail)
                                                                if tail else ""))
         status, value = pickle.loads(out.read_bytes())
     if status == "error":
         raise DrapeInputError(value)
     return value
+
+
+def _stop(child: subprocess.Popen) -> None:
+    """Kill a script's process group (the child and anything it started) and reap it."""
+    import signal
+
+    try:
+        os.killpg(child.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    child.communicate()
 
 
 def _child(job: str, out: str) -> None:

@@ -589,6 +589,11 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
 
     out = Path(out_dir)
     record = result.to_dict()
+    # -- issue 41 hook (data before physics, spec version 4): each measurement checked
+    # against its case.
+    from fenicsx_drape.diagnosis.data_check import data_check
+
+    record["data_check"] = data_check(bundle)
     path = write_json(out / "compare.json", record)
     atomic_write_text(out / "model.toml", result.model.to_toml())
     tests = {t.id: t for t in bundle.tests}

@@ -509,6 +509,7 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
             raise CaseError([f"{fname}: [blank]: {err}"]) from None
     try:
         check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
+        check_run_size(case)  # and the run's length
     except DrapeInputError as err:
         raise CaseError([str(err)]) from None
     return case
@@ -866,6 +867,10 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     params = {k: float(v) for k, v in overrides.items() if k in param_names | builtin_names}
     if "travel_mm" in overrides:
         travel = float(overrides["travel_mm"])
+        if not (math.isfinite(travel) and travel > 0):
+            raise CaseError([f"{where}: override travel_mm = {travel:g}: a travel against the "
+                             "tool's motion (travel is the distance the fastest tool moves "
+                             "along its motion, > 0)"])
         moving = [t for t in tools if not t.builtin and t.motion is not None]
         if moving:
             now = max(t.motion.travel_mm(t.motion.time_s[-1]) for t in moving)
@@ -895,6 +900,7 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
                                        **changes)
         new_case.blank.grid()
         check_tool_sizes(new_case, warn=False)
+        check_run_size(new_case)
         for t in new_case.tools:
             if t.builtin:
                 _builtin_tools(t)
@@ -1163,6 +1169,35 @@ def check_tool_sizes(case: FormingCase, skip: tuple[str, ...] = (), warn: bool =
         check_triangles(total, f"{where}: tools ({', '.join(named)})")
 
 
+def run_size(case: FormingCase) -> dict[str, float]:
+    """A run's length from the case alone: load steps, nodes and seconds (one rank).
+
+    The steps are the fastest tool's travel over ``step_mm`` (cut-backs add a few); the
+    nodes the net's lattice; the time :func:`fenicsx_drape.limits.run_seconds`.
+    """
+    from fenicsx_drape.limits import run_seconds
+
+    grid = case.blank.grid()
+    steps = float(math.ceil(case.total_travel_mm / case.step_mm - 1e-9))
+    nodes = float((grid.nx + 1) * (grid.ny + 1))
+    return {"steps": steps, "nodes": nodes, "seconds": run_seconds(steps, nodes),
+            "travel_mm": case.total_travel_mm}
+
+
+def check_run_size(case: FormingCase) -> dict[str, float]:
+    """Refuse a run longer than the step limit at once (:func:`fenicsx_drape.limits.check_steps`).
+
+    Returns:
+        :func:`run_size`.
+    """
+    from fenicsx_drape.limits import check_steps
+
+    size = run_size(case)
+    check_steps(size["steps"], size["nodes"], str(case.path or f"case {case.name!r}"),
+                f"{size['travel_mm']:g} mm of travel at step_mm = {case.step_mm:g}")
+    return size
+
+
 def coarse_mesh_problem(surface, cell_mm: float) -> str | None:
     """A message when a tool's triangles miss its curved geometry by much (None if not).
 
@@ -1210,6 +1245,17 @@ def _meshed_tool(case: FormingCase, spec: ToolSpec):
         require_trust(spec.path, "the Python geometry of tool " + repr(spec.name), case.origin)
     surface = load_surface(spec.path, spec.params or None, spec.mesh_mm, spec.order or 1,
                            sheet_side=spec.side)
+    if spec.role != "holder":  # a holder's opening is a hole by design
+        from fenicsx_drape.forming.tools.checks import holes
+
+        found = holes(surface)
+        if found:
+            centre, size = found[0]
+            at = ", ".join(f"{v:g}" for v in np.round(centre, 1) + 0.0)
+            raise CaseError([f"{where}: {spec.path.name}: the {spec.role}'s surface has "
+                             f"{len(found)} hole(s): one of {size:.3g} mm across at ({at}) "
+                             f"mm (a {spec.role} must be closed or one surface without "
+                             "holes: the sheet would sink into it)"])
     coarse = coarse_mesh_problem(surface, case.blank.cell_mm)
     if coarse:
         warnings.warn(f"{where}: {coarse}", stacklevel=3)
@@ -1309,13 +1355,18 @@ def case_toml(case: FormingCase, relative_to: str | os.PathLike | None = None,
 
 
 def write_case(case: FormingCase, folder: str | os.PathLike, *, name: str = "case.toml",
-               comment: str = "") -> Path:
+               comment: str = "", surfaces: Mapping[str, Any] | None = None) -> Path:
     """Write the case into ``folder`` with copies of its geometry files: a self-contained case.
 
     Tool geometry and the outline curve are copied next to the case file (renamed on a
     clash) and named relative to it; the model file is not copied (a bundle names no model).
+    A tool named in ``surfaces`` (its
+    :class:`~fenicsx_drape.forming.tools.surfaces.TriangleSurface`, as a run meshed it) is
+    written as that mesh instead, ``<name>.msh``:
+    data that any reader takes without ``--trust``, at the resolution the run used.
     Returns the written case file.
     """
+    from fenicsx_drape.forming.tools.surfaces import write_msh
     from fenicsx_drape.provenance import atomic_write_bytes, atomic_write_text
 
     folder = Path(folder)
@@ -1336,7 +1387,17 @@ def write_case(case: FormingCase, folder: str | os.PathLike, *, name: str = "cas
         copies[p] = folder / target
         return copies[p]
 
-    tools = tuple(dataclasses.replace(t, path=copy(t.path)) if t.path else t for t in case.tools)
+    def meshed(t: ToolSpec) -> ToolSpec:
+        target = f"{t.name}.msh" if f"{t.name}.msh" not in used else f"{t.name}_tool.msh"
+        used.add(target)
+        write_msh(surfaces[t.name], folder / target)
+        return dataclasses.replace(t, geometry=target, path=folder / target, parameters=(),
+                                   mesh_mm=None, order=None)
+
+    surfaces = surfaces or {}
+    tools = tuple(meshed(t) if t.name in surfaces and t.path else
+                  dataclasses.replace(t, path=copy(t.path)) if t.path else t
+                  for t in case.tools)
     blank = case.blank
     if blank.path is not None:
         blank = dataclasses.replace(blank, path=copy(blank.path))

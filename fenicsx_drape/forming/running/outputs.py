@@ -13,8 +13,9 @@
 - ``fields.xdmf`` (+ ``.h5``) every 5 mm of the fastest tool's travel; ``tools/*.vtk``: the
   tools at the end of their motion;
 - ``bundle/``: the formed part's drawn grid as a forming bundle whose test names a copy of
-  the case (``case = "case/case.toml"``, with its geometry files in ``bundle/case/``), so that
-  it can be compared later like a measured part;
+  the case (``case = "case/case.toml"``, with its meshed tools as ``bundle/case/<tool>.msh``
+  at the resolution of the run: data, read without ``--trust``), so that it can be compared
+  later like a measured part;
 - ``kinematic_shear.png``: the kinematic drape (pin-jointed net) beside the FE result; a
   partial net says how many nodes it placed in its title;
 - ``shear.png``, ``wrinkling.png``: the formed sheet (mirrored to the whole part for a
@@ -234,7 +235,10 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
             μ = float(np.max(given if given is not None else model.parameters.get("mu", 0.0)))
             note = (f"simulated by fenicsx_drape (drape form): case {case.name!r}, cell "
                     f"{case.blank.cell_mm:g} mm, symmetry {list(case.planes) or 'none'}")
-            write_case(case, out / "bundle" / "case", comment=note)
+            # The tools as the run meshed them: the bundle is data (no code, no Gmsh script).
+            meshes = {name: tool.surface for name, tool in run.tools.items()
+                      if hasattr(getattr(tool, "surface", None), "triangles")}
+            write_case(case, out / "bundle" / "case", comment=note, surfaces=meshes)
             write_bundle(case_bundle(run, μ, grid_mm), out / "bundle", comment=note)
             if pictures:
                 plot_shear(run.grid, out / "shear.png",

@@ -16,6 +16,11 @@ core and steps it to the end of its motion (the paper's hemisphere is the case
 - the out-of-plane stabilisation of the slack net
   (:mod:`~fenicsx_drape.forming.terms.stabilisation`) along the nearest tool's normal.
 
+Before anything is built the run's length is checked (load steps, nodes, time:
+:func:`~fenicsx_drape.forming.case.format.check_run_size`), and before the first step where
+the blank and the tools are (:mod:`~fenicsx_drape.forming.running.geometry`); the progress
+lines give the estimate, then the time left at the rate so far.
+
 Load steps move the fastest tool ``step_mm``; a step whose Newton solve fails is halved, and
 steps grow back (×1.5, up to ``step_mm``) after solves of at most 15 iterations. A step has
 converged when ‖F‖ ≤ 1e-6 N or no node carries more than :data:`NODE_ATOL_N` out of balance
@@ -34,7 +39,13 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from fenicsx_drape.errors import SolverError
-from fenicsx_drape.forming.case.format import CaseError, FormingCase, build_tools
+from fenicsx_drape.forming.case.format import (
+    CaseError,
+    FormingCase,
+    build_tools,
+    check_run_size,
+)
+from fenicsx_drape.forming.running.geometry import geometry_problems
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.terms.contact import PenaltyContact
 from fenicsx_drape.forming.terms.holder import BlankHolder
@@ -149,7 +160,9 @@ def run_case(case: FormingCase, model=None, options=None, *,
     from fenicsx_drape.fe.mesh import grid_to_sheet
     from fenicsx_drape.fe.solver import TrussProblem
     from fenicsx_drape.fe.stepping import RunReport
+    from fenicsx_drape.limits import duration_text
 
+    size = check_run_size(case)  # a run past the step limit stops before anything is built
     model = model or case_model(case)
     if case.holder is not None and case.holder.mu is not None:
         model = model.with_parameters(mu=case.holder.mu)
@@ -159,6 +172,11 @@ def run_case(case: FormingCase, model=None, options=None, *,
             raise CaseError([f"run_case: tool {name!r} is not a tool of case {case.name!r}"])
     built = {**build_tools(case, skip=tuple(given)), **given}
     built = {t.name: built[t.name] for t in case.tools}  # in the case's order
+    errors, warns = geometry_problems(case, built, case.blank.grid().nodes)
+    if errors:  # before the first step, in the user's terms
+        raise CaseError([f"case {case.path or case.name}: {e}" for e in errors])
+    for text in warns:
+        warnings.warn(f"case {case.path or case.name}: {text}", stacklevel=2)
     holder_surface = built[case.holder.tool] if case.holder is not None else None
     μ_t = tool_friction(model)
     if options is None:
@@ -196,12 +214,21 @@ def run_case(case: FormingCase, model=None, options=None, *,
                              f"origin_mm = {list(case.blank.origin_mm)} (inside the blank)"])
         problem.fix(origin, (0, 1))
 
+    if progress is not None and comm.rank == 0:
+        progress(f"{case.name}: about {size['steps']:.0f} load steps ({size['travel_mm']:g} mm "
+                 f"at {case.step_mm:g} mm) on {size['nodes']:.0f} nodes, about "
+                 f"{duration_text(size['seconds'])} (estimate)")
+
     def report(step) -> None:
         if progress is not None and comm.rank == 0:
             travel = case.travel_mm(step.time_s)
             state = "ok" if step.converged else f"cut back ({step.reason})"
+            # Time left at the rate so far (wall time per mm of travel).
+            spent = time.perf_counter() - stepping
+            left = (f"  ~{duration_text(spent * (size['travel_mm'] - travel) / travel)} left"
+                    if travel > 0 and step.converged else "")
             progress(f"step {len(problem.steps):4d}  t = {step.time_s:7.3f} s  travel = "
-                     f"{travel:6.2f} mm  Newton {step.iterations:2d}  {state}")
+                     f"{travel:6.2f} mm  Newton {step.iterations:2d}  {state}{left}")
 
     touched = False  # whether a node ever touched a punch, die or surface
     forces_of_tools = record_tool_forces(case, problem, contact, holder)
@@ -217,6 +244,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
 
     dt = case.step_mm / case.max_speed_mm_per_s
     stopped = None
+    stepping = time.perf_counter()
     try:
         problem.run(case.duration_s, dt, dt_max_s=dt, easy_iterations=15, progress=report,
                     on_step=after_step, failure_dir=failure_dir)

@@ -63,6 +63,7 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.forming.tools.checks import WELD_TOLERANCE as _WELD_TOLERANCE
 from fenicsx_drape.provenance import file_digest
 
 #: Geometry sources by suffix.
@@ -71,7 +72,6 @@ MESH_SUFFIXES = (".stl", ".msh")
 SUFFIXES = (".geo", ".py", *CAD_SUFFIXES, *MESH_SUFFIXES)
 
 _AXES = {"x": 0, "y": 1, "z": 2}
-_WELD_TOLERANCE = 1e-7  # of the bounding box's diagonal
 _READ_CACHE = 16
 _read_cache: dict[tuple, TriangleSurface] = {}
 
@@ -690,14 +690,34 @@ def _read(path: Path, parameters, mesh_size_mm, order, sheet_side,
         if unknown:
             raise DrapeInputError(f"{path}: parameter(s) {', '.join(map(repr, unknown))} "
                                   "not used by the script (a misspelt name would be ignored)")
+    if suffix == ".stl" and path.is_file():
+        from fenicsx_drape.forming.tools.checks import stl_problems
+
+        if problems := stl_problems(path):
+            raise DrapeInputError("; ".join(problems))
     if suffix in (".geo", ".py") and path.is_file():
         from fenicsx_drape.limits import run_script
 
         points, triangles = run_script(_read_raw, (path, parameters, mesh_size_mm, order,
                                                    sheet_side, physical), path)
-        return TriangleSurface(points, triangles, sheet_side=sheet_side, source=str(path))
-    points, triangles = _read_raw(path, parameters, mesh_size_mm, order, sheet_side, physical)
+    else:
+        points, triangles = _read_raw(path, parameters, mesh_size_mm, order, sheet_side,
+                                      physical)
+    _check_mesh(points, triangles, path)
     return TriangleSurface(points, triangles, sheet_side=sheet_side, source=str(path))
+
+
+def _check_mesh(points: np.ndarray, triangles: np.ndarray, path: Path) -> None:
+    """The mesh as the mesher returned it, checked (:mod:`.checks`): refused or warned."""
+    import warnings
+
+    from fenicsx_drape.forming.tools.checks import mesh_defects
+
+    errors, warns = mesh_defects(points, triangles)
+    if errors:
+        raise DrapeInputError(f"{path}: the tool mesh is damaged: " + "; ".join(errors))
+    for text in warns:
+        warnings.warn(f"{path}: {text}", stacklevel=4)
 
 
 def _read_raw(path: Path, parameters, mesh_size_mm, order, sheet_side,
@@ -882,6 +902,23 @@ def _triangles(gmsh, physical: str | None, where: str) -> tuple[np.ndarray, np.n
 
 def _nodes_of(etype: int) -> int:
     return {2: 3, 9: 6, 3: 4, 10: 9}[etype]
+
+
+def write_msh(surface: TriangleSurface, path: str | os.PathLike) -> Path:
+    """Write a surface as a Gmsh mesh (format 2.2, ASCII, every number exact), atomically.
+
+    Read back (:func:`load_surface`) it is the same surface: the same points and triangles,
+    oriented by the same rule. A forming bundle's case carries its tools so (data, not code).
+    """
+    from fenicsx_drape.provenance import atomic_write_text
+
+    p, t = surface.points, surface.triangles
+    lines = ["$MeshFormat", "2.2 0 8", "$EndMeshFormat", "$Nodes", str(len(p))]
+    lines += [f"{k + 1} {x!r} {y!r} {z!r}" for k, (x, y, z) in enumerate(p.tolist())]
+    lines += ["$EndNodes", "$Elements", str(len(t))]
+    lines += [f"{k + 1} 2 2 0 1 {a + 1} {b + 1} {c + 1}" for k, (a, b, c) in enumerate(t.tolist())]
+    lines.append("$EndElements")
+    return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
 # --------------------------------------------------------------------------------------------

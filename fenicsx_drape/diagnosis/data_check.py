@@ -1,0 +1,215 @@
+"""Data before physics (spec version 4): is each measurement one of the case it names?
+
+A bundle may hold measurements that cannot belong to its case: axes swapped, another part's
+grid, a flat frame shifted, a scan in metres. No effect or set-up explains them, and blaming
+the model sends a user the wrong way. :func:`data_check` looks at every measurement of a
+forming test against its case, before any fit, and returns the report's ``data_check``
+entries (``suspect`` with ``why``, the first reason found):
+
+- *units*: the formed positions span less than 1/100 of the blank (metres read as mm);
+- *axes*: along an axis the formed positions span more than the tools reach (the case's
+  reach, :func:`~fenicsx_drape.measurements.plausible.reach_of_case`, × 1.2 plus two cells);
+  when another order of the axes fits, the swap is named (of those that fit, the one that
+  moves the fewest axes, then whose spans are most like the tools');
+- *another part*: more than :data:`OTHER_PART_SHARE` of the flat positions lie more than a
+  quarter cell outside the case's blank, or of the formed positions farther than a cell from
+  every tool at the end of the motion (a part formed on these tools lies on them);
+- *a shifted frame*: on a symmetry plane of the case (x = 0 or y = 0) the tools hold the
+  sheet's column of that plane: the grid's column nearest the plane in the formed positions
+  has flat and formed coordinates that agree. When they differ by more than
+  :data:`SHIFT_OF_GRID` of the grid's spacing (and 1 mm), the flat (or formed) frame is
+  shifted. A blank placed off-centre (a set-up error the set-up stage sizes) breaks the
+  plane, and its test has no plane to check: the ``why`` says which was chosen.
+
+A travel against the tool's motion (``travel_mm`` ≤ 0) is impossible input: the function
+raises :class:`~fenicsx_drape.errors.DrapeInputError` (exit 2; the case's overrides refuse
+it first, when the bundle is read). A punch force has no positions to check, and a lab
+measurement whose frame is registered (``register = true``) is placed by the comparison.
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+import numpy as np
+
+from fenicsx_drape.errors import DrapeInputError
+
+#: A share of a measurement's points beyond the case that makes it another part's.
+OTHER_PART_SHARE = 0.1
+#: A flat-formed difference on a symmetry plane beyond this share of the grid spacing.
+SHIFT_OF_GRID = 0.1
+AXES = "xyz"
+
+
+def _columns(test, names) -> np.ndarray | None:
+    cols = [test.columns.get(n) for n in names]
+    if any(c is None for c in cols):
+        return None
+    return np.column_stack([np.asarray(c, dtype=float) for c in cols])
+
+
+def _outside_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Distance (n,) of points (n, 2) outside a polygon (m, 2); 0 inside."""
+    a, b = polygon, np.roll(polygon, -1, axis=0)
+    ab = b - a
+    t = np.clip(np.einsum("nmk,mk->nm", points[:, None, :] - a, ab)
+                / np.maximum(np.einsum("mk,mk->m", ab, ab), 1e-300), 0.0, 1.0)
+    d = np.linalg.norm(points[:, None, :] - (a + t[..., None] * ab), axis=2).min(axis=1)
+    # Inside by the crossing rule.
+    x, y = points[:, :1], points[:, 1:]
+    crosses = ((a[:, 1] > y) != (b[:, 1] > y)) & (
+        x < a[:, 0] + (y - a[:, 1]) * ab[:, 0] / np.where(ab[:, 1] == 0, 1e-300, ab[:, 1]))
+    inside = crosses.sum(axis=1) % 2 == 1
+    return np.where(inside, 0.0, d)
+
+
+def _axes(formed: np.ndarray, reach, cell: float) -> str | None:
+    """An axis whose span is beyond the tools' reach (and the order of axes that fits)."""
+    span = np.ptp(formed, axis=0)
+    reach_span = np.asarray(reach.hi_mm) - np.asarray(reach.lo_mm)
+    allowed = 1.2 * reach_span + 2.0 * cell
+
+    def excess(order) -> float:
+        return float(np.maximum(span[list(order)] - allowed, 0.0).sum())
+
+    if excess((0, 1, 2)) == 0.0:
+        return None
+    a = int(np.argmax(span - allowed))
+    text = f"the measured {AXES[a]} spans {span[a]:.3g} mm, the tools {reach_span[a]:.3g} mm"
+
+    def simplest(order) -> tuple[int, float]:  # fewest axes moved, spans most like the tools'
+        moved = sum(k != o for k, o in enumerate(order))
+        return moved, float(np.abs(np.log((span[list(order)] + cell)
+                                          / (reach_span + cell))).sum())
+
+    fits = sorted((o for o in itertools.permutations(range(3)) if excess(o) == 0.0),
+                  key=simplest)
+    if fits:
+        swapped = [AXES[k] for k in range(3) if fits[0][k] != k]
+        return f"{' and '.join(swapped)} look swapped: {text}"
+    return f"{text}: positions of another part, or of another frame?"
+
+
+def _off_tools(case, formed: np.ndarray) -> float:
+    """The share of formed positions farther than a cell from every tool at the end."""
+    from fenicsx_drape.forming.case.format import build_tools
+    from fenicsx_drape.forming.running.geometry import _distance
+
+    tools = build_tools(case)
+    end = case.duration_s
+    near = np.full(len(formed), np.inf)
+    for tool in tools.values():
+        near = np.minimum(near, np.abs(_distance(tool, formed, end)))
+    return float(np.mean(near > case.blank.cell_mm))
+
+
+def _shift(test, case) -> str | None:
+    """A flat frame shifted off the case's symmetry planes (module docstring)."""
+    grid = _columns(test, ("i", "j", "x0_mm", "y0_mm", "x_mm", "y_mm"))
+    if grid is None or not case.planes:
+        return None
+    spacing = float(test.forming.get("grid_mm") or 0.0) or float(
+        np.median(np.abs(np.diff(np.unique(grid[:, 2])))) if len(grid) > 1 else 0.0)
+    for plane in case.planes:
+        k = {"x": 0, "y": 1}[plane]
+        index, flat, formed = grid[:, k], grid[:, 2 + k], grid[:, 4 + k]
+        columns = [c for c in np.unique(index) if (index == c).sum() >= 2]
+        if not columns:
+            continue
+        best = min(columns, key=lambda c: float(np.median(np.abs(formed[index == c]))))
+        rows = index == best
+        if np.median(np.abs(formed[rows])) > 0.5 * spacing:
+            continue  # the grid has no column on the plane
+        s = float(np.median(flat[rows] - formed[rows]))
+        if abs(s) > max(SHIFT_OF_GRID * spacing, 1.0):
+            return (f"every flat {plane} looks shifted by {s:.3g} mm: the grid's column the "
+                    f"tools hold on their plane {plane} = 0 has {plane}0 = {s:+.3g} mm (a "
+                    "blank placed off-centre, a set-up error, would keep flat and formed "
+                    f"{plane} equal there: not a set-up the fit can size)")
+    return None
+
+
+def check_measurement(test, case) -> str | None:
+    """Why a forming test's measurement cannot be of ``case`` (None when it can)."""
+    from fenicsx_drape.measurements.plausible import reach_of_case
+
+    formed = _columns(test, ("x_mm", "y_mm", "z_mm"))
+    flat = _columns(test, ("x0_mm", "y0_mm"))
+    polygon = np.asarray(case.blank.polygon(), dtype=float)
+    size = float(np.ptp(polygon, axis=0).max())
+    cell = case.blank.cell_mm
+    if formed is not None and len(formed) >= 3:
+        span = float(np.ptp(formed, axis=0).max())
+        if span < 0.01 * size:
+            return (f"the positions span {span:.3g} mm, the blank {size:.3g} mm: metres read "
+                    "as millimetres?")
+        axes = _axes(formed, reach_of_case(case), cell)
+        if axes:
+            return axes
+    if flat is not None and len(flat):
+        out = _outside_polygon(flat, polygon) > 0.25 * cell
+        if out.mean() > OTHER_PART_SHARE:
+            k = int(np.argmax(_outside_polygon(flat, polygon)))
+            return (f"{100 * out.mean():.0f} % of the flat positions lie outside the case's "
+                    f"blank (up to ({flat[k, 0]:.4g}, {flat[k, 1]:.4g}) mm): another part's "
+                    "grid?")
+    if formed is not None and len(formed):
+        share = _off_tools(case, formed)
+        if share > OTHER_PART_SHARE:
+            return (f"{100 * share:.0f} % of the formed positions lie farther than a cell "
+                    f"({cell:g} mm) from every tool at the end of the motion: another part's "
+                    "shape?")
+    return _shift(test, case)
+
+
+def data_check(bundle) -> list[dict[str, Any]]:
+    """The report's ``data_check``: every forming measurement checked against its case.
+
+    Returns:
+        One entry per measurement: ``test`` (the forming test's id), ``measurement``
+        (``"file"`` for the grid, or the lab measurement's name), ``suspect`` and ``why``.
+
+    Raises:
+        DrapeInputError: a travel against the tool's motion (``travel_mm`` ≤ 0).
+    """
+    from fenicsx_drape.diagnosis.forming_kind import forming_case_of
+
+    out = []
+    for test in bundle.tests:
+        if test.kind != "forming":
+            continue
+        travel = test.forming.get("travel_mm", test.case_keys.get("travel_mm"))
+        if travel is not None and not float(travel) > 0:
+            raise DrapeInputError(f"test {test.id!r}: travel_mm = {travel:g}: a travel against "
+                                  "the tool's motion (travel is the distance it moves, > 0)")
+        lab = getattr(test, "lab", None)
+        parent = lab.parent if lab is not None else test.id
+        measurement = lab.measurement if lab is not None else "file"
+        if measurement == "punch_force" or (lab is not None and lab.frame.register):
+            continue  # no positions to check; or in a frame the comparison fits
+        why = check_measurement(test, forming_case_of(test))
+        out.append({"test": parent, "measurement": measurement, "suspect": why is not None,
+                    "why": why or "consistent with the case (extent, blank, tools, frame)"})
+    return out
+
+
+def apply_data_check(report: dict[str, Any], entries: list[dict[str, Any]]) -> None:
+    """Put ``data_check`` into a diagnosis report; suspect data first in its conclusion.
+
+    With a suspect measurement no effect is named (``missing_effect`` null, ``add_effects``
+    empty): the conclusion starts "Check the data: ..." with each suspect's ``why``; what the
+    fit found stays in the report's other fields (candidates, set-up).
+    """
+    report["data_check"] = entries
+    bad = [e for e in entries if e["suspect"]]
+    if not bad:
+        return
+    report["missing_effect"] = None
+    report["add_effects"] = []
+    report["conclusion"] = (
+        "Check the data: " + "; ".join(f"{e['test']}/{e['measurement']}: {e['why']}"
+                                       for e in bad)
+        + ". No effect is named on the evidence of data that cannot be of the case; set them "
+        "right (or leave them out) and diagnose again.")
