@@ -111,3 +111,32 @@ def test_shear_read_off_a_finer_net_is_the_nets_not_physics(tmp_path):
     assert entry["fine_residual"] < entry["residual"]
     assert "Resolution" in report["conclusion"]
     assert "not in the catalogue" not in report["conclusion"]
+
+
+def nan_on_line_4(lines):
+    cells = lines[3].split(",")
+    return [*lines[:3], ",".join(["nan", *cells[1:]]), *lines[4:]]
+
+
+def without_shear_column(lines):
+    return [line if line.startswith("#") else ",".join(
+        c for k, c in enumerate(line.split(",")) if k != 3) for line in lines]
+
+
+@pytest.mark.parametrize("damage, where", [(nan_on_line_4, "shear.csv:4"),
+                                           (without_shear_column, "shear_deg")])
+def test_a_damaged_lab_table_is_bad_input_with_its_file_and_line(tmp_path, capsys, damage,
+                                                                 where):
+    """The README's lab command on a damaged copy of the bundle: exit 2, file and line."""
+    bundle = tmp_path / "octagon-lab"
+    shutil.copytree(ROOT / "demos" / "bundles" / "octagon-lab", bundle)
+    table = bundle / "shear.csv"
+    table.write_text("\n".join(damage(table.read_text().splitlines())) + "\n")
+    args = readme_lab_command()
+    args[args.index("demos/bundles/octagon-lab")] = str(bundle)
+    args[args.index("--json") + 1] = str(tmp_path / "REPORT.json")
+    args[args.index("--out") + 1] = str(tmp_path / "out")
+    args[args.index("--model") + 1] = str(ROOT / "demos/models/without_tow_buckling.toml")
+    assert main(args) == 2
+    assert where in capsys.readouterr().err
+    assert not (tmp_path / "REPORT.json").exists()
