@@ -393,7 +393,7 @@ def setup_rules(iterations: int = BASELINE_ITERATIONS):
     """
     from fenicsx_drape.diagnosis.setup import Rules
 
-    return Rules(EVIDENCE_THRESHOLD, PARSIMONY, UNTESTABLE_BELOW, iterations)
+    return Rules(EVIDENCE_THRESHOLD, PARSIMONY, UNTESTABLE_BELOW, iterations, ADEQUATE)
 
 
 def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,

@@ -90,6 +90,7 @@ from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.compare import compare_tests, error_record, normalised_error
 from fenicsx_drape.diagnosis.forming_fit import FORMING, mirrorable, moved, on_sheet, value_sd
 from fenicsx_drape.diagnosis.forming_runs import cached, form_many
+from fenicsx_drape.diagnosis.resolution import check_resolution, explained
 from fenicsx_drape.errors import DrapeInputError, SolverError
 from fenicsx_drape.forming.case.format import FormingCase, broken_planes, with_overrides
 
@@ -142,6 +143,9 @@ class Rules:
     parsimony: float  # held-out errors this close count as ties
     untestable_below: float  # a change (× noise) below this: untestable
     iterations: int  # the coupon fit's iteration cap (the stated model's material)
+    # a measurement within this × its noise has nothing to explain (no resolution check);
+    # None: no resolution check of the stated set-up
+    adequate: float | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -606,6 +610,24 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
     stated_runs = _Runs(tests, model, None)
     base_values = stated_runs.values([np.zeros(0)])[0]
     base_cmp = stated_runs.compare(base_values)
+    if rules.adequate is not None:
+        # Resolution before the set-up, too: a measurement whose residual at the stated
+        # set-up is the net's own error is no evidence of a set-up error.
+        out["resolution"] = check_resolution(tests, model, base_cmp, rules.adequate, say)
+        resolved = explained(out["resolution"])
+        if resolved:
+            say(f"  set-up stage: the net explains the residual of {', '.join(sorted(resolved))}"
+                "; the set-up is judged on the others")
+            tests = [t for t in tests if t.id not in resolved]
+            if not tests:
+                out["untestable"] = [{"effect": n, "setup": True, "reason": (
+                    "the model's net explains every forming measurement's residual at the "
+                    "stated set-up (resolution)")} for n in names]
+                return out
+            test0 = tests[0]
+            stated_runs = _Runs(tests, model, None)
+            base_values = stated_runs.values([np.zeros(0)])[0]
+            base_cmp = stated_runs.compare(base_values)
     base_ho = normalised_error(base_cmp)  # nothing is fitted: held-out = the error
     say(f"set-up as stated: normalised error {base_ho:.3g} on {len(tests)} forming test(s)")
     out.update(stated_error=error_record(base_cmp), stated_heldout_normalised=base_ho,
@@ -867,6 +889,8 @@ def add_setup(report: dict[str, Any], stage: dict[str, Any] | None) -> None:
                                 "heldout_normalised": stage.get("stated_heldout_normalised")},
                   setup_scheme=stage.get("scheme"), setup_rule=stage.get("rule"))
     report["untestable"] = list(report.get("untestable", [])) + stage["untestable"]
+    if "resolution" in stage:
+        report["setup_resolution"] = stage["resolution"]
     if stage.get("model_note"):
         report["notes"] = [*report.get("notes", []), f"set-up: {stage['model_note']}"]
     if stage["setup_error"] is None:
