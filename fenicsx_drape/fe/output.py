@@ -33,11 +33,17 @@ from fenicsx_drape.provenance import atomic_write_text
 
 
 def gather_nodes(problem) -> tuple[np.ndarray, np.ndarray]:
-    """Reference and current positions of all nodes, shaped (nx + 1, ny + 1, 3), on all ranks."""
+    """Reference and current positions of all nodes, shaped (nx + 1, ny + 1, 3), on all ranks.
+
+    A sheet without one structured grid (a stack of plies) gives them shaped (n, 3).
+    """
     grid: TrussGrid = problem.sheet.grid
     n = problem.num_owned
     X = problem.X[:n]
     x = problem.positions()[:n]
+    if grid is None:  # no single grid (a stack of plies): all nodes, (n, 3), rank by rank
+        parts = problem.comm.allgather((X, x))
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     ij = np.rint(grid.grid_coordinates(X)).astype(int)
     parts = problem.comm.allgather((ij, X, x))
     Xg = np.full((grid.nx + 1, grid.ny + 1, 3), np.nan)

@@ -202,6 +202,10 @@ class TrussProblem:
         self._A = fem_petsc.create_matrix(self.jacobian_form)
         self._b = fem_petsc.create_vector(self.V)
         self._x = fem_petsc.create_vector(self.V)
+        # Terms whose stiffness couples nodes (plies of a stack): blocks on their pattern.
+        self._couplings = [t for t in self.nodal_terms if hasattr(t, "pattern")]
+        if self._couplings:
+            self._setup_couplings()
         self._bending = None
         self._bending_in_A: tuple[PETSc.Mat, PETSc.Mat] | None = None
         if options.tow_bending_EI_Nmm2 > 0 and sheet.grid is not None:  # tow lines known
@@ -315,6 +319,28 @@ class TrussProblem:
     def _monitor(self, iterate: Iterate) -> None:
         if self.monitor is not None:
             self.monitor(self, iterate)
+
+    def _setup_couplings(self) -> None:
+        """Add the coupling terms' patterns to the Jacobian's, once (zeros kept as entries)."""
+        A = self._A
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        fem_petsc.assemble_matrix(A, self.jacobian_form)
+        A.assemble()
+        for term in self._couplings:
+            indptr, indices = term.pattern
+            A.setValuesBlockedLocalCSR(indptr, indices, np.zeros((len(indices), 3, 3)),
+                                       PETSc.InsertMode.ADD_VALUES)
+        A.assemble()
+        A.zeroEntries()
+
+    def _add_couplings(self, A: PETSc.Mat) -> None:
+        """Add the coupling terms' blocks, without the rows and columns of constrained dofs."""
+        free = ~self.constrained
+        for term in self._couplings:
+            indptr, indices = term.pattern
+            rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+            values = term.values * free[rows][:, :, None] * free[indices][:, None, :]
+            A.setValuesBlockedLocalCSR(indptr, indices, values, PETSc.InsertMode.ADD_VALUES)
 
     def _setup_bending(self) -> None:
         """The tow bending term, and a Jacobian whose pattern also holds its stencils.
@@ -437,6 +463,8 @@ class TrussProblem:
                                            np.arange(n, dtype=PETSc.IntType),
                                            self._nodal_K[:n].ravel(),
                                            PETSc.InsertMode.ADD_VALUES)
+            if self._couplings:
+                self._add_couplings(A)
             A.assemble()
 
     # -- stepping -----------------------------------------------------------------------

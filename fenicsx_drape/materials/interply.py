@@ -73,7 +73,7 @@ class InterplyLaw(MaterialLaw):
         doc="film viscosity over thickness η_f = η/h (0.0005-0.01 MPa·s/mm)")
     slip_mm: float = parameter(0.1, unit="mm", bounds=(1e-9, math.inf),
                                doc="slip ε over which τ₀ + μp is reached (regularisation)")
-    bond_MPa_per_mm: float = parameter(100.0, unit="MPa/mm", bounds=(1e-9, math.inf),
+    bond_MPa_per_mm: float = parameter(1e4, unit="MPa/mm", bounds=(1e-9, math.inf),
                                        doc="stiffness of bonded plies (without the effect)")
     pressure_MPa: float = condition(0.0, unit="MPa",
                                     doc="normal pressure of the scalar update (a pull-out)")
