@@ -170,3 +170,39 @@ def test_frictionless_plies_form_like_independent_plies():
     assert F2[:2] == pytest.approx(F1[:2], rel=1e-6)
     assert np.abs(u2[0] - u1[0]).max() < 1e-6
     assert np.abs(u2[1, :, :2]).max() < 1e-9
+
+
+def test_stiffness_is_the_derivative_of_the_forces():
+    """The coupling blocks equal a finite difference of the forces (plies at 0° and 30°)."""
+    from fenicsx_drape.fe.grid import sheet_grid
+
+    lower = TrussGrid(6, 6, 10.0, (-30.0, -30.0), False)
+    upper = sheet_grid(40.0, 10.0, ply_angle_deg=30.0)
+    plies = stack_plies([lower, upper], [0.3, 0.3])
+    law = InterplyLaw(tau0_MPa=0.01, mu_ply=0.3, eta_f_MPa_s_per_mm=0.01, slip_mm=0.1)
+    term = PlyContact(plies, law, K_N)
+    from fenicsx_drape.fe.plies import stack_nodes
+
+    X = stack_nodes(plies)[0]
+    term.bind(X, np.ones(len(X), bool), None)
+    assert (term.w.max(axis=1) < 0.99).any()  # some nodes sit inside a cell, not on a node
+    rng = np.random.default_rng(1)
+    x = X + rng.normal(scale=[0.3, 0.3, 0.05], size=X.shape)
+    x[ply_of(plies, X) == 1, 2] -= 0.05  # pressed together
+    term.state[:, :3] = rng.normal(scale=0.2, size=(len(term.a), 3))
+    term.forces(x, 1.0, 0.1)
+    indptr, indices = term.pattern
+    K = np.zeros((3 * len(X), 3 * len(X)))
+    for r in range(len(X)):
+        for k in range(indptr[r], indptr[r + 1]):
+            c = indices[k]
+            K[3 * r:3 * r + 3, 3 * c:3 * c + 3] = term.values[k]
+    h = 1e-6
+    nodes = np.unique(np.column_stack([term.a, term.J]))
+    for node in nodes[:: max(1, len(nodes) // 25)]:
+        for i in range(3):
+            xp, xm = x.copy(), x.copy()
+            xp[node, i] += h
+            xm[node, i] -= h
+            fd = -(term.forces(xp, 1.0, 0.1)[0] - term.forces(xm, 1.0, 0.1)[0]).ravel() / (2 * h)
+            assert np.allclose(K[:, 3 * node + i], fd, rtol=1e-4, atol=1e-6 * np.abs(K).max())
