@@ -38,7 +38,8 @@ from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.fe.grid import TrussGrid
 from fenicsx_drape.materials.interply import InterplyLaw
 
-__all__ = ["Ply", "PlyContact", "ply_of", "stack_nodes", "stack_sheet"]
+__all__ = ["Ply", "PlyContact", "ply_of", "sheet_grids", "stack_nodes", "stack_plies",
+           "stack_sheet"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,8 +83,8 @@ def stack_nodes(plies: list[Ply]):
 def stack_sheet(plies: list[Ply], comm=None):
     """The plies' nets in one DOLFINx mesh (a :class:`~fenicsx_drape.fe.mesh.Sheet`).
 
-    The sheet has no single structured grid (``grid`` is None); its ``plies`` attribute
-    holds the plies, and :func:`ply_of` tells a node's ply from its height.
+    The sheet has no single structured grid (``grid`` is None); its ``plies`` hold the
+    plies, and :func:`ply_of` tells a node's ply from its height.
     """
     from mpi4py import MPI
 
@@ -95,15 +96,26 @@ def stack_sheet(plies: list[Ply], comm=None):
     cell = plies[0].grid.cell_mm
     if any(abs(p.grid.cell_mm - cell) > 1e-9 * cell for p in plies):
         raise DrapeInputError("the plies of a stack need the same unit-cell size")
-    sheet = Sheet(mesh, bar_tags, node_tags, None, cell)
-    sheet.plies = list(plies)
-    return sheet
+    return Sheet(mesh, bar_tags, node_tags, None, cell, plies=list(plies))
 
 
 def ply_of(plies: list[Ply], X: np.ndarray) -> np.ndarray:
     """The index (0 = ply 1) of the ply of each node at reference positions ``X`` (n, 3)."""
     z = np.array([p.z_mm for p in plies])
     return np.argmin(np.abs(np.asarray(X)[:, 2:3] - z[None, :]), axis=1)
+
+
+def sheet_grids(sheet, X: np.ndarray) -> list[tuple[TrussGrid, np.ndarray]]:
+    """The structured grid of each ply of a sheet and the mask of the points ``X`` on it.
+
+    One pair for a sheet of one grid, one per ply for a stack, none for a free truss.
+    """
+    if sheet.plies:
+        which = ply_of(sheet.plies, X)
+        return [(p.grid, which == k) for k, p in enumerate(sheet.plies)]
+    if sheet.grid is None:
+        return []
+    return [(sheet.grid, np.ones(len(X), dtype=bool))]
 
 
 def node_areas(grid: TrussGrid) -> np.ndarray:

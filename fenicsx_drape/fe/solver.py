@@ -48,6 +48,7 @@ from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
 from fenicsx_drape.fe.newton import LINE_SEARCHES, Iterate, Newton, NewtonResult
+from fenicsx_drape.fe.plies import sheet_grids
 from fenicsx_drape.fe.state import MaterialState, StrainError
 from fenicsx_drape.fe.stepping import StepReport, run
 from fenicsx_drape.materials.base import MaterialLaw
@@ -208,7 +209,7 @@ class TrussProblem:
             self._setup_couplings()
         self._bending = None
         self._bending_in_A: tuple[PETSc.Mat, PETSc.Mat] | None = None
-        if options.tow_bending_EI_Nmm2 > 0 and sheet.grid is not None:  # tow lines known
+        if options.tow_bending_EI_Nmm2 > 0 and (sheet.grid is not None or sheet.plies):
             self._setup_bending()
         self._setup_newton()
 
@@ -228,7 +229,7 @@ class TrussProblem:
 
     def _bars(self) -> tuple[np.ndarray, np.ndarray]:
         """Kind and number of tows ``n_t`` of every owned bar."""
-        mesh, grid, opts = self.sheet.mesh, self.sheet.grid, self.options
+        mesh, opts = self.sheet.mesh, self.options
         n = mesh.topology.index_map(1).size_local
         kinds = np.zeros(n, dtype=np.int32)
         tags = self.sheet.bar_tags
@@ -240,17 +241,17 @@ class TrussProblem:
         # bars with a unit cell on one side only (sheet edges, symmetry edges, ragged edges
         # of a clipped net).
         tows = np.full(n, opts.tows_per_mm * self.sheet.cell_mm)
-        if grid is None:
-            return kinds, tows
         nodes = mesh.geometry.dofmaps[0][:n]
-        ij = grid.grid_coordinates(mesh.geometry.x[nodes].mean(axis=1))
-        lo, near = np.floor(ij).astype(int), np.rint(ij).astype(int)  # a bar's (i, j)
-        warp, weft = kinds == WARP, kinds == WEFT
-        warp_cells, weft_cells = grid.tow_bar_cells()
-        sides = np.zeros(n, dtype=int)
-        sides[warp] = warp_cells[lo[warp, 0], near[warp, 1]]
-        sides[weft] = weft_cells[near[weft, 0], lo[weft, 1]]
-        tows[sides == 1] *= opts.edge_tow_factor
+        middle = mesh.geometry.x[nodes].mean(axis=1)
+        for grid, on in sheet_grids(self.sheet, middle):  # each ply of a stack on its own
+            ij = grid.grid_coordinates(middle)
+            lo, near = np.floor(ij).astype(int), np.rint(ij).astype(int)  # a bar's (i, j)
+            warp, weft = on & (kinds == WARP), on & (kinds == WEFT)
+            warp_cells, weft_cells = grid.tow_bar_cells()
+            sides = np.zeros(n, dtype=int)
+            sides[warp] = warp_cells[lo[warp, 0], near[warp, 1]]
+            sides[weft] = weft_cells[near[weft, 0], lo[weft, 1]]
+            tows[sides == 1] *= opts.edge_tow_factor
         return kinds, tows
 
     def nodes(self, where: Where) -> np.ndarray:
