@@ -281,3 +281,4 @@ class PlyContact:
     def sliding_mm(self) -> np.ndarray:
         """Plastic (sliding) slip of every pair (p, 3) in mm, at the last converged step."""
         return self.state[:, :3]
+
