@@ -187,7 +187,7 @@ class PlyContact:
             if (dist > 1e-6 * ply.grid.cell_mm).any():
                 raise DrapeInputError("PlyContact: the mesh is not the stack of these plies")
             local.append(idx)
-        a, J, w, area, h = [], [], [], [], []
+        a, J, w, area, h, face = [], [], [], [], [], []
         for k in range(1, len(self.plies)):
             upper, lower = self.plies[k], self.plies[k - 1]
             corners, weights = _partners(lower.grid, upper.grid.nodes[:, :2])
@@ -197,11 +197,14 @@ class PlyContact:
             w.append(weights[keep])
             area.append(node_areas(upper.grid)[keep])
             h.append(np.full(keep.sum(), upper.z_mm - lower.z_mm))
+            face.append(np.full(keep.sum(), k - 1))
         self.a = np.concatenate(a) if a else np.zeros(0, int)
         self.J = np.concatenate(J) if J else np.zeros((0, 4), int)
         self.w = np.concatenate(w) if w else np.zeros((0, 4))
         self.area = np.concatenate(area) if area else np.zeros(0)
         self.h = np.concatenate(h) if h else np.zeros(0)
+        # The interface of each pair: 0 between plies 1 and 2, ...
+        self.interface = np.concatenate(face) if face else np.zeros(0, int)
         self.d0 = self.X[self.a] - np.einsum("pj,pji->pi", self.w, self.X[self.J])
         self.state = self.law.initial_state(len(self.a), 3)
         self._trial = None
@@ -276,6 +279,27 @@ class PlyContact:
     def revert(self) -> None:
         """Forget the trial slip of a step that is cut back."""
         self._trial = None
+
+    def summary(self, x: np.ndarray) -> list[dict]:
+        """Per interface: pairs, pressed pairs, largest and mean pressure and sliding.
+
+        ``x`` are the converged positions (for the pairs' places, ``xy``).
+        """
+        out = []
+        sliding = np.linalg.norm(self.sliding_mm, axis=1)
+        for k in range(len(self.plies) - 1):
+            on = self.interface == k
+            p, s = self.pressure_MPa[on], sliding[on]
+            pressed = p > 0
+            out.append({"interface": f"ply{k + 1}/ply{k + 2}", "pairs": int(on.sum()),
+                        "pressed_pairs": int(pressed.sum()),
+                        "max_pressure_MPa": float(p.max(initial=0.0)),
+                        "mean_pressure_MPa": float(p[pressed].mean()) if pressed.any() else 0.0,
+                        "max_sliding_mm": float(s.max(initial=0.0)),
+                        "mean_sliding_mm": float(s.mean()) if len(s) else 0.0,
+                        "sliding_fraction": float((s > 1e-9).mean()) if len(s) else 0.0,
+                        "xy": x[self.a[on], :2], "sliding_mm": s, "pressure_MPa": p})
+        return out
 
     @property
     def sliding_mm(self) -> np.ndarray:
