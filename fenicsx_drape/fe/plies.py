@@ -208,15 +208,18 @@ class PlyContact:
         self.d0 = self.X[self.a] - np.einsum("pj,pji->pi", self.w, self.X[self.J])
         self.state = self.law.initial_state(len(self.a), 3)
         self._trial = None
-        # The pattern: every pair couples its five nodes with each other.
+        # The pattern: every pair couples its node and the partner's corners of nonzero
+        # weight with each other (for identical nets, the node under it only: less fill).
         nodes = np.column_stack([self.a, self.J])  # (p, 5)
-        rows = np.repeat(nodes, 5, axis=1).ravel()
-        cols = np.tile(nodes, (1, 5)).ravel()
-        key = rows * n + cols
-        unique, self._slot = np.unique(key, return_inverse=True)
+        live = np.column_stack([np.ones(len(self.a), bool), self.w > 1e-12])
+        self._live = live[:, :, None] & live[:, None, :]  # (p, 5, 5)
+        rows = np.broadcast_to(nodes[:, :, None], self._live.shape)[self._live]
+        cols = np.broadcast_to(nodes[:, None, :], self._live.shape)[self._live]
+        unique, self._slot = np.unique(rows * n + cols, return_inverse=True)
         r, c = np.divmod(unique, n)
         self.pattern = (np.searchsorted(r, np.arange(n + 1)).astype(np.int32),
                         c.astype(np.int32))
+        self.rows = r  # the row of every block of the pattern
         self.values = np.zeros((len(unique), 3, 3))
         self._normals(self.X)
         self.pressure_MPa = np.zeros(len(self.a))
@@ -258,11 +261,14 @@ class PlyContact:
         G = (k_touch * nn_T + self.area[:, None, None] * np.einsum("pik,pkj->pij", out.dtau_ds, P)
              - pressed * k_touch * np.einsum("pi,pj->pij", out.dtau_dp, n))
         c = np.column_stack([np.ones(p_count), -self.w])  # ∂d/∂x of the five nodes
-        np.add.at(f, self.a, f_a)
-        np.add.at(f, self.J.ravel(), (-self.w[:, :, None] * f_a[:, None, :]).reshape(-1, 3))
-        blocks = np.einsum("pi,pj,pkl->pijkl", c, c, G).reshape(-1, 3, 3)
-        self.values = np.zeros_like(self.values)
-        np.add.at(self.values, self._slot, blocks)
+        nodes = np.concatenate([self.a, self.J.ravel()])
+        forces = np.concatenate([f_a, (-self.w[:, :, None] * f_a[:, None, :]).reshape(-1, 3)])
+        for i in range(3):  # a scatter-add (bincount is much faster than ufunc.at)
+            f[:, i] = np.bincount(nodes, forces[:, i], minlength=nn)
+        blocks = np.einsum("pi,pj,pkl->pijkl", c, c, G)[self._live]
+        m = len(self.values)
+        self.values = np.stack([np.bincount(self._slot, blocks[:, i, j], minlength=m)
+                                for i in range(3) for j in range(3)], axis=1).reshape(m, 3, 3)
         self._trial = (x.copy(), out.state, p, s)
         self.f = f  # the forces of the last evaluation (N), also on constrained nodes
         return f, np.zeros((nn, 3, 3))

@@ -340,7 +340,7 @@ class TrussProblem:
         for term in self._couplings:
             indptr, indices = term.pattern
             rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-            values = term.values * free[rows][:, :, None] * free[indices][:, None, :]
+            values = term.values * (free[rows][:, :, None] & free[indices][:, None, :])
             A.setValuesBlockedLocalCSR(indptr, indices, values, PETSc.InsertMode.ADD_VALUES)
 
     def _setup_bending(self) -> None:
