@@ -4,9 +4,10 @@
     ./drape exec python3 benchmarks/bench_laminates.py --case hemisphere --cell-mm 20
 
 The case at its own net (quarter model), one rank: the single ply, then stacks of two and four
-plies, all at 0° (a turned ply breaks the quarter symmetry). Every line: plies, nodes, wall time,
-steps, cut-backs, Newton iterations (per step), time per iteration, the ratio of the wall time
-to the single ply's, and each ply's maximum shear. The machine's load average comes first.
+plies, all at 0° (a turned ply breaks the quarter symmetry), the die's gap the stack's. Every
+line: plies, nodes, wall time, steps, cut-backs, Newton iterations (per step), time per
+iteration, the ratio of the wall time to the single ply's, and each ply's maximum shear. The
+machine's load average comes first.
 """
 
 import argparse
@@ -30,8 +31,13 @@ run_case(load_case(args.case, cell_mm=30.0))  # JIT warm-up
 print(f"load average {os.getloadavg()[0]:.2f}; case {base.name}, cell {base.blank.cell_mm:g} mm")
 single = None
 for angles in ((0.0,), (0.0, 0.0), (0.0, 0.0, 0.0, 0.0)):
-    case = base if len(angles) == 1 else dataclasses.replace(
-        base, plies=tuple(PlySpec(a, 0.3) for a in angles))
+    # The die's gap is the stack's thickness (the double dome's offset_mm, the builtin tools'
+    # ply_thickness_mm): a die closing on one ply's gap would squeeze the stack.
+    gap = {k: 0.3 * len(angles) for k in ("offset_mm", "ply_thickness_mm")
+           if any(k in t.params for t in base.tools)}
+    case = load_case(args.case, cell_mm=args.cell_mm, duration_s=args.duration_s, **gap)
+    if len(angles) > 1:
+        case = dataclasses.replace(case, plies=tuple(PlySpec(a, 0.3) for a in angles))
     start = time.perf_counter()
     run = run_case(case)
     wall = time.perf_counter() - start
