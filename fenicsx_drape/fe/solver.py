@@ -20,6 +20,10 @@ Two choices make the Newton iteration of forming robust without changing its sol
 - **The predictor** extrapolates the last increment and lets the nodal terms project it
   (contact keeps pressed nodes on their gap, :mod:`~fenicsx_drape.forming.terms.contact`).
 
+A nodal term with a ``pattern`` (the ply contact of a stack, :mod:`~fenicsx_drape.fe.plies`)
+couples nodes: its 3 × 3 blocks (``values``) go to the Jacobian on that pattern, added to the
+matrix's once.
+
 Nodes are the blocks of the vector P1 space in its local order (owned nodes first, then
 ghosts); that is the order of every nodal array this module hands out or takes.
 """
