@@ -6,6 +6,7 @@ import pytest
 
 from fenicsx_drape.forming.case.format import (
     CaseError,
+    PlySpec,
     load_case,
     with_overrides,
     write_case,
@@ -83,3 +84,24 @@ def test_a_bad_stack_names_the_key(tmp_path, text, message):
 def test_a_turned_ply_in_a_quarter_model_is_refused(tmp_path):
     with pytest.raises(CaseError, match=r"\[\[ply\]\] 2"):
         load_case(stack_case(tmp_path, symmetry='["x", "y"]'))
+
+
+def test_plies_with_different_models_are_refused_by_name(tmp_path):
+    from fenicsx_drape.forming.running.run import case_model
+
+    (tmp_path / "a.toml").write_text('effects = ["decrimping"]\n')
+    (tmp_path / "b.toml").write_text('effects = ["tow_buckling"]\n')
+    text = STACK.replace("thickness_mm = 0.3\n", "thickness_mm = 0.3\nmodel = 'a.toml'\n")
+    text = text.replace("thickness_mm = 0.25\n", "thickness_mm = 0.25\nmodel = 'b.toml'\n")
+    case = load_case(stack_case(tmp_path, text))
+    with pytest.raises(CaseError, match="different models"):
+        case_model(case)
+    same = text.replace("model = 'b.toml'", "model = 'a.toml'")
+    assert case_model(load_case(stack_case(tmp_path, same))).effects == ("decrimping",)
+
+
+def test_the_plies_share_the_cell_size_the_rectangle_fits():
+    """A 300 mm side takes 18.75 mm cells for 20 asked; the ply at 45° takes them too."""
+    case = load_case("double_dome", symmetry=[], cell_mm=20.0)
+    case = dataclasses.replace(case, plies=(PlySpec(0.0, 0.3), PlySpec(45.0, 0.3)))
+    assert [b.grid().cell_mm for b in case.ply_blanks()] == [18.75, 18.75]

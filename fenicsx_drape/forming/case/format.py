@@ -219,12 +219,26 @@ class FormingCase:
         return len(self.plies) > 1
 
     def ply_blanks(self) -> list[BlankSpec]:
-        """The blank of each ply: its net turned by the blank's angle plus its own."""
+        """The blank of each ply: its net turned by the blank's angle plus its own.
+
+        The plies share one cell size: a rectangle's tow-aligned ply fits whole cells to its
+        sides (:meth:`BlankSpec.grid`), and the turned plies take that Δ too.
+        """
         if not self.plies:
             return [self.blank]
-        return [dataclasses.replace(self.blank,
-                                    ply_angle_deg=self.blank.ply_angle_deg + p.angle_deg)
-                for p in self.plies]
+        blanks = [dataclasses.replace(self.blank,
+                                      ply_angle_deg=self.blank.ply_angle_deg + p.angle_deg)
+                  for p in self.plies]
+        fitted = set()
+        for b in blanks:
+            try:
+                fitted.add(b.grid().cell_mm)
+            except DrapeInputError:  # reported with the ply by whoever builds its grid
+                pass
+        fitted -= {self.blank.cell_mm}
+        if fitted:
+            blanks = [dataclasses.replace(b, cell_mm=min(fitted)) for b in blanks]
+        return blanks
 
     def interply_law(self) -> InterplyLaw:
         """The inter-ply law of the stack (``[interply]`` over InterplyLaw's defaults)."""
