@@ -98,7 +98,11 @@ def test_pull_out_steady_force(pressure, speed):
     problem, contact, grip, A = pull_out(pressure, law, speed=speed, travel=1.0)
     exact = 2 * A * (TAU0 + MU * pressure + ETA * speed)
     assert grip_force(problem, contact, grip) == pytest.approx(exact, rel=0.02)
-    assert contact.pressure_MPa == pytest.approx(pressure, rel=5e-3)
+    # The pairs follow the sliding ply (node to surface): the pressure is p on average.
+    for k in (0, 1):
+        on = contact.interface == k
+        mean = np.average(contact.pressure_MPa[on], weights=contact.area[on])
+        assert mean == pytest.approx(pressure, rel=5e-3)
     assert (np.linalg.norm(contact.sliding_mm, axis=1) > 0.5).all()  # every pair slid
 
 
@@ -206,3 +210,33 @@ def test_stiffness_is_the_derivative_of_the_forces():
             xm[node, i] -= h
             fd = -(term.forces(xp, 1.0, 0.1)[0] - term.forces(xm, 1.0, 0.1)[0]).ravel() / (2 * h)
             assert np.allclose(K[:, 3 * node + i], fd, rtol=1e-4, atol=1e-6 * np.abs(K).max())
+
+
+def test_pairs_follow_a_ply_sliding_farther_than_a_cell():
+    """A 40 mm ply pulled 25 mm over a 100 mm one: re-paired, each node keeps the point under
+    it as partner, and the force stays A (τ₀ + μ p + η_f v) (one interface)."""
+    bottom = TrussGrid(10, 2, 10.0, (0.0, 0.0), False)
+    top = TrussGrid(4, 2, 10.0, (0.0, 0.0), False)
+    plies = stack_plies([bottom, top], [0.2, 0.2])
+    law = InterplyLaw(tau0_MPa=TAU0, mu_ply=MU, eta_f_MPa_s_per_mm=ETA, slip_mm=0.05)
+    contact = PlyContact(plies, law, K_N, follow=True)
+    p, v = 0.1, 5.0
+    squeeze = NodeForce(lambda X: ply_of(plies, X) == 1, 0.0)
+    problem = TrussProblem(stack_sheet(plies), default_model(), [contact, squeeze],
+                           SolverOptions(snes_atol=1e-9))
+    X = problem.X
+    which = ply_of(plies, X)
+    ij = np.rint(X[:, :2] / 10.0).astype(int)
+    area = node_areas(top).reshape(3, 5)
+    squeeze.f[which == 1, 2] = -p * area[ij[which == 1, 1], ij[which == 1, 0]]
+    problem.fix(which == 0)
+    problem.fix(which == 1, (1,))
+    grip = (which == 1) & (np.abs(X[:, 0] - 40.0) < 1e-9)
+    problem.fix(grip, (0,), lambda t: v * t)
+    problem.run(25.0 / v, 0.2)
+    x = problem.positions()
+    under = x[contact.a] - np.einsum("pj,pji->pi", contact.w, x[contact.J])
+    assert np.abs(under[:, :2]).max() < 1e-6  # the partner is the point under the node
+    assert len(contact.a) == 15 and contact.cell[:, 0].min() >= 2  # 2.5 cells along
+    exact = area.sum() * (TAU0 + MU * p + ETA * v)
+    assert grip_force(problem, contact, grip) == pytest.approx(exact, rel=0.02)

@@ -337,6 +337,8 @@ class TrussProblem:
                                        PETSc.InsertMode.ADD_VALUES)
         A.assemble()
         A.zeroEntries()
+        self._coupling_versions = [t.pattern_version for t in self._couplings]
+        self._bending_in_A = None  # A's pattern changed: the bending's copy of it too
 
     def _add_couplings(self, A: PETSc.Mat) -> None:
         """Add the coupling terms' blocks, without the rows and columns of constrained dofs."""
@@ -457,6 +459,9 @@ class TrussProblem:
         self.state.limit_geometric_force(np.inf if local else self._geometric_limit_N)
         A = self._A
         with self._timed("jacobian"):
+            if self._couplings and self._coupling_versions != [
+                    t.pattern_version for t in self._couplings]:
+                self._setup_couplings()  # the pairs followed the plies: a larger pattern
             A.zeroEntries()
             fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self.constraints.bcs)
             A.assemble()
