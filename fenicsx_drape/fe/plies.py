@@ -167,15 +167,9 @@ def _partners(lower: TrussGrid, xy: np.ndarray, tol: float = 1e-9):
     ξ, η = (ij - lo).T
     inside = ((ξ > -tol) & (ξ < 1 + tol) & (η > -tol) & (η < 1 + tol)
               & lower.cells[lo[:, 0], lo[:, 1]])
-    ξ, η = np.clip(ξ, 0, 1), np.clip(η, 0, 1)
-    i, j = lo.T
-    lattice = np.column_stack([lower.node(i, j), lower.node(i + 1, j),
-                               lower.node(i + 1, j + 1), lower.node(i, j + 1)])
-    if lower.clipped:
-        lattice = (np.cumsum(lower.present.T.ravel()) - 1)[lattice]
-    w = np.column_stack([(1 - ξ) * (1 - η), ξ * (1 - η), ξ * η, (1 - ξ) * η])
-    lattice[~inside] = -1
-    return lattice, w, lo
+    corners = _corners(lower, *lo.T)
+    corners[~inside] = -1
+    return corners, _bilinear(np.clip(ξ, 0, 1), np.clip(η, 0, 1)), lo
 
 
 class PlyContact:
