@@ -10,8 +10,9 @@ column), and the force
     F = n A τ(s, p, v),   A = contact_length_mm × contact_width_mm,
 
 with n the interfaces. The overlap is taken as constant, ``contact_length_mm`` as given (a
-pulled ply longer than the pressure plates, as in the rigs of ten Thije & Akkerman, Int. J.
-Mater. Form. 2 (2009) 197-200); the spec reads it as the overlap at zero displacement.
+pulled ply longer than the pressure plates under a uniform pressure, as ten Thije & Akkerman,
+Int. J. Mater. Form. (2009) 197-200 ask of a pull-out); the spec reads it as the overlap at
+zero displacement.
 
 The fit is a bounded least squares over τ₀, μ and η_f (the slip ε stays the law's: a
 regularisation), each residual over the row's noise (``force_sd_N``, a declared noise, else

@@ -3,8 +3,9 @@
 The shear traction between two plies sliding against each other under a normal pressure p
 (prepregs slide in a mixed regime of boundary and hydrodynamic friction, Pasco et al., J.
 Compos. Mater. 53 (2019) 227-243; a tack term dominates cold AS4/8552, Erland et al., Compos.
-A (2015) 210-218; tool-ply friction as Coulomb plus viscous, ten Thije & Akkerman, Int. J.
-Mater. Form. 2 (2009) 197-200 and Harrison et al., World J. Eng. 7 (2010) 5-22)::
+A (2015) 210-218; tool-ply friction as Coulomb plus viscous, ten Thije, ESAFORM 2008 and
+Harrison et al., World J. Eng. 7 (2010) 5-22; a pull-out needs a uniform pressure, ten Thije &
+Akkerman, Int. J. Mater. Form. (2009) 197-200)::
 
     τ = τ₀ + μ p + η_f v        (steady sliding at speed v)
 
