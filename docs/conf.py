@@ -44,7 +44,8 @@ nb_custom_formats = {".py": ["jupytext.reads", {"fmt": "py:light"}]}
 # output (the page says so) and run by their tests. The build stops on a demo's error.
 nb_execution_mode = "force"
 nb_execution_excludepatterns = ["demos/demo_forming_diagnosis.py", "demos/demo_diagnosis.py",
-                                "demos/demo_case_diagnosis.py", "demos/demo_lab_diagnosis.py"]
+                                "demos/demo_case_diagnosis.py", "demos/demo_lab_diagnosis.py",
+                                "demos/demo_laminates.py"]
 nb_execution_timeout = 600
 nb_execution_raise_on_error = True
 nb_execution_show_tb = True

@@ -1,7 +1,9 @@
 """``drape fit BUNDLE [--model MODEL.toml] --out DIR``: identify a model's parameters.
 
 The same in Python: ``write_fit(fit(load_bundle(BUNDLE), load_model(MODEL)), DIR)``; with
-``--consistency``, also ``consistency(bundle, result)`` (calibration.consistency).
+``--consistency``, also ``consistency(bundle, result)`` (calibration.consistency). A bundle's
+``interply_friction`` tests are fitted by ``calibration.interply.fit_interply`` and written as
+the ``[interply]`` table of a stack's case file (``interply.toml``, ``interply.json``).
 """
 
 from __future__ import annotations
@@ -36,10 +38,16 @@ def run(args: argparse.Namespace) -> int:
     from fenicsx_drape.calibration.fit import fit, write_fit
     from fenicsx_drape.calibration.sensitivity import format_table
     from fenicsx_drape.cli import load_bundle_reported
+    from fenicsx_drape.effects import COUPON_KINDS
     from fenicsx_drape.model import default_model, load_model
 
     bundle = load_bundle_reported(args.bundle)
     model = load_model(args.model) if args.model else default_model()
+    chosen = [t for t in bundle.tests if args.tests is None or t.id in args.tests]
+    if any(t.kind == "interply_friction" for t in chosen):
+        _fit_interply(chosen, args.out)
+        if not any(t.kind in COUPON_KINDS for t in chosen):
+            return 0
     result = fit(bundle, model, progress=print, initial_guess_from_features=not args.warm_start,
                  tests=args.tests, max_iterations=args.max_iterations,
                  global_stage=False if args.no_global else None)
@@ -62,3 +70,27 @@ def run(args: argparse.Namespace) -> int:
         print(f"consistency: {report['verdict']}: {report['says']}")
         print(f"wrote {out}/consistency.json")
     return 0
+
+
+def _fit_interply(tests, out_dir) -> None:
+    """Fit the inter-ply law to the interply_friction tests; write interply.toml and .json."""
+    from pathlib import Path
+
+    from fenicsx_drape.calibration.interply import fit_interply
+    from fenicsx_drape.provenance import atomic_write_text, write_json, write_provenance
+
+    result = fit_interply(tests)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    law = result.law
+    print(f"inter-ply friction: tau0 = {law.tau0_MPa:.4g} MPa, mu = {law.mu_ply:.4g}, "
+          f"eta_f = {law.eta_f_MPa_s_per_mm:.4g} MPa s/mm; normalised error "
+          f"{result.normalised:.3g} (1 = noise floor)")
+    for name, why in result.held.items():
+        print(f"  {name} held at {getattr(law, name):g}: {why}")
+    atomic_write_text(out / "interply.toml", "# the [interply] table of a stack's case file, "
+                      "fitted by drape fit\n" + result.toml())
+    write_json(out / "interply.json", result.report())
+    write_provenance(out, interply=result.report(), tests=[t.id for t in tests
+                                                           if t.kind == "interply_friction"])
+    print(f"wrote {out}/interply.toml, interply.json")

@@ -203,6 +203,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {note}")
         pictures = ["shear.png", "wrinkling.png", "kinematic_shear.png",
                     *(["paths.png"] if hemisphere else [])]
+        for k in range(1, len(result.get("plies", [])) + 1):  # a stack: each ply, the slip
+            pictures += [f"shear_ply{k}.png", f"wrinkling_ply{k}.png"]
+        pictures += ["interply.png"] if result.get("plies") else []
         print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "
               f"{args.out / 'summary.json'}")
     return 0

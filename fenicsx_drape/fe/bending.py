@@ -31,6 +31,7 @@ from petsc4py import PETSc
 import numpy as np
 
 from fenicsx_drape.fe.grid import TrussGrid
+from fenicsx_drape.fe.plies import sheet_grids
 
 
 def stencils(grid: TrussGrid, edge_factor: float) -> tuple[np.ndarray, np.ndarray]:
@@ -61,29 +62,38 @@ class TowBending:
     """The bending matrix of a problem's tow lines, in the layout of its PETSc matrices.
 
     Args:
-        problem: The :class:`~fenicsx_drape.fe.solver.TrussProblem` (a structured sheet).
+        problem: The :class:`~fenicsx_drape.fe.solver.TrussProblem` (a structured sheet, or a
+            stack of them: each ply's tow lines).
         EI_Nmm2: Bending stiffness of one tow (N·mm²).
     """
 
     def __init__(self, problem, EI_Nmm2: float):
-        grid = problem.sheet.grid
-        if grid is None:
-            raise ValueError("tow bending needs a structured sheet (truss_sheet)")
         comm = problem.comm
         n = problem.num_owned
+        grids = sheet_grids(problem.sheet, problem.X[:n])
+        if not grids:
+            raise ValueError("tow bending needs a structured sheet (truss_sheet)")
         first = problem.V.dofmap.index_map.local_range[0]
-        ij = np.rint(grid.grid_coordinates(problem.X[:n])).astype(np.int64)
-        flat = grid.node(ij[:, 0], ij[:, 1])
+        # The lattices of the plies one after the other (one lattice for one ply).
+        flat = np.zeros(n, dtype=np.int64)
+        offset, triplets, shares = 0, [], []
+        for grid, on in grids:
+            ij = np.rint(grid.grid_coordinates(problem.X[:n][on])).astype(np.int64)
+            flat[on] = offset + grid.node(ij[:, 0], ij[:, 1])
+            t, s = stencils(grid, problem.options.edge_tow_factor)
+            triplets.append(t + offset)
+            shares.append(s)
+            offset += (grid.nx + 1) * (grid.ny + 1)
+        triplets, shares = np.concatenate(triplets), np.concatenate(shares)
         # PETSc block index of every node of the sheet, on every rank.
-        self.global_index = np.full((grid.nx + 1) * (grid.ny + 1), -1, dtype=np.int64)
+        self.global_index = np.full(offset, -1, dtype=np.int64)
         for f, g in comm.allgather((flat, first + np.arange(n))):
             self.global_index[f] = g
         owned_rows = np.full(len(self.global_index), -1, dtype=np.int64)
         owned_rows[flat] = np.arange(n)
         self.flat = flat
 
-        triplets, shares = stencils(grid, problem.options.edge_tow_factor)
-        Δ = grid.cell_mm
+        Δ = problem.sheet.cell_mm
         k = shares * problem.options.tows_per_mm * Δ * EI_Nmm2 / Δ**3
         w = np.array([1.0, -2.0, 1.0])
         rows = np.repeat(triplets, 3, axis=1).ravel()  # (a a a b b b c c c)

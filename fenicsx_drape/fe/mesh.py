@@ -31,6 +31,8 @@ class Sheet:
     node_tags: dolfinx.mesh.MeshTags | None  # vertex tags: SYMMETRY_X | SYMMETRY_Y | BORDER
     grid: TrussGrid | None  # the structured grid (same on every rank); None for a free truss
     cell_mm: float  # unit-cell size Δ (mm): a bar stands for n_t = l_t Δ tows
+    # A stack of plies (fe.plies.Ply, ply 1 first), each its own grid; then grid is None.
+    plies: list | None = None
 
     @property
     def num_nodes_global(self) -> int:

@@ -29,15 +29,22 @@ import dolfinx
 import numpy as np
 
 from fenicsx_drape.fe.grid import DIAGONAL_MINUS, DIAGONAL_PLUS, WARP, WEFT, TrussGrid
+from fenicsx_drape.fe.plies import ply_of, sheet_grids
 from fenicsx_drape.provenance import atomic_write_text
 
 
 def gather_nodes(problem) -> tuple[np.ndarray, np.ndarray]:
-    """Reference and current positions of all nodes, shaped (nx + 1, ny + 1, 3), on all ranks."""
+    """Reference and current positions of all nodes, shaped (nx + 1, ny + 1, 3), on all ranks.
+
+    A sheet without one structured grid (a stack of plies) gives them shaped (n, 3).
+    """
     grid: TrussGrid = problem.sheet.grid
     n = problem.num_owned
     X = problem.X[:n]
     x = problem.positions()[:n]
+    if grid is None:  # no single grid (a stack of plies): all nodes, (n, 3), rank by rank
+        parts = problem.comm.allgather((X, x))
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     ij = np.rint(grid.grid_coordinates(X)).astype(int)
     parts = problem.comm.allgather((ij, X, x))
     Xg = np.full((grid.nx + 1, grid.ny + 1, 3), np.nan)
@@ -124,6 +131,28 @@ def results(problem) -> Results:
                    problem.options.edge_tow_factor)
 
 
+class _PlyView:
+    """One ply of a stacked problem, seen as a problem of its own by the output functions."""
+
+    def __init__(self, problem, k: int) -> None:
+        plies = problem.sheet.plies
+        n = problem.num_owned
+        on = ply_of(plies, problem.X[:n]) == k
+        self.sheet = dataclasses.replace(problem.sheet, grid=plies[k].grid, plies=None)
+        self.X = problem.X[:n][on]
+        self._x = problem.positions()[:n][on]
+        self.num_owned = len(self.X)
+        self.comm, self.t, self.options = problem.comm, problem.t, problem.options
+
+    def positions(self) -> np.ndarray:
+        return self._x
+
+
+def ply_results(problem, k: int):
+    """The :class:`~fenicsx_drape.fe.output.Results` of ply ``k`` (0: ply 1) of a stack."""
+    return results(_PlyView(problem, k))
+
+
 def grid_points(res: Results, grid_mm: float = 10.0) -> dict[str, np.ndarray]:
     """Positions of the points of a drawn grid of spacing ``grid_mm`` on the sheet.
 
@@ -173,7 +202,10 @@ class FieldWriter:
 
     Fields: ``displacement_mm`` (nodes); per bar ``strain`` (Green-Lagrange),
     ``stress_per_tow_N``, ``wrinkling_strain`` (tows, ≤ 0), ``shear_deg`` (the shear angle of
-    the unit cell, on its two diagonals) and ``kind`` (1 warp, 2 weft, 3/4 diagonals).
+    the unit cell, on its two diagonals) and ``kind`` (1 warp, 2 weft, 3/4 diagonals). A
+    stack of plies adds ``ply`` (per bar, 1 on the punch side) and, at the nodes of each
+    upper ply of a pair, ``interply_pressure_MPa`` and ``interply_sliding_mm`` (the sliding
+    slip's length).
     """
 
     def __init__(self, problem, path: str | os.PathLike):
@@ -195,24 +227,41 @@ class FieldWriter:
         owned = tags.indices < n
         self._kinds[tags.indices[owned]] = tags.values[owned]
         self.fields["kind"].x.array[self._dofs] = self._kinds
-        grid = problem.sheet.grid
         mid = mesh.geometry.x[mesh.geometry.dofmaps[0][:n]].mean(axis=1)
-        cell = np.floor(grid.grid_coordinates(mid)).astype(int)
-        self._cell = (np.clip(cell[:, 0], 0, grid.nx - 1), np.clip(cell[:, 1], 0, grid.ny - 1))
+        self._cells = []  # each ply's grid (one for a single ply): its bars' unit cells
+        for grid, on in sheet_grids(problem.sheet, mid):
+            cell = np.floor(grid.grid_coordinates(mid)).astype(int)
+            self._cells.append((on, np.clip(cell[:, 0], 0, grid.nx - 1),
+                                np.clip(cell[:, 1], 0, grid.ny - 1)))
+        # A stack: each bar's ply, and the inter-ply pressure and sliding at the nodes.
+        self._contact = next((t for t in problem.nodal_terms if hasattr(t, "pattern")), None)
+        if problem.sheet.plies:
+            self.fields["ply"] = dolfinx.fem.Function(W, name="ply")
+            self.fields["ply"].x.array[self._dofs] = 1 + ply_of(problem.sheet.plies, mid)
+        if self._contact is not None:
+            S = dolfinx.fem.functionspace(mesh, ("Lagrange", 1))
+            self._nodal = {name: dolfinx.fem.Function(S, name=name)
+                           for name in ("interply_pressure_MPa", "interply_sliding_mm")}
 
     def write(self, res: Results | None = None) -> None:
         """Append the fields at the problem's current time (collective)."""
         p = self.problem
-        res = res if res is not None else p.results()
+        if p.sheet.plies:
+            shear_of = [ply_results(p, k).shear_deg for k in range(len(p.sheet.plies))]
+        else:
+            shear_of = [(res if res is not None else p.results()).shear_deg]
         q = p.state.dofs
         ε = p.state.strain.x.array[q]
         tow = (self._kinds == WARP) | (self._kinds == WEFT)
         diag = (self._kinds == DIAGONAL_PLUS) | (self._kinds == DIAGONAL_MINUS)
+        shear = np.zeros(len(ε))
+        for (on, i, j), cells in zip(self._cells, shear_of):
+            shear[on] = cells[i[on], j[on]]
         values = {
             "strain": ε,
             "stress_per_tow_N": p.state.stress.x.array[q],
             "wrinkling_strain": np.where(tow, np.minimum(ε, 0.0), 0.0),
-            "shear_deg": np.where(diag, res.shear_deg[self._cell], 0.0),
+            "shear_deg": np.where(diag, shear, 0.0),
         }
         for name, v in values.items():
             self.fields[name].x.array[self._dofs] = v
@@ -221,6 +270,15 @@ class FieldWriter:
         self.file.write_function(p.u, p.t)
         for f in self.fields.values():
             self.file.write_function(f, p.t)
+        if self._contact is not None:  # the values of a pair at its node on the upper ply
+            c = self._contact
+            pressure, sliding = self._nodal.values()
+            pressure.x.array[:] = 0.0
+            sliding.x.array[:] = 0.0
+            pressure.x.array[c.a] = c.pressure_MPa
+            sliding.x.array[c.a] = np.linalg.norm(c.sliding_mm, axis=1)
+            for f in self._nodal.values():
+                self.file.write_function(f, p.t)
 
     def close(self) -> None:
         """Close the file."""

@@ -20,6 +20,10 @@ Two choices make the Newton iteration of forming robust without changing its sol
 - **The predictor** extrapolates the last increment and lets the nodal terms project it
   (contact keeps pressed nodes on their gap, :mod:`~fenicsx_drape.forming.terms.contact`).
 
+A nodal term with a ``pattern`` (the ply contact of a stack, :mod:`~fenicsx_drape.fe.plies`)
+couples nodes: its 3 × 3 blocks (``values``) go to the Jacobian on that pattern, added to the
+matrix's once.
+
 Nodes are the blocks of the vector P1 space in its local order (owned nodes first, then
 ghosts); that is the order of every nodal array this module hands out or takes.
 """
@@ -48,6 +52,7 @@ from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
 from fenicsx_drape.fe.newton import LINE_SEARCHES, Iterate, Newton, NewtonResult
+from fenicsx_drape.fe.plies import sheet_grids
 from fenicsx_drape.fe.state import MaterialState, StrainError
 from fenicsx_drape.fe.stepping import StepReport, run
 from fenicsx_drape.materials.base import MaterialLaw
@@ -202,9 +207,13 @@ class TrussProblem:
         self._A = fem_petsc.create_matrix(self.jacobian_form)
         self._b = fem_petsc.create_vector(self.V)
         self._x = fem_petsc.create_vector(self.V)
+        # Terms whose stiffness couples nodes (plies of a stack): blocks on their pattern.
+        self._couplings = [t for t in self.nodal_terms if hasattr(t, "pattern")]
+        if self._couplings:
+            self._setup_couplings()
         self._bending = None
         self._bending_in_A: tuple[PETSc.Mat, PETSc.Mat] | None = None
-        if options.tow_bending_EI_Nmm2 > 0 and sheet.grid is not None:  # tow lines known
+        if options.tow_bending_EI_Nmm2 > 0 and (sheet.grid is not None or sheet.plies):
             self._setup_bending()
         self._setup_newton()
 
@@ -224,7 +233,7 @@ class TrussProblem:
 
     def _bars(self) -> tuple[np.ndarray, np.ndarray]:
         """Kind and number of tows ``n_t`` of every owned bar."""
-        mesh, grid, opts = self.sheet.mesh, self.sheet.grid, self.options
+        mesh, opts = self.sheet.mesh, self.options
         n = mesh.topology.index_map(1).size_local
         kinds = np.zeros(n, dtype=np.int32)
         tags = self.sheet.bar_tags
@@ -236,17 +245,17 @@ class TrussProblem:
         # bars with a unit cell on one side only (sheet edges, symmetry edges, ragged edges
         # of a clipped net).
         tows = np.full(n, opts.tows_per_mm * self.sheet.cell_mm)
-        if grid is None:
-            return kinds, tows
         nodes = mesh.geometry.dofmaps[0][:n]
-        ij = grid.grid_coordinates(mesh.geometry.x[nodes].mean(axis=1))
-        lo, near = np.floor(ij).astype(int), np.rint(ij).astype(int)  # a bar's (i, j)
-        warp, weft = kinds == WARP, kinds == WEFT
-        warp_cells, weft_cells = grid.tow_bar_cells()
-        sides = np.zeros(n, dtype=int)
-        sides[warp] = warp_cells[lo[warp, 0], near[warp, 1]]
-        sides[weft] = weft_cells[near[weft, 0], lo[weft, 1]]
-        tows[sides == 1] *= opts.edge_tow_factor
+        middle = mesh.geometry.x[nodes].mean(axis=1)
+        for grid, on in sheet_grids(self.sheet, middle):  # each ply of a stack on its own
+            ij = grid.grid_coordinates(middle)
+            lo, near = np.floor(ij).astype(int), np.rint(ij).astype(int)  # a bar's (i, j)
+            warp, weft = on & (kinds == WARP), on & (kinds == WEFT)
+            warp_cells, weft_cells = grid.tow_bar_cells()
+            sides = np.zeros(n, dtype=int)
+            sides[warp] = warp_cells[lo[warp, 0], near[warp, 1]]
+            sides[weft] = weft_cells[near[weft, 0], lo[weft, 1]]
+            tows[sides == 1] *= opts.edge_tow_factor
         return kinds, tows
 
     def nodes(self, where: Where) -> np.ndarray:
@@ -315,6 +324,30 @@ class TrussProblem:
     def _monitor(self, iterate: Iterate) -> None:
         if self.monitor is not None:
             self.monitor(self, iterate)
+
+    def _setup_couplings(self) -> None:
+        """Add the coupling terms' patterns to the Jacobian's, once (zeros kept as entries)."""
+        A = self._A
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        fem_petsc.assemble_matrix(A, self.jacobian_form)
+        A.assemble()
+        for term in self._couplings:
+            indptr, indices = term.pattern
+            A.setValuesBlockedLocalCSR(indptr, indices, np.zeros((len(indices), 3, 3)),
+                                       PETSc.InsertMode.ADD_VALUES)
+        A.assemble()
+        A.zeroEntries()
+        self._coupling_versions = [t.pattern_version for t in self._couplings]
+        self._bending_in_A = None  # A's pattern changed: the bending's copy of it too
+
+    def _add_couplings(self, A: PETSc.Mat) -> None:
+        """Add the coupling terms' blocks, without the rows and columns of constrained dofs."""
+        free = ~self.constrained
+        for term in self._couplings:
+            indptr, indices = term.pattern
+            rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+            values = term.values * (free[rows][:, :, None] & free[indices][:, None, :])
+            A.setValuesBlockedLocalCSR(indptr, indices, values, PETSc.InsertMode.ADD_VALUES)
 
     def _setup_bending(self) -> None:
         """The tow bending term, and a Jacobian whose pattern also holds its stencils.
@@ -426,6 +459,9 @@ class TrussProblem:
         self.state.limit_geometric_force(np.inf if local else self._geometric_limit_N)
         A = self._A
         with self._timed("jacobian"):
+            if self._couplings and self._coupling_versions != [
+                    t.pattern_version for t in self._couplings]:
+                self._setup_couplings()  # the pairs followed the plies: a larger pattern
             A.zeroEntries()
             fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self.constraints.bcs)
             A.assemble()
@@ -437,6 +473,8 @@ class TrussProblem:
                                            np.arange(n, dtype=PETSc.IntType),
                                            self._nodal_K[:n].ravel(),
                                            PETSc.InsertMode.ADD_VALUES)
+            if self._couplings:
+                self._add_couplings(A)
             A.assemble()
 
     # -- stepping -----------------------------------------------------------------------

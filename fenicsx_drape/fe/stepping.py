@@ -142,7 +142,7 @@ def save_state(problem: Steppable, folder: str | os.PathLike | None = None) -> P
     """Save the node positions of the last converged state as ``state.npz`` (rank 0 writes).
 
     The file holds ``time_s`` and ``X``, ``x``: the reference and current positions (mm) of
-    every node of the sheet, shaped (nx + 1, ny + 1, 3) by grid index.
+    every node of the sheet, shaped (nx + 1, ny + 1, 3) by grid index ((n, 3) for a stack).
     """
     from fenicsx_drape.fe.output import gather_nodes
     from fenicsx_drape.provenance import atomic_write_bytes

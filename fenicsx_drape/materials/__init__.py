@@ -5,7 +5,8 @@ Public API for users writing their own law (see ``demos/user_laws/``)::
     from fenicsx_drape.materials import MaterialLaw, parameter, condition, effect, register_law
 
 The built-in laws are registered as ``"paper_tow"`` (eqs. 2-4), ``"paper_shear"``
-(eqs. 5-9) and ``"paper_friction"`` (eq. 1).
+(eqs. 5-9) and ``"paper_friction"`` (eq. 1). :class:`InterplyLaw` is the friction between
+the plies of a stack (tack, Coulomb, viscous film).
 """
 
 from fenicsx_drape.materials.base import (
@@ -21,6 +22,7 @@ from fenicsx_drape.materials.base import (
     registered_laws,
 )
 from fenicsx_drape.materials.friction import FrictionLaw
+from fenicsx_drape.materials.interply import InterplyLaw
 from fenicsx_drape.materials.shear import ShearLaw
 from fenicsx_drape.materials.tow import TowLaw
 
@@ -32,6 +34,7 @@ __all__ = [
     "BUILT_IN_LAWS",
     "ROLES",
     "FrictionLaw",
+    "InterplyLaw",
     "MaterialLaw",
     "ShearLaw",
     "TowLaw",

@@ -33,7 +33,7 @@ from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements import lab
 from fenicsx_drape.provenance import atomic_write_text
 
-KINDS = ("tensile", "bias_extension", "picture_frame", "forming")
+KINDS = ("tensile", "bias_extension", "picture_frame", "forming", "interply_friction")
 
 # Required and optional CSV columns per test kind.
 COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
@@ -44,6 +44,8 @@ COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
         ("i", "j", "x0_mm", "y0_mm", "x_mm", "y_mm", "z_mm"),
         ("position_sd_mm", "shear_deg", "wrinkle_strain"),
     ),
+    # Spec version 4: one ply pulled between two (or over one) under a normal pressure.
+    "interply_friction": (("time_s", "displacement_mm", "force_N"), ("force_sd_N", "pressure_kPa")),
 }
 
 # A declared noise for coupon tables without a force_sd_N column (an addition to the spec,
@@ -62,12 +64,15 @@ SETUP_KEYS: dict[str, tuple[str, ...]] = {
         "punch_radius_mm", "fillet_radius_mm", "holder_opening_mm", "sheet_mm", "travel_mm",
         "duration_s", "holder_force_N", "grid_mm",
     ),
+    "interply_friction": ("contact_length_mm", "contact_width_mm", "interfaces", "pressure_kPa",
+                          "speed_mm_per_min", *NOISE_KEYS),
 }
 REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
     "tensile": ("gauge_length_mm",),
     "bias_extension": ("length_mm", "width_mm"),
     "picture_frame": ("frame_side_mm", "fabric_side_mm"),
     "forming": ("geometry", "sheet_mm", "travel_mm", "duration_s", "holder_force_N"),
+    "interply_friction": ("contact_length_mm", "contact_width_mm", "interfaces", "pressure_kPa"),
 }
 # A forming test that names its case file needs nothing else: the case says the rest, and the
 # test's own keys override it. ``grid_mm`` describes the drawn grid (not a case value).
@@ -96,11 +101,13 @@ UNITS: dict[str, str] = {
     "grid": "mm", "punch_radius": "mm", "fillet_radius": "mm", "holder_opening": "mm",
     "holder_force": "N", "position_sd": "mm", "x": "mm", "y": "mm", "z": "mm", "x0": "mm",
     "y0": "mm", "shear": "deg", "temperature": "C", "speed": "mm_per_min",
-    "frame_side": "mm", "fabric_side": "mm",
+    "frame_side": "mm", "fabric_side": "mm", "contact_length": "mm", "contact_width": "mm",
+    "pressure": "kPa",
 }
 _FOREIGN_UNITS = (
     "m", "cm", "um", "in", "inch", "ft", "kN", "mN", "lbf", "N", "mm", "s", "ms", "min", "h",
-    "K", "F", "C", "deg", "rad", "mm_per_s", "m_per_s", "mm_per_min", "in_per_min",
+    "K", "F", "C", "deg", "rad", "mm_per_s", "m_per_s", "mm_per_min", "in_per_min", "Pa",
+    "kPa", "MPa", "bar", "psi",
 )
 _UNIT_NAME = re.compile(
     "^({})_({})$".format(*("|".join(sorted(names, key=len, reverse=True))
@@ -137,7 +144,7 @@ class Test:
     __test__ = False  # not a pytest test class
 
     id: str  # unique in the bundle
-    kind: str  # "tensile" | "bias_extension" | "picture_frame" | "forming"
+    kind: str  # "tensile" | "bias_extension" | "picture_frame" | "forming" | "interply_friction"
     file: str  # CSV table, relative to the bundle folder
     columns: Mapping[str, np.ndarray]  # the table by column name (all read-only float arrays)
     line: int = 0  # line of the [[test]] header in bundle.toml (for messages)
@@ -166,6 +173,9 @@ class Test:
     # forming (version 3): the lab measurement this test holds, a
     # :class:`~fenicsx_drape.measurements.lab.LabData` (None: a test as in version 2)
     lab: Any = None
+    # interply_friction (version 4): contact_length_mm, contact_width_mm, interfaces,
+    # pressure_kPa and, when given, ply_angles_deg
+    interply: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
     def column(self, name: str) -> np.ndarray | None:
         """A column of the table, or None when the table does not have it."""
@@ -478,6 +488,19 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
                      f"{label}: geometry must be a string (e.g. \"hemisphere\")")
     known = {"id", "kind", "file", "conditions"} | ({"geometry", "case", *lab.LAB_KEYS}
                                                     if kind == "forming" else set())
+    angles = raw.get("ply_angles_deg")
+    if kind == "interply_friction":
+        known.add("ply_angles_deg")
+        if angles is not None and not (isinstance(angles, list) and angles and all(
+                _is_number(a) and math.isfinite(a) for a in angles)):
+            problems.add(fname, where("test", index, "ply_angles_deg"),
+                         f"{label}: ply_angles_deg = {angles!r} must be a list of angles "
+                         "(degrees)")
+        n = raw.get("interfaces")
+        if n is not None and n not in (1, 2):
+            problems.add(fname, where("test", index, "interfaces"),
+                         f"{label}: interfaces = {n!r} must be 2 (pull-out, between two plies) "
+                         "or 1 (pull-through, over one)")
     case_file, case_path, used, forming_case = None, None, {}, None
     if names_case:
         for key in PAIR_KEYS:
@@ -593,6 +616,15 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
         return None
     case_keys = ({k: v for k, v in raw.items() if _offered(k, v, known)} if names_case
                  else {})
+    interply = {}
+    if kind == "interply_friction":
+        interply = {k: setup[k] for k in ("contact_length_mm", "contact_width_mm", "interfaces",
+                                          "pressure_kPa") if k in setup}
+        if angles is not None:
+            interply["ply_angles_deg"] = [float(a) for a in angles]
+        if "pressure_kPa" in columns and (columns["pressure_kPa"] < 0).any():
+            problems.add(fname, line, f"{label}: a negative pressure_kPa in {file}")
+            return None
     test = Test(
         id=test_id, kind=kind, file=file, columns=columns, line=line,
         gauge_length_mm=setup.get("gauge_length_mm"), length_mm=setup.get("length_mm"),
@@ -601,6 +633,7 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
         speed_mm_per_min=speed, geometry=geometry if kind == "forming" else None,
         forming=forming, conditions=conditions, notes=text_notes, case=case_file,
         case_path=case_path, case_keys=case_keys, forming_case=forming_case,
+        interply=interply,
     )
     own = {k: setup[k] for k in NOISE_KEYS if k in setup}
     return declared_noise(test, own, f"{fname} [[test]] {test_id!r}") if own else test

@@ -34,6 +34,8 @@ from fenicsx_drape.fe.grid import TrussGrid, outline_grid, polygon_area
 from fenicsx_drape.forming.terms.holder import FORCE_SHARES
 from fenicsx_drape.forming.tools.motion import RigidMotion
 from fenicsx_drape.forming.tools.surfaces import sample_curve_loop
+from fenicsx_drape.materials.base import fields_of
+from fenicsx_drape.materials.interply import InterplyLaw
 
 ROLES = ("punch", "die", "holder", "surface")
 BUILTIN = "builtin:hemisphere"
@@ -166,6 +168,19 @@ class BlankSpec:
 
 
 @dataclasses.dataclass(frozen=True)
+class PlySpec:
+    """One ply of a stack (``[[ply]]``), in order from the punch side."""
+
+    angle_deg: float  # its warp's angle within the stack (the blank's ply_angle_deg turns all)
+    thickness_mm: float  # its thickness (mm): adjacent mid-planes lie (t_k + t_k+1)/2 apart
+    model: Path | None = None  # its own MODEL.toml (absolute); None: the case's model
+
+
+INTERPLY_KEYS = (*(f.name for f in fields_of(InterplyLaw, "parameter")), "interply_friction")
+"""The keys of ``[interply]``: the inter-ply law's parameters and its effect switch."""
+
+
+@dataclasses.dataclass(frozen=True)
 class HolderSpec:
     """The blank holder: the tool whose surface clamps, the force and eq. 1's reading."""
 
@@ -193,11 +208,46 @@ class FormingCase:
     # Where the case came from when that is data (a measurement bundle): its Python geometry
     # and its model's plugins then run only with --trust (fenicsx_drape.trust).
     origin: str | None = None
+    # A stack of two or more plies ([[ply]], from the punch side); () is one ply, the blank's.
+    plies: tuple[PlySpec, ...] = ()
+    # The inter-ply law's values ([interply]; the rest take InterplyLaw's defaults).
+    interply: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         problems = _case_problems(self)
         if problems:
             raise CaseError([f"forming case {self.name!r}: {p}" for p in problems])
+
+    @property
+    def stack(self) -> bool:
+        """Whether the blank is a stack of two or more plies."""
+        return len(self.plies) > 1
+
+    def ply_blanks(self) -> list[BlankSpec]:
+        """The blank of each ply: its net turned by the blank's angle plus its own.
+
+        The plies share one cell size: a rectangle's tow-aligned ply fits whole cells to its
+        sides (:meth:`BlankSpec.grid`), and the turned plies take that Δ too.
+        """
+        if not self.plies:
+            return [self.blank]
+        blanks = [dataclasses.replace(self.blank,
+                                      ply_angle_deg=self.blank.ply_angle_deg + p.angle_deg)
+                  for p in self.plies]
+        fitted = set()
+        for b in blanks:
+            try:
+                fitted.add(b.grid().cell_mm)
+            except DrapeInputError:  # reported with the ply by whoever builds its grid
+                pass
+        fitted -= {self.blank.cell_mm}
+        if fitted:
+            blanks = [dataclasses.replace(b, cell_mm=min(fitted)) for b in blanks]
+        return blanks
+
+    def interply_law(self) -> InterplyLaw:
+        """The inter-ply law of the stack (``[interply]`` over InterplyLaw's defaults)."""
+        return InterplyLaw(**dict(self.interply))
 
     def tool(self, name: str) -> ToolSpec:
         """The tool of this name."""
@@ -298,6 +348,19 @@ def _case_problems(case: FormingCase) -> list[str]:
         out.append(f"blank: symmetry = {list(b.symmetry)}: planes are \"x\" and \"y\"")
     if not isinstance(b.hold_origin, bool):
         out.append(f"blank: hold_origin = {b.hold_origin!r} must be true or false")
+    for k, ply in enumerate(case.plies, 1):
+        if not _finite(ply.angle_deg):
+            out.append(f"ply {k}: angle_deg = {ply.angle_deg!r} must be a number")
+        if not (_finite(ply.thickness_mm) and ply.thickness_mm > 0):
+            out.append(f"ply {k}: thickness_mm = {ply.thickness_mm!r} must be > 0")
+    unknown = [k for k, _ in case.interply if k not in INTERPLY_KEYS]
+    if unknown:
+        out.append(f"interply: unknown key(s) {unknown} (known: {', '.join(INTERPLY_KEYS)})")
+    else:
+        try:
+            case.interply_law()
+        except DrapeInputError as err:
+            out.append(f"interply: {err}")
     return out
 
 
@@ -456,7 +519,7 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
         raise CaseError([f"{fname}: not valid TOML ({err})"]) from err
     r = _Reader(fname)
     folder = path.resolve().parent
-    r.unknown(raw, ("case", "blank", "holder", "tool"), "")
+    r.unknown(raw, ("case", "blank", "holder", "tool", "ply", "interply"), "")
 
     c = r.table(raw, "case", "[case]", required=True) or {}
     r.unknown(c, ("name", "description", "duration_s", "model", "step_mm", "penalty_factor",
@@ -475,6 +538,26 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
 
     blank = _read_blank(r, raw, folder)
     tools = _read_tools(r, raw, folder, duration)
+    plies = _read_plies(r, raw, folder)
+    interply = ()
+    if (ip := r.table(raw, "interply", "[interply]")) is not None:
+        r.unknown(ip, INTERPLY_KEYS, "[interply]")
+        for key, value in ip.items():
+            if key == "interply_friction":
+                if not isinstance(value, bool):
+                    r.add("[interply] 'interply_friction'", f"{value!r} must be true or false")
+            elif key in INTERPLY_KEYS:
+                r.number(ip, key, "[interply]", nonnegative=True)
+        interply = tuple(ip.items())
+        if not r.problems:
+            try:
+                InterplyLaw(**ip)
+            except DrapeInputError as err:
+                r.add("[interply]", str(err))
+    if len(plies) == 1:  # one ply is today's case: its angle turns the blank's net
+        blank = dataclasses.replace(blank, ply_angle_deg=blank.ply_angle_deg + plies[0].angle_deg)
+        model = plies[0].model or model
+        plies = []
     holder = None
     if (h := r.table(raw, "holder", "[holder]")) is not None:
         r.unknown(h, ("tool", "force_N", "mu", "force_share"), "[holder]")
@@ -495,7 +578,8 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
     try:
         case = FormingCase(name=name, duration_s=duration, blank=blank, tools=tuple(tools),
                            holder=holder, description=description, model=model, step_mm=step,
-                           penalty_factor=penalty, stabilisation_N_per_mm=stab, path=path)
+                           penalty_factor=penalty, stabilisation_N_per_mm=stab, path=path,
+                           plies=tuple(plies), interply=interply)
     except CaseError as err:
         raise CaseError([f"{fname}: {p.split(': ', 1)[1]}" for p in err.problems]) from None
     if any(v is not None for v in overrides.values()):
@@ -503,10 +587,12 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
         # check of the blank, in with_overrides.
         case = with_overrides(case, **overrides)
     else:
-        try:
-            case.blank.grid()
-        except DrapeInputError as err:
-            raise CaseError([f"{fname}: [blank]: {err}"]) from None
+        for k, blank_k in enumerate(case.ply_blanks(), 1):
+            try:
+                blank_k.grid()
+            except DrapeInputError as err:
+                at = f"[[ply]] {k}" if case.plies else "[blank]"
+                raise CaseError([f"{fname}: {at}: {err}"]) from None
     try:
         check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
         check_run_size(case)  # and the run's length
@@ -577,6 +663,27 @@ def _read_blank(r: _Reader, raw: Mapping, folder: Path) -> BlankSpec:
     return BlankSpec(outline=outline, cell_mm=cell, size_mm=size, centre_mm=centre,
                      points_mm=points, path=path, ply_angle_deg=angle, origin_mm=origin,
                      symmetry=symmetry, hold_origin=hold_origin)
+
+
+def _read_plies(r: _Reader, raw: Mapping, folder: Path) -> list[PlySpec]:
+    """The ``[[ply]]`` tables, in order from the punch side (none: the blank is one ply)."""
+    items = raw.get("ply", [])
+    if not isinstance(items, list) or not all(isinstance(p, dict) for p in items):
+        r.add("", "'ply' must be an array of tables ([[ply]])")
+        return []
+    plies = []
+    for k, p in enumerate(items, 1):
+        at = f"[[ply]] {k}"
+        r.unknown(p, ("angle_deg", "thickness_mm", "model"), at)
+        angle = r.number(p, "angle_deg", at, required=True, default=0.0)
+        thickness = r.number(p, "thickness_mm", at, positive=True, required=True, default=0.3)
+        model = None
+        if (m := r.string(p, "model", at)) is not None:
+            model = (folder / m).resolve()
+            if not model.is_file():
+                r.add(f"{at} 'model'", f"no such file {m!r}")
+        plies.append(PlySpec(angle, thickness, model))
+    return plies
 
 
 def _read_tools(r: _Reader, raw: Mapping, folder: Path, duration: float) -> list[ToolSpec]:
@@ -898,7 +1005,8 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     try:
         new_case = dataclasses.replace(case, blank=blank, tools=tuple(tools), holder=holder,
                                        **changes)
-        new_case.blank.grid()
+        for blank_k in new_case.ply_blanks():
+            blank_k.grid()
         check_tool_sizes(new_case, warn=False)
         check_run_size(new_case)
         for t in new_case.tools:
@@ -1317,6 +1425,12 @@ def case_dict(case: FormingCase, relative_to: str | os.PathLike | None = None) -
                                    centre_mm=list(m.centre_mm))
         tools.append(d)
     out["tool"] = tools
+    if case.plies:
+        out["ply"] = [{"angle_deg": p.angle_deg, "thickness_mm": p.thickness_mm,
+                       **({"model": rel(p.model, str(p.model))} if p.model else {})}
+                      for p in case.plies]
+    if case.interply:
+        out["interply"] = dict(case.interply)
     return out
 
 
@@ -1341,7 +1455,7 @@ def case_toml(case: FormingCase, relative_to: str | os.PathLike | None = None,
     """The text of a case file for ``case`` (the format :func:`load_case` reads)."""
     d = case_dict(case, relative_to)
     lines = [f"# {line}" for line in comment.splitlines()]
-    for table in ("case", "blank", "holder"):
+    for table in ("case", "blank", "holder", "interply"):
         if table in d:
             lines += ["", f"[{table}]"] if lines else [f"[{table}]"]
             lines += [f"{k} = {_toml(v)}" for k, v in d[table].items()]
@@ -1351,6 +1465,8 @@ def case_toml(case: FormingCase, relative_to: str | os.PathLike | None = None,
         if "motion" in t:
             lines.append("[tool.motion]")
             lines += [f"{k} = {_toml(v)}" for k, v in t["motion"].items()]
+    for p in d.get("ply", []):
+        lines += ["", "[[ply]]"] + [f"{k} = {_toml(v)}" for k, v in p.items()]
     return "\n".join(lines) + "\n"
 
 
@@ -1401,6 +1517,8 @@ def write_case(case: FormingCase, folder: str | os.PathLike, *, name: str = "cas
     blank = case.blank
     if blank.path is not None:
         blank = dataclasses.replace(blank, path=copy(blank.path))
-    local = dataclasses.replace(case, tools=tools, blank=blank, model=None, path=None)
+    plies = tuple(dataclasses.replace(p, model=None) for p in case.plies)
+    local = dataclasses.replace(case, tools=tools, blank=blank, model=None, path=None,
+                                plies=plies)
     text = case_toml(local, relative_to=folder, comment=comment)
     return atomic_write_text(folder / name, text)

@@ -27,6 +27,12 @@
   force stands out of both neighbours', ``tool_force_outliers``, each with a note in
   ``tool_force_notes``; :func:`write_tool_forces`).
 
+A stack of plies (``[[ply]]``): the numbers, pictures and bundle above are of the ply away
+from the punch (the one a camera sees; ``measured_ply``); ``summary.json`` adds ``plies``
+(each ply's shear, wrinkling and draw-in) and ``interply`` (each interface's pressure and
+sliding), and the folder ``shear_ply<k>.png``, ``wrinkling_ply<k>.png`` and ``interply.png``
+(where the plies slid, and their pressure); ``fields.xdmf`` has every ply.
+
 The paper's hemisphere (``drape form hemisphere``, ``meshes/hemisphere/case.toml``: tools that
 are all builtin) is a case like any other; its folder also holds ``paths.png``: shear along
 the diagonal path and wrinkling along the normal path (the paper's Figs. 10-11), with the
@@ -44,7 +50,12 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape.forming.case.format import FormingCase, case_dict, write_case
-from fenicsx_drape.forming.running.plots import plot_paths, plot_shear, plot_wrinkling
+from fenicsx_drape.forming.running.plots import (
+    plot_interply,
+    plot_paths,
+    plot_shear,
+    plot_wrinkling,
+)
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.running.run import FormingRun, run_case
 from fenicsx_drape.measurements.bundle import Bundle, Test, write_bundle
@@ -147,8 +158,38 @@ def case_summary(run: FormingRun) -> dict:
     if case.holder is not None:
         out["holder_force_share"] = case.holder.force_share
         out["holder_nodes"] = float(run.holder.n_s)
+    if run.plies:
+        out["measured_ply"] = len(run.plies)  # the numbers above: the ply away from the punch
+        out["plies"] = [ply_summary(run, k) for k in range(len(run.plies))]
+        out["interply"] = [{k: v for k, v in face.items()
+                            if k not in ("xy", "sliding_mm", "pressure_MPa")}
+                           for face in interply_maps(run)]
     out["case"] = case_dict(case, case.folder)
     return out
+
+
+def ply_summary(run: FormingRun, k: int) -> dict:
+    """Shear, wrinkling and draw-in of ply ``k`` (0: ply 1, on the punch side) of a stack."""
+    from fenicsx_drape.forming.running.run import draw_in, edge_displacement
+
+    g, spec = run.plies[k], run.case.plies[k]
+    warp, weft = g.tow_strains()
+    out = {"ply": k + 1, "angle_deg": run.case.ply_blanks()[k].ply_angle_deg,
+           "thickness_mm": spec.thickness_mm,
+           "max_shear_deg": float(np.nanmax(np.abs(g.shear_deg()))),
+           "total_wrinkling_strain": g.total_wrinkling_strain(),
+           "min_wrinkling_strain": float(min(np.nanmin(warp), np.nanmin(weft), 0.0)),
+           "edge_displacement_mm": edge_displacement(g)}
+    if run.case.blank.outline == "rectangle":
+        out["draw_in_mm"] = draw_in(g)
+    return out
+
+
+def interply_maps(run: FormingRun) -> list[dict]:
+    """Each interface's numbers and maps (:meth:`~fenicsx_drape.fe.plies.PlyContact.summary`)."""
+    if run.interply is None:
+        return []
+    return run.interply.summary(run.problem.positions())
 
 
 def case_bundle(run: FormingRun, friction: float, grid_mm: float = 10.0,
@@ -244,6 +285,16 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
                 plot_shear(run.grid, out / "shear.png",
                            f"{case.name}: shear angle (max {result['max_shear_deg']:.1f}°)")
                 plot_wrinkling(run.grid, out / "wrinkling.png")
+                for k, (g, ply) in enumerate(zip(run.plies, result.get("plies", [])), 1):
+                    plot_shear(g, out / f"shear_ply{k}.png",
+                               f"{case.name}: ply {k} at {ply['angle_deg']:g}°, shear angle "
+                               f"(max {ply['max_shear_deg']:.1f}°)")
+                    plot_wrinkling(g, out / f"wrinkling_ply{k}.png")
+                if run.plies:
+                    faces = [dict(face, name=face["interface"]) for face in interply_maps(run)]
+                    plot_interply(faces, out / "interply.png",
+                                  f"{case.name}: where the plies slid, and their pressure "
+                                  "(the modelled part)")
                 if is_paper_hemisphere(case) and net is not None:
                     plot_paths({"FE truss": run.grid, "kinematic (PjN)": net},
                                out / "paths.png")

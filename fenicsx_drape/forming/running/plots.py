@@ -165,3 +165,28 @@ def plot_tool_forces(curves: Mapping[str, np.ndarray], path: str | os.PathLike,
     ax.set_title(title, fontsize=9)
     ax.legend(fontsize=8)
     return save_figure(fig, path)
+
+
+def plot_interply(interfaces: list[dict], path: str | os.PathLike, title: str = "") -> Path:
+    """Top views of each interface of a stack: where the plies slid, and the pressure.
+
+    ``interfaces`` holds, per interface, ``name`` and, at its pairs (the modelled part),
+    ``xy`` (n, 2) formed positions (mm), ``sliding_mm`` and ``pressure_MPa``.
+    """
+    import matplotlib.pyplot as plt
+
+    n = len(interfaces)
+    fig, axes = plt.subplots(2, n, figsize=(4.6 * n, 8.4), squeeze=False)
+    for k, face in enumerate(interfaces):
+        for row, (key, label, cmap) in enumerate((("sliding_mm", "sliding slip, mm", "magma"),
+                                                  ("pressure_MPa", "pressure, MPa", "viridis"))):
+            ax = axes[row, k]
+            v = np.asarray(face[key])
+            dots = ax.scatter(face["xy"][:, 0], face["xy"][:, 1], c=v, s=14, cmap=cmap,
+                              vmin=0.0, vmax=max(float(v.max(initial=0.0)), 1e-9))
+            ax.set(aspect="equal", xlabel="x, mm", ylabel="y, mm",
+                   title=f"{face['name']}: {label} (max {v.max(initial=0.0):.3g})")
+            fig.colorbar(dots, ax=ax, shrink=0.8)
+    if title:
+        fig.suptitle(title)
+    return save_figure(fig, path)

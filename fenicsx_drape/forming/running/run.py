@@ -48,7 +48,7 @@ from fenicsx_drape.forming.case.format import (
 from fenicsx_drape.forming.running.geometry import geometry_problems
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.terms.contact import PenaltyContact
-from fenicsx_drape.forming.terms.holder import BlankHolder
+from fenicsx_drape.forming.terms.holder import BlankHolder, StackHolder
 from fenicsx_drape.forming.terms.stabilisation import ExtrapolationSpring
 
 CONTACT_ROLES = ("punch", "die", "surface")
@@ -84,6 +84,10 @@ class FormingRun:
     # Per converged step: time_s, travel_mm and the force (N) of every tool along its motion
     # on the whole part (:func:`record_tool_forces`).
     tool_forces: list[dict[str, float]] = dataclasses.field(default_factory=list)
+    # A stack: every ply's formed sheet (ply 1 on the punch side; ``grid`` is the last, the
+    # side a camera sees) and the inter-ply contact (fe.plies.PlyContact).
+    plies: list[FormedGrid] = dataclasses.field(default_factory=list)
+    interply: object | None = None
 
     @property
     def travel_mm(self) -> float:
@@ -98,12 +102,20 @@ def contact_stiffness(model, options, factor: float = 1.0) -> float:
 
 
 def case_model(case: FormingCase):
-    """The case's material model: its MODEL.toml, else the paper's (Table 2)."""
+    """The case's material model: its MODEL.toml (or its plies'), else the paper's (Table 2)."""
     from fenicsx_drape.model import default_model, load_model
 
-    if case.model is None:
+    path = case.model
+    if case.plies:  # a ply's own model; one model for the whole stack for now
+        paths = {p.model or case.model for p in case.plies}
+        if len(paths) > 1:
+            raise CaseError([f"case {case.name!r}: the plies name different models "
+                             f"({', '.join(sorted(str(p) for p in paths))}); a stack takes "
+                             "one model for all its plies for now"])
+        path = paths.pop()
+    if path is None:
         return default_model()
-    return load_model(case.model, origin=case.origin)
+    return load_model(path, origin=case.origin)
 
 
 def tool_friction(model) -> float:
@@ -111,19 +123,20 @@ def tool_friction(model) -> float:
     return float(model.parameters.get("mu_tool", 0.0)) if "tool_friction" in model.effects else 0.0
 
 
-def forming_options(model, *, flat_holder: bool = True, **changes):
+def forming_options(model, *, flat_holder: bool = True, stack: bool = False, **changes):
     """The forming cases' solver options, with ``changes`` (SolverOptions fields).
 
     Residual tolerances of 1e-6 N (2-norm) and :data:`NODE_ATOL_N` per node. The Jacobian is
     symmetric unless tool friction, the shear-tension coupling or a curved clamping surface
     (``flat_holder`` False) acts: it is then factorised with MUMPS's symmetric indefinite
-    LDLᵀ, about 20 % less time than LU. ``petsc_options`` given in ``changes`` are added to
-    that choice (e.g. :data:`~fenicsx_drape.fe.solver.SINGLE_PRECISION_FACTOR`).
+    LDLᵀ, about 20 % less time than LU; a stack of plies (``stack``: inter-ply friction
+    depends on the pressure) is never symmetric. ``petsc_options`` given in ``changes`` are
+    added to that choice (e.g. :data:`~fenicsx_drape.fe.solver.SINGLE_PRECISION_FACTOR`).
     """
     from fenicsx_drape.fe.solver import SolverOptions
 
     symmetric = (tool_friction(model) == 0.0 and "shear_tension_coupling" not in model.effects
-                 and flat_holder)
+                 and flat_holder and not stack)
     petsc = {"pc_type": "cholesky"} if symmetric else {}
     petsc.update(changes.pop("petsc_options", {}))
     return SolverOptions(snes_atol=1e-6, node_atol_N=NODE_ATOL_N, petsc_options=petsc, **changes)
@@ -181,7 +194,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
     μ_t = tool_friction(model)
     if options is None:
         flat = holder_surface is None or bool(getattr(holder_surface, "flat", False))
-        options = forming_options(model, flat_holder=flat)
+        options = forming_options(model, flat_holder=flat, stack=case.stack)
     comm = comm or MPI.COMM_WORLD
     start = time.perf_counter()
     planes = case.planes
@@ -190,16 +203,35 @@ def run_case(case: FormingCase, model=None, options=None, *,
     slip = float(model.parameters.get("tool_slip_mm", 0.1))
     contact = [PenaltyContact(built[t.name], k, friction=μ_t, slip_regularisation_mm=slip)
                for t in case.tools if t.role in CONTACT_ROLES]
+    plies = interply = None
+    if case.stack:  # every ply its own net, laid on ply 1 (z = 0) from the punch side
+        from fenicsx_drape.fe.plies import PlyContact, stack_plies, stack_sheet
+
+        grids = [b.grid() for b in case.ply_blanks()]
+        plies = stack_plies(grids, [p.thickness_mm for p in case.plies])
+        interply = PlyContact(plies, case.interply_law(), k)
     holder = None
     if case.holder is not None:
         h = case.holder
-        holder = BlankHolder(model.laws()["friction"], surface=holder_surface,
-                             force_N=h.force_N, force_share=h.force_share,
-                             clamp_stiffness_N_per_mm=k,
-                             symmetry_axes=tuple({"x": 0, "y": 1}[p] for p in planes))
-    grid = case.blank.grid()  # the same on every rank (plain NumPy)
-    sheet = grid_to_sheet(grid, comm)
+        axes = tuple({"x": 0, "y": 1}[p] for p in planes)
+        if plies is None:
+            holder = BlankHolder(model.laws()["friction"], surface=holder_surface,
+                                 force_N=h.force_N, force_share=h.force_share,
+                                 clamp_stiffness_N_per_mm=k, symmetry_axes=axes)
+        else:
+            holder = StackHolder(model.laws()["friction"], heights_mm=[p.z_mm for p in plies],
+                                 surface=holder_surface, force_N=h.force_N,
+                                 force_share=h.force_share, clamp_stiffness_N_per_mm=k,
+                                 symmetry_axes=axes)
+    if plies is None:
+        grid = case.blank.grid()  # the same on every rank (plain NumPy)
+        sheet = grid_to_sheet(grid, comm)
+    else:
+        grid = plies[0].grid
+        sheet = stack_sheet(plies, comm)
     terms = [*contact, *([holder] if holder is not None else [])]
+    if interply is not None:
+        terms.append(interply)
     if case.stabilisation_N_per_mm:
         terms.append(ExtrapolationSpring(case.stabilisation_N_per_mm, sheet_normal(contact)))
     problem = TrussProblem(sheet, model, terms, options)
@@ -209,7 +241,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
         problem.fix(f"symmetry_{planes[0]}", ({"x": 0, "y": 1}[planes[0]],))
     if case.blank.hold_origin:
         origin = np.hypot(*(problem.X[:, :2] - case.blank.origin_mm).T) <= 1e-6 * grid.cell_mm
-        if comm.allreduce(int(origin[: problem.num_owned].sum())) != 1:
+        if comm.allreduce(int(origin[: problem.num_owned].sum())) != len(plies or [0]):
             raise CaseError([f"case {case.name!r}: hold_origin: no node of the net at "
                              f"origin_mm = {list(case.blank.origin_mm)} (inside the blank)"])
         problem.fix(origin, (0, 1))
@@ -257,9 +289,18 @@ def run_case(case: FormingCase, model=None, options=None, *,
         warnings.warn(f"case {case.name!r}: no node of the blank touched {names} in "
                       f"{case.travel_mm(problem.t):g} mm of travel; check the tools' start "
                       "positions and motions", stacklevel=2)
-    res = problem.results()
     both = planes == ("x", "y")
-    formed = FormedGrid(res.X, res.x, both, None if both or not planes else planes)
+    symmetry = None if both or not planes else planes
+    if plies is None:
+        res = problem.results()
+        formed = FormedGrid(res.X, res.x, both, symmetry)
+        formed_plies = []
+    else:
+        from fenicsx_drape.fe.output import ply_results
+
+        formed_plies = [FormedGrid(r.X, r.x, both, symmetry)
+                        for r in (ply_results(problem, j) for j in range(len(plies)))]
+        formed = formed_plies[-1]
     x = problem.positions()[: problem.num_owned]
     t = problem.t
     depth = max((float(c.penetration(x, t).max(initial=0.0)) for c in contact), default=0.0)
@@ -270,7 +311,8 @@ def run_case(case: FormingCase, model=None, options=None, *,
         max_penetration_mm=comm.allreduce(depth, op=MPI.MAX),
         draw_in_mm=draw_in(formed) if case.blank.outline == "rectangle" else None,
         edge_displacement_mm=edge_displacement(formed), contact=contact, holder=holder,
-        tools=built, stopped=stopped, tool_forces=forces_of_tools.rows)
+        tools=built, stopped=stopped, tool_forces=forces_of_tools.rows, plies=formed_plies,
+        interply=interply)
 
 
 def tool_direction(case: FormingCase, name: str) -> np.ndarray:

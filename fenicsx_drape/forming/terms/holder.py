@@ -56,7 +56,7 @@ from fenicsx_drape.errors import ParameterError
 from fenicsx_drape.forming.tools.shapes import Gap
 from fenicsx_drape.materials.base import MaterialLaw
 
-__all__ = ["FORCE_SHARES", "BlankHolder", "FlatHolder", "part_force_N"]
+__all__ = ["FORCE_SHARES", "BlankHolder", "FlatHolder", "StackHolder", "part_force_N"]
 
 FORCE_SHARES = ("symmetric_part", "model")
 
@@ -259,3 +259,91 @@ class BlankHolder:
     def revert(self) -> None:
         """Forget the trial sliding of a step that is cut back."""
         self._trial = None
+
+
+class _PlySurface:
+    """A clamping surface lifted to one ply's height that covers only that ply's nodes.
+
+    The signed distance of the surface offset by ``z_mm`` along its normal is φ − z_mm; the
+    ply's nodes are told by their height in the flat stack (the first call, from ``bind``).
+    """
+
+    def __init__(self, surface, z_mm: float, k: int, heights: np.ndarray) -> None:
+        self.surface, self.z_mm, self.k, self.heights = surface, float(z_mm), k, heights
+        self.name = getattr(surface, "name", "holder")
+        self.flat = bool(getattr(surface, "flat", False))
+        self._mine: np.ndarray | None = None
+
+    def gap(self, x: np.ndarray, t: float) -> Gap:
+        g = self.surface.gap(x, t)
+        return Gap(g.phi - self.z_mm, g.normal, g.hessian)
+
+    def covers(self, x: np.ndarray, t: float) -> np.ndarray:
+        if self._mine is None:  # the reference positions of every local node
+            self._mine = np.argmin(np.abs(x[:, 2:3] - self.heights[None, :]), axis=1) == self.k
+        return np.asarray(self.surface.covers(x, t), dtype=bool) & self._mine
+
+    def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
+        move = getattr(self.surface, "displacement", None)
+        return np.zeros((len(x), 3)) if move is None else move(x, t0, t1)
+
+
+class StackHolder:
+    """The blank holder on a stack of plies (a :class:`NodalTerm`).
+
+    Every ply under the holder is clamped at its own height in the flat stack (a
+    :class:`BlankHolder` per ply on the clamping surface lifted to the ply's mid-plane);
+    the eq. 1 friction bars act on the two outer plies, the ones the holder's plates touch,
+    each with half the holding force (so the stack's holder friction is μ F, as one ply's).
+    The inner plies are held in place by the inter-ply friction
+    (:mod:`fenicsx_drape.fe.plies`).
+
+    Args:
+        law: the friction bars' law (see :class:`BlankHolder`).
+        heights_mm: the plies' mid-plane heights, ply 1 (punch side) first.
+        force_N, force_share, clamp_stiffness_N_per_mm, surface, symmetry_axes: as
+            :class:`BlankHolder`'s.
+    """
+
+    def __init__(self, law: MaterialLaw, *, heights_mm, force_N: float, force_share: str,
+                 clamp_stiffness_N_per_mm: float, surface,
+                 symmetry_axes: tuple[int, ...] = ()) -> None:
+        z = np.asarray(heights_mm, dtype=float)
+        if len(z) < 2:
+            raise ParameterError("StackHolder: a stack has two plies or more")
+        self.surface = surface
+        self.holders = [
+            BlankHolder(law, force_N=force_N / 2 if k in (0, len(z) - 1) else 0.0,
+                        force_share=force_share, clamp_stiffness_N_per_mm=clamp_stiffness_N_per_mm,
+                        surface=_PlySurface(surface, zk, k, z), symmetry_axes=symmetry_axes)
+            for k, zk in enumerate(z)]
+        self.flat = all(h.flat for h in self.holders)
+
+    @property
+    def n_s(self) -> float:
+        """Nodes under the holder on the punch-side ply (eq. 1's n_s of one outer ply)."""
+        return self.holders[0].n_s
+
+    def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
+        """Bind every ply's holder (see :meth:`BlankHolder.bind`)."""
+        for h in self.holders:
+            h.bind(X, owned, comm)
+
+    def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """The plies' clamping and friction forces (N) and stiffness (N/mm), summed."""
+        f, K = np.zeros((len(x), 3)), np.zeros((len(x), 3, 3))
+        for h in self.holders:
+            fh, Kh = h.forces(x, t, dt)
+            f += fh
+            K += Kh
+        return f, K
+
+    def commit(self) -> None:
+        """Commit every ply's friction bars."""
+        for h in self.holders:
+            h.commit()
+
+    def revert(self) -> None:
+        """Revert every ply's friction bars."""
+        for h in self.holders:
+            h.revert()
