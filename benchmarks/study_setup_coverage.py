@@ -1,6 +1,6 @@
 """Does a fitted set-up's sd cover its error? The blank offset on the hemisphere, many trials.
 
-Issue 27.3 asks for each fitted set-up "within its reported uncertainty (or two of them)". One
+Each fitted set-up should lie "within its reported uncertainty (or two of them)". One
 bundle cannot say whether an sd is honest; this study repeats the fit. Per trial, a blank
 offset is drawn in the issue's range (x 5-15 mm, y ±5 mm, ``numpy.random.default_rng(--seed)``),
 the whole hemisphere is formed with it (the paper's case, ``--cell-mm`` net, solver

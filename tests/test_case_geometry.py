@@ -1,4 +1,4 @@
-"""A case's geometry checked before the first step, in the user's terms (issue 41).
+"""A case's geometry checked before the first step, in the user's terms.
 
 The tools are built here: a dome punch (an STL of R = 60 mm) rising 20 mm from 1 mm under the
 blank, a flat plate as the holder and another as the die, each moved where a careless case

@@ -1,4 +1,4 @@
-"""Data before physics (issue 41, spec version 4): measurements that cannot be of their case
+"""Data before physics (spec version 4): measurements that cannot be of their case
 are named as such, first, and no effect is named on their evidence.
 
 The issue's examples, each built here from a formed part: the double dome and the square box

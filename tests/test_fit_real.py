@@ -1,4 +1,4 @@
-"""Issue 14: the fit on real and awkward bundles.
+"""The fit on real and awkward bundles.
 
 One speed and no tensile test; a start outside a law's range; MODEL.toml starts reaching the
 optimiser; a declared noise and an implausible one; a law outside the catalogue with a sharp

@@ -1,4 +1,4 @@
-"""Bundles written by ``drape form`` are data (issue 41): their case carries the tools as the
+"""Bundles written by ``drape form`` are data: their case carries the tools as the
 run meshed them, so ``compare`` and ``diagnose`` read them without ``--trust`` and reproduce
 the run; a stopped geometry script leaves no temporary file behind."""
 

@@ -1,4 +1,4 @@
-"""Issue 15: the paper's hemisphere reproduced: wrinkling measures, tool geometry, comparison."""
+"""The paper's hemisphere reproduced: wrinkling measures, tool geometry, comparison."""
 
 import math
 

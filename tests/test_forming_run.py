@@ -211,7 +211,7 @@ def test_a_tool_given_in_python_moves_by_its_motion_table():
 @pytest.mark.skip_in_parallel
 def test_a_punch_that_never_reaches_the_blank_is_reported():
     """A punch started 100 mm too low passes under the blank: the run says so before it starts
-    (issue 41; it used to run 80 steps and warn), naming the tools and how near they come."""
+    (it used to run 80 steps and warn), naming the tools and how near they come."""
     from fenicsx_drape.forming.case.format import build_tools
 
     case = load_case(HEMISPHERE, **COARSE)

@@ -1,4 +1,4 @@
-"""Runs bounded before they start (issue 41): load steps, nodes and a time estimate from the
+"""Runs bounded before they start: load steps, nodes and a time estimate from the
 case; past the step limit the command stops at once; long runs print the time left."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Tool meshes checked as meshes (issue 41): damaged tools are refused or warned with where.
+"""Tool meshes checked as meshes: damaged tools are refused or warned with where.
 
 Every mesh is built here: a faceted dome (ASCII STL) with one vertex made ``nan``, one corner
 moved onto a far vertex (a spike, as a mesher's weld leaves it), a hole cut in its top;

@@ -589,7 +589,7 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
 
     out = Path(out_dir)
     record = result.to_dict()
-    # -- issue 41 hook (data before physics, spec version 4): each measurement checked
+    # Data before physics (spec version 4): each measurement checked
     # against its case.
     from fenicsx_drape.diagnosis.data_check import data_check
 

@@ -109,7 +109,7 @@ PARSIMONY = 0.05  # candidates this close to the best held-out error count as ti
 BLOCKS = 3  # interleaved folds of a kind with a single test
 BASELINE_ITERATIONS = 100  # iteration caps of the fits: baseline, candidates, folds
 REFIT_ITERATIONS = 40
-# Rounds of set-up and effect fitted in turn when a set-up error was fitted (issue 27).
+# Rounds of set-up and effect fitted in turn when a set-up error was fitted.
 SETUP_ROUNDS = 4
 FOLD_ITERATIONS = 8
 WEAK = 0.01  # a candidate's weak start: its own vanishing parameters at 1 % of default

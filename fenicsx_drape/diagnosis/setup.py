@@ -1,4 +1,4 @@
-"""Process set-up before physics: the diagnosis's set-up candidates (spec version 3, issue 27).
+"""Process set-up before physics: the diagnosis's set-up candidates (spec version 3).
 
 When a formed part disagrees with the model, its set-up is the first suspect. Before any
 physics effect is tried, :func:`fit_setup` fits each set-up parameter of
@@ -103,7 +103,7 @@ SETUP_PARAMETERS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", 
 # error may lie either side, and a turned net is clipped to the blank, so that the error is
 # not smooth through θ = 0): degrees, mm, a change of the factor on the force, μ. The
 # smallest positive move is the sensitivity's probe.
-# Two points per axis, the Gauss-Newton fit moving from the best (issue 27: four per axis
+# Two points per axis, the Gauss-Newton fit moving from the best (four per axis
 # were a quarter of the set-up stage's runs, all on the whole blank for a ply or an offset).
 # A punch moved past its clearance to a matched die clashes with it (the double dome's die is
 # 0.3 mm off the punch): at 3 mm its runs took 2.4× as long, with cut-backs; 1 mm is the
@@ -727,7 +727,7 @@ MODELS_DIFFER = 2.0
 
 
 def _model_note(tried: list, stated_ho: float) -> str | None:
-    """A note when the stated set-up forms unlike the case's model on another (issue 27.2).
+    """A note when the stated set-up forms unlike the case's model on another.
 
     A whole blank on frictionless tools can slide on them as a whole: only the holder's
     friction holds it, and once that yields (eq. 1) the translation is free, so where it

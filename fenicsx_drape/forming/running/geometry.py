@@ -1,4 +1,4 @@
-"""A case's geometry checked before the first step, in the user's terms (issue 41).
+"""A case's geometry checked before the first step, in the user's terms.
 
 A case can be wrong about where its parts are, and the solve then ends far from the cause
 ("did not converge", "no warp bar on the grid"). :func:`geometry_problems` looks at the flat

@@ -56,7 +56,7 @@ CONTACT_ROLES = ("punch", "die", "surface")
 NODE_ATOL_N = 1e-3
 """A step has converged when no node carries an out-of-balance force above this (N).
 
-Issue 17: the 2-norm test ‖F‖ ≤ 1e-6 N alone spent about one Newton iteration per step
+The 2-norm test ‖F‖ ≤ 1e-6 N alone spent about one Newton iteration per step
 polishing an equilibrium that no longer moved: on the hemisphere at Δ = 10, 5 and 2.5 mm
 (quarter) stopping at 1e-3 N per node moves no node by more than 1e-4 mm. Holder friction puts
 F μ / n_s ≥ 0.008 N on a node even on the full 2.5 mm sheet, eight times this.

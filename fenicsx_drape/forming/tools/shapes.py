@@ -192,7 +192,7 @@ class HemisphereTools:
     ``edge_radius_mm`` turns it into the punch's cylindrical side. Apex-to-base height is
     R + c, the fillet's foot (the base of the part) at r_b.
 
-    The paper gives R = 60 mm and R_f = 20 mm but not where the cap's centre sits (issue 15).
+    The paper gives R = 60 mm and R_f = 20 mm but not where the cap's centre sits (docs/forming.md).
     The default drop 0 (c = R_f) makes the cap a whole hemisphere meeting the fillet at its
     equator: height 80 mm (the travel), base at r_b = 80 mm, 125.7 mm of meridian from apex to
     base; the kinematic drape then gives the paper's 61° (62.5°, Fig. 11a). A drop of R_f puts
@@ -219,7 +219,7 @@ class HemisphereTools:
     sheet_mm: float = 240.0
     travel_mm: float = 80.0
     ply_thickness_mm: float = 0.3
-    cap_centre_drop_mm: float = 0.0  # the cap's centre below the fillet's centre (issue 15)
+    cap_centre_drop_mm: float = 0.0  # the cap's centre below the fillet's centre
     # The punch's misalignment: its axis at (x, y) while die and holder stay on the z axis.
     punch_x_mm: float = 0.0
     punch_y_mm: float = 0.0
@@ -342,7 +342,7 @@ class HemisphereTools:
 
 
 class MeshedTool:
-    """A rigid tool given by a triangle surface (issue 13), moving with a rigid motion.
+    """A rigid tool given by a triangle surface, moving with a rigid motion.
 
     The gap is the smooth signed distance field of the surface in the tool's own frame
     (:mod:`~fenicsx_drape.forming.tools.distance`: a cubic B-spline of exact distances, C², so the
