@@ -106,8 +106,13 @@ def stl_case(folder: Path) -> Path:
     return folder / "case.toml"
 
 
-def make(out: Path, seed: int = SEED, measurements=None, truth_model=None, **overrides) -> Path:
-    """Form the truth and write the lab bundle at ``out`` (the module doc)."""
+def make(out: Path, seed: int = SEED, measurements=None, truth_model=None, stl: bool = True,
+         **overrides) -> Path:
+    """Form the truth and write the lab bundle at ``out`` (the module doc).
+
+    ``stl=False``: the bundle's case is the octagon's own (closed-form tools), not the lab's
+    STL copy; ``overrides`` change the truth's case (its net, step, set-up).
+    """
     from fenicsx_drape.diagnosis import forming_runs as runs
     from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
     from fenicsx_drape.forming.case.format import load_case, with_overrides
@@ -118,12 +123,13 @@ def make(out: Path, seed: int = SEED, measurements=None, truth_model=None, **ove
     (grid,) = runs.form_many([(truth, model)])
     tables = lab_tables(grid, runs.tool_forces(truth, model), seed=seed, points_per_line=20,
                         scan_points=600, holes=[(20.0, 20.0, 10.0)], edge_points=40)
-    lab_case = load_case(stl_case(out / "stl"))
+    lab_case = load_case(stl_case(out / "stl") if stl else CASE)
     write_lab_bundle(out, lab_case, tables, name="octagon-lab", measurements=measurements,
                      comment="A lab's forming trial of meshes/octagon (demos/make_lab_bundle.py)")
-    for stl in (out / "stl").iterdir():  # the case's copy holds its tools
-        stl.unlink()
-    (out / "stl").rmdir()
+    if stl:
+        for path in (out / "stl").iterdir():  # the case's copy holds its tools
+            path.unlink()
+        (out / "stl").rmdir()
     return out
 
 
