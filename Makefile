@@ -5,9 +5,9 @@ DRAPE := ./drape
 # a run stuck for 30 min is stopped (exit status 124), so that CI fails instead of stalling.
 PYTEST_ARGS := -q -o faulthandler_timeout=300
 LIMIT := timeout 1800
-# The one-process tests on every core (pytest-xdist); the tests of one file stay together, as
-# they share its module's fixtures (often forming runs). XDIST= runs them in one process.
-XDIST := -n auto --dist loadscope
+# The one-process tests on every core (pytest-xdist; a worker that is done takes tests from the
+# other's queue, so that the few long tests do not end on one). XDIST= runs them in one process.
+XDIST := -n auto --dist worksteal
 
 .PHONY: test test-serial test-parallel test-fast bench lint demo docs
 
