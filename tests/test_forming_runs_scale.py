@@ -216,3 +216,20 @@ def test_the_same_report_whichever_executor_and_workers(tmp_path, dolfinx):
         reports[label].pop("provenance", None)
     first = reports.pop("1 workers")
     assert first["per_test"] and all(r == first for r in reports.values())
+
+
+@pytest.mark.skip_in_parallel
+def test_a_worker_that_dies_fails_its_runs_and_the_next_batch_has_a_new_pool(tmp_path, dolfinx,
+                                                                              fresh_memory):
+    import signal
+
+    jobs = octagon_jobs(tmp_path)[:2]
+    with runs.execution(workers=2):
+        _, pool = runs.executor()
+        with runs._fresh_workers():
+            futures = [pool.submit(signal.pause) for _ in range(2)]  # two workers, waiting
+        for process in list(pool._processes.values()):
+            process.kill()
+        assert all("terminated abruptly" in str(f.exception(timeout=60)) for f in futures)
+        # The broken pool is replaced: the runs are formed.
+        assert len(runs.form_many(jobs)) == 2 and runs.executor()[1] is not pool

@@ -279,8 +279,9 @@ def executor() -> tuple[str, Executor | None]:
 
 
 def _shutdown() -> None:
-    for pool in _pools.values():
-        pool.shutdown(wait=True, cancel_futures=True)
+    for name, pool in _pools.items():
+        if name != "mpi":  # the shared pool of mpi4py.futures ends with the job
+            pool.shutdown(wait=True, cancel_futures=True)
     _pools.clear()
 
 
@@ -321,15 +322,26 @@ def _form_all(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
             except Exception as error:  # raised after the others
                 results.append(("error", error))
         return results
+    from concurrent.futures import BrokenExecutor
+
     options = _solver_options()
-    with _fresh_workers():
-        futures = [pool.submit(_run, case, model, trusted(), options) for case, model in jobs]
-    results = []
+    try:
+        with _fresh_workers():
+            futures = [pool.submit(_run, c, m, trusted(), options) for c, m in jobs]
+    except BrokenExecutor:  # a worker died since the last batch: a new pool
+        _shutdown()
+        name, pool = executor()
+        with _fresh_workers():
+            futures = [pool.submit(_run, c, m, trusted(), options) for c, m in jobs]
+    results, broken = [], False
     for future in futures:  # in the order asked: the same gathering whichever finishes first
         try:
             results.append(future.result())
         except Exception as error:  # a worker that died, a job that did not pickle
+            broken |= isinstance(error, BrokenExecutor)
             results.append(("error", RuntimeError(f"forming worker failed: {error!r}")))
+    if broken:  # the next batch starts a new pool
+        _shutdown()
     return results
 
 
