@@ -233,3 +233,29 @@ def test_a_worker_that_dies_fails_its_runs_and_the_next_batch_has_a_new_pool(tmp
         assert all("terminated abruptly" in str(f.exception(timeout=60)) for f in futures)
         # The broken pool is replaced: the runs are formed.
         assert len(runs.form_many(jobs)) == 2 and runs.executor()[1] is not pool
+
+
+@pytest.mark.skip_in_parallel
+def test_the_petsc_options_are_in_a_runs_key_and_go_with_its_job(tmp_path, dolfinx):
+    from petsc4py import PETSc
+
+    from fenicsx_drape.fe.newton import set_petsc_options
+
+    case, model = octagon_jobs(tmp_path)[0]
+    plain = runs._key(case, model)
+    db = PETSc.Options()
+    try:
+        set_petsc_options("-snes_type newtontr -snes_converged_reason")
+        given = runs._solver_options()
+        assert dict(given) == {"snes_type": "newtontr", "snes_converged_reason": ""}
+        assert runs._key(case, model) != plain
+    finally:
+        for name in ("snes_type", "snes_converged_reason"):
+            db.delValue(name)
+    assert runs._key(case, model) == plain
+    # A worker sets the job's options and drops those of its last job that are not given.
+    status, _ = runs._run(None, model, False, given)  # no case: fails after the options
+    assert status == "error" and db.getString("snes_type") == "newtontr"
+    assert db.hasName("snes_converged_reason")
+    runs._run(None, model, False, ())
+    assert not db.hasName("snes_type") and not db.hasName("snes_converged_reason")

@@ -165,7 +165,8 @@ def _solver_options() -> tuple[tuple[str, str], ...]:
         return tuple(sorted(_options_from_env().items()))
     from petsc4py import PETSc
 
-    return tuple(sorted((k, str(v)) for k, v in PETSc.Options().getAll().items()))
+    return tuple(sorted((k, "" if v is None else str(v))  # None: a flag without a value
+                        for k, v in PETSc.Options().getAll().items()))
 
 
 def _options_from_env() -> dict[str, str]:
