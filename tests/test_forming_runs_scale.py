@@ -239,23 +239,29 @@ def test_a_worker_that_dies_fails_its_runs_and_the_next_batch_has_a_new_pool(tmp
 def test_the_petsc_options_are_in_a_runs_key_and_go_with_its_job(tmp_path, dolfinx):
     from petsc4py import PETSc
 
-    from fenicsx_drape.fe.newton import set_petsc_options
+    from fenicsx_drape.fe.newton import SOLVER_PREFIXES, set_petsc_options
 
+    assert runs.USER_OPTIONS == (*SOLVER_PREFIXES, "log_")
     case, model = octagon_jobs(tmp_path)[0]
-    plain = runs._key(case, model)
     db = PETSc.Options()
+    names = ("snes_linesearch_order", "ksp_converged_reason")
+    assert not any(db.hasName(n) for n in names)
+    before, plain = dict(runs._solver_options()), runs._key(case, model)
+    db["drape_truss_99_snes_atol"] = "1e-3"  # a problem's own option: not the user's
     try:
-        set_petsc_options("-snes_type newtontr -snes_converged_reason")
+        assert runs._key(case, model) == plain
+        set_petsc_options("-snes_linesearch_order 2 -ksp_converged_reason")
         given = runs._solver_options()
-        assert dict(given) == {"snes_type": "newtontr", "snes_converged_reason": ""}
+        assert dict(given) == {**before, "snes_linesearch_order": "2",
+                               "ksp_converged_reason": ""}
         assert runs._key(case, model) != plain
     finally:
-        for name in ("snes_type", "snes_converged_reason"):
+        for name in (*names, "drape_truss_99_snes_atol"):
             db.delValue(name)
     assert runs._key(case, model) == plain
     # A worker sets the job's options and drops those of its last job that are not given.
     status, _ = runs._run(None, model, False, given)  # no case: fails after the options
-    assert status == "error" and db.getString("snes_type") == "newtontr"
-    assert db.hasName("snes_converged_reason")
-    runs._run(None, model, False, ())
-    assert not db.hasName("snes_type") and not db.hasName("snes_converged_reason")
+    assert status == "error" and db.getString("snes_linesearch_order") == "2"
+    assert db.hasName("ksp_converged_reason")
+    runs._run(None, model, False, tuple(before.items()))
+    assert not any(db.hasName(n) for n in names)

@@ -49,6 +49,9 @@ if TYPE_CHECKING:
 FULL_CELL_MM = 10.0  # unit cell of the forming runs (mm), the paper's Δ
 SCREEN_CELL_MM = 20.0  # a coarse screening mesh (mm), for data formed on it (tests)
 WORKERS_ENV = "DRAPE_WORKERS"  # processes forming at once, when not given
+# The PETSc options a user gives every solve (fe.newton.SOLVER_PREFIXES and log_*): those a
+# run depends on, unlike the ones each problem keeps under its own prefix while it lives.
+USER_OPTIONS = ("snes_", "ksp_", "pc_", "mat_", "npc_", "sub_", "log_")
 
 _settings: dict[str, Any] = {"cell_mm": None,  # None: each case's own cell
                              "workers": None,  # None: default_workers()
@@ -156,8 +159,8 @@ def _key(case, model: Model) -> tuple:
 def _solver_options() -> tuple[tuple[str, str], ...]:
     """The user's PETSc options (``--petsc-option``, ``PETSC_OPTIONS``): a run depends on them.
 
-    Read from PETSc's database (the solver's own options are there only during a solve), and
-    given to each worker with its job.
+    Read from PETSc's database, without the options each problem keeps under its own prefix
+    while it lives (``drape_truss_N_``), and given to each worker with its job.
     """
     import sys
 
@@ -166,7 +169,8 @@ def _solver_options() -> tuple[tuple[str, str], ...]:
     from petsc4py import PETSc
 
     return tuple(sorted((k, "" if v is None else str(v))  # None: a flag without a value
-                        for k, v in PETSc.Options().getAll().items()))
+                        for k, v in PETSc.Options().getAll().items()
+                        if k.startswith(USER_OPTIONS)))
 
 
 def _options_from_env() -> dict[str, str]:
@@ -180,7 +184,7 @@ def _options_from_env() -> dict[str, str]:
             given[name] = ""
         elif name is not None:
             given[name] = token
-    return given
+    return {k: v for k, v in given.items() if k.startswith(USER_OPTIONS)}
 
 
 def describe(case, model: Model) -> str:
