@@ -122,7 +122,8 @@ class RunStore:
             raise DrapeInputError(f"--cache {folder}: the run cache needs the diskcache "
                                   "package (Debian: python3-diskcache)") from None
         try:
-            self._cache = diskcache.Cache(str(self.folder), size_limit=SIZE_LIMIT)
+            self._cache = diskcache.Cache(str(self.folder), size_limit=SIZE_LIMIT,
+                                          eviction_policy="least-recently-used")
         except Exception as err:  # sqlite's and the file system's errors alike
             print(f"drape: the run cache {folder} cannot be opened ({err}): no run is kept",
                   file=sys.stderr)
