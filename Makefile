@@ -5,18 +5,26 @@ DRAPE := ./drape
 # a run stuck for 30 min is stopped (exit status 124), so that CI fails instead of stalling.
 PYTEST_ARGS := -q -o faulthandler_timeout=300
 LIMIT := timeout 1800
+# The one-process tests on every core (pytest-xdist; a worker that is done takes tests from the
+# other's queue, so that the few long tests do not end on one). XDIST= runs them in one process.
+XDIST := -n auto --dist worksteal
 
-.PHONY: test test-serial test-parallel test-fast test-launcher lint demo docs
+.PHONY: test test-serial test-parallel test-fast test-launcher bench lint demo docs
 
-# The whole suite: serially, the parallel tests again on 2 and 3 ranks, then the linter.
+# The whole suite: on every core, the parallel tests again on 2 and 3 ranks, the launcher's
+# own tests on the host, then the linter.
 test: test-serial test-parallel test-launcher lint
 
 test-serial:
-	$(DRAPE) exec $(LIMIT) python3 -m pytest $(PYTEST_ARGS)
+	$(DRAPE) exec $(LIMIT) python3 -m pytest $(PYTEST_ARGS) $(XDIST) -m "not bench"
 
-# The suite without the tests marked slow, serially: a few minutes, for every change.
+# The suite without the tests marked slow: a few minutes, for every change.
 test-fast:
-	$(DRAPE) exec $(LIMIT) python3 -m pytest $(PYTEST_ARGS) -m "not slow"
+	$(DRAPE) exec $(LIMIT) python3 -m pytest $(PYTEST_ARGS) $(XDIST) -m "not slow and not bench"
+
+# The heavy forming tests (marked bench): the full-size runs the suite checks on smaller ones.
+bench:
+	$(DRAPE) exec $(LIMIT) python3 -m pytest $(PYTEST_ARGS) -m bench
 
 # pytest exits with 5 when no test is marked parallel: that is not a failure.
 test-parallel:

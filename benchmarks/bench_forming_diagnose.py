@@ -32,7 +32,7 @@ def main() -> None:
         "tool_friction": (paper.with_effects("tool_friction").with_parameters(mu_tool=0.8),
                           paper),
     }
-    print(f"forming workers: {runs.WORKERS}; cells {runs.FULL_CELL_MM:g} mm", flush=True)
+    print(f"forming workers: {runs.default_workers()}; cells {runs.FULL_CELL_MM:g} mm", flush=True)
     for hidden, (truth, baseline) in cases.items():
         test = fc.synthetic_forming_test(truth, sd_mm=0.3, seed=7)
         runs._cache.clear()

@@ -11,7 +11,7 @@ A quarter-model double-dome bundle (the case's own 10 mm cells and 1 mm steps; t
 Printed: the wall time of each, their ratio (target: the set-up adds at most 2×; the whole
 diagnosis under 5 minutes on one core), the forming runs made, and the verdicts.
 ``--workers 1`` runs the forming solves on one process (one core); the default is the pool's
-(:data:`~fenicsx_drape.diagnosis.forming_runs.WORKERS`); ``--cell-mm`` and ``--step-mm``
+(:func:`~fenicsx_drape.diagnosis.forming_runs.default_workers`); ``--cell-mm`` and ``--step-mm``
 change the net and the step.
 
     ./drape exec python3 benchmarks/bench_setup_diagnose.py --workers 1
@@ -19,6 +19,7 @@ change the net and the step.
 
 import argparse
 import dataclasses
+import os
 import sys
 import time
 from pathlib import Path
@@ -43,7 +44,7 @@ def main() -> None:
     parser.add_argument("--ply-angle-deg", type=float, default=4.37)
     args = parser.parse_args()
     if args.workers:
-        runs.WORKERS = args.workers
+        os.environ[runs.WORKERS_ENV] = str(args.workers)
     paper = default_model()
     stated = load_case(CASE, cell_mm=args.cell_mm, step_mm=args.step_mm)
     truth = with_overrides(stated, ply_angle_deg=args.ply_angle_deg)
@@ -51,7 +52,8 @@ def main() -> None:
     bundle = Bundle(name="ply", tests=(dataclasses.replace(test, forming_case=stated,
                                                             case_keys={}),))
     print(f"double dome, cells {stated.blank.cell_mm:g} mm, steps {stated.step_mm:g} mm, "
-          f"{runs.WORKERS} forming worker(s); bundle: the ply turned by {args.ply_angle_deg:g}°",
+          f"{runs.default_workers()} forming worker(s); bundle: the ply turned by "
+          f"{args.ply_angle_deg:g}°",
           flush=True)
     times = {}
     for label, setup in (("effects only", ()), ("set-up and effects", SETUP_PARAMETERS)):

@@ -8,7 +8,9 @@ Exit status: 0 success, 2 bad input (the message names the file, line or paramet
 1 internal failure.
 
 The commands that form (``form``, ``compare``, ``diagnose``) take ``--petsc-option`` for SNES
-(:func:`petsc_option_argument`; ``docs/solver.md``).
+(:func:`petsc_option_argument`; ``docs/solver.md``); ``compare`` and ``diagnose`` take
+``--workers`` and ``--cache`` for their many runs (:func:`forming_runs_arguments`;
+``docs/scale.md``).
 """
 
 from __future__ import annotations
@@ -73,6 +75,34 @@ def petsc_option_argument(parser: argparse.ArgumentParser) -> None:
                         "docs/solver.md)")
 
 
+def forming_runs_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--workers N``, ``--cache DIR``, ``--no-cache``: where forming runs go and are kept."""
+    import os
+
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count() or 1
+    parser.add_argument("--workers", type=positive_int, default=None, metavar="N",
+                        help="processes forming at once (default: DRAPE_WORKERS, else this "
+                        f"machine's cores, here {cores}; under 'python3 -m mpi4py.futures' "
+                        "the job's other ranks)")
+    parser.add_argument("--cache", metavar="DIR", default=None,
+                        help="folder keeping the forming runs across commands, by content "
+                        "(default: DRAPE_CACHE, else $XDG_CACHE_HOME/fenicsx-drape/runs; "
+                        "remove it to clear it)")
+    parser.add_argument("--no-cache", action="store_true", help="keep no forming run on disk")
+
+
+def forming_runs_setting(args: argparse.Namespace):
+    """The :func:`~fenicsx_drape.diagnosis.forming_runs.execution` the options ask for."""
+    from fenicsx_drape.diagnosis.forming_runs import execution
+    from fenicsx_drape.diagnosis.run_store import default_folder
+
+    cache = None if args.no_cache else (args.cache or default_folder())
+    return execution(args.workers, cache)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -91,6 +121,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     module, parser = command_parser(name)
     args = parser.parse_args(rest)  # exits 2 on bad options
+    if "mpi4py.futures._core" in sys.modules:  # rank 0 of python3 -m mpi4py.futures
+        from fenicsx_drape.diagnosis.mpi_pool import petsc_alone, shared_pool
+
+        if shared_pool():
+            petsc_alone()
     apply_trust_option(args)
     try:
         from fenicsx_drape.limits import apply_max_steps
@@ -124,6 +159,13 @@ def positive_float(text: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
     return value
+
+
+def positive_int(text: str) -> int:
+    """An ``argparse`` type: a whole number >= 1 (refused up front, exit status 2)."""
+    if not (text.strip().isdigit() and int(text) >= 1):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number >= 1")
+    return int(text)
 
 
 def load_bundle_reported(path):

@@ -12,6 +12,7 @@ mpi4py is optional: the pure-NumPy tests also run on a host without MPI.
 """
 
 import gc
+import os
 
 import pytest
 
@@ -34,7 +35,11 @@ def pytest_collection_modifyitems(config, items):
 
 
 def pytest_configure(config):
-    """Make Hypothesis draw the same examples on every rank, and share no database file."""
+    """Keep no forming run on disk unless a test names a cache (``--cache``, ``execution``).
+
+    Make Hypothesis draw the same examples on every rank, and share no database file.
+    """
+    os.environ["DRAPE_CACHE"] = "off"  # the commands' default cache is the user's, not tests'
     if COMM_SIZE == 1:
         return
     try:

@@ -66,6 +66,7 @@ def test_demo_forming_diagnosis_names_the_hidden_effect(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.bench  # make bench: minutes of forming runs
 @pytest.mark.skip_in_parallel
 def test_demo_case_diagnosis_names_the_hidden_effect(tmp_path):
     """The double-dome demo (shown unexecuted in the docs), on a copy of the case at 20 mm."""

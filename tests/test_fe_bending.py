@@ -89,3 +89,32 @@ def test_bending_adds_a_consistent_stiffness():
     plain._A.mult(direction, Jd_plain)
     Jd_plain.axpy(-1.0, fd)
     assert Jd_plain.norm() > 1e-5 * fd.norm()
+
+
+@pytest.mark.parallel
+def test_a_diagonal_bending_jacobian_keeps_a_plain_nets_pattern_and_the_full_residual():
+    """``bending_jacobian = "diagonal"``: K's diagonal alone, in the pattern of a net without
+    bending (Newton's matrix factors as a plain net's); the residual keeps the whole term."""
+    full = _problem(quarter=True)
+    options = SolverOptions(tow_bending_EI_Nmm2=EI, bending_jacobian="diagonal")
+    diagonal = TrussProblem(full.sheet, LAWS, options=options)
+    plain = _problem(True, EI=0.0, sheet=full.sheet)
+    x = None
+    for problem in (full, diagonal, plain):
+        problem.symmetry()
+        problem.u.interpolate(lambda X: np.vstack([1e-4 * X[0] * X[1], 2e-4 * X[0] * X[1],
+                                                   1e-3 * (X[0] ** 2 + X[1] ** 2)]))
+        x = problem.u.x.petsc_vec.copy() if x is None else x
+        problem._jacobian(x)
+    nonzeros = {name: p._A.getInfo()["nz_used"]
+                for name, p in (("full", full), ("diagonal", diagonal), ("plain", plain))}
+    assert nonzeros["diagonal"] == nonzeros["plain"] < nonzeros["full"]
+    np.testing.assert_allclose(diagonal._A.getDiagonal().array, full._A.getDiagonal().array,
+                               rtol=1e-12)
+    assert not np.allclose(plain._A.getDiagonal().array, full._A.getDiagonal().array)
+    b_full, b_diagonal = (fem_petsc.create_vector(full.V) for _ in range(2))
+    full._residual(x, b_full)
+    diagonal._residual(x, b_diagonal)
+    np.testing.assert_allclose(b_diagonal.array, b_full.array, rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match="bending_jacobian"):
+        SolverOptions(bending_jacobian="lumped")

@@ -151,6 +151,7 @@ def test_diagnose_names_hidden_tow_buckling_in_a_forming_bundle(dolfinx):
 
 
 @pytest.mark.slow
+@pytest.mark.bench  # make bench: minutes of forming runs
 @pytest.mark.skip_in_parallel
 def test_diagnose_names_hidden_tool_friction_in_a_forming_bundle(dolfinx):
     """Punch/die friction μ_tool = 0.8 hidden; the baseline refits the holder's μ.
@@ -176,6 +177,7 @@ def test_diagnose_names_hidden_tool_friction_in_a_forming_bundle(dolfinx):
 
 
 @pytest.mark.slow
+@pytest.mark.bench  # make bench: minutes of forming runs
 @pytest.mark.skip_in_parallel
 def test_mixed_bundle_reports_coupons_and_forming_and_names_the_forming_effect(dolfinx):
     """Coupons and a formed part in one bundle; the hidden effect acts on the part only."""
@@ -208,6 +210,7 @@ def test_mixed_bundle_reports_coupons_and_forming_and_names_the_forming_effect(d
 
 
 @pytest.mark.slow
+@pytest.mark.bench  # make bench: minutes of forming runs
 @pytest.mark.skip_in_parallel
 def test_null_forming_bundle_gives_null(dolfinx):
     from fenicsx_drape.model import default_model

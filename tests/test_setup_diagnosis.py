@@ -321,6 +321,7 @@ def test_the_set_up_is_fitted_again_with_a_candidate_effect():
 
 
 @pytest.mark.slow
+@pytest.mark.bench  # make bench: minutes of forming runs
 @pytest.mark.skip_in_parallel
 def test_a_set_up_error_and_a_missing_effect_are_both_named():
     """Twice the holding force and tool friction (μ_tool 0.8), 0.1 mm noise, quarter, 20 mm.

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fenicsx_drape.cli import petsc_option_argument
+from fenicsx_drape.cli import forming_runs_arguments, petsc_option_argument
 from fenicsx_drape.errors import DrapeInputError
 
 
@@ -22,11 +22,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="unit cell of the forming simulations (default: a case's own "
                         "cell_mm; the hemisphere 10 mm, the paper's)")
     petsc_option_argument(parser)
+    forming_runs_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     """Fit, compare, write the outputs and print the summary; returns the exit status."""
-    from fenicsx_drape.cli import load_bundle_reported
+    from fenicsx_drape.cli import forming_runs_setting, load_bundle_reported
     from fenicsx_drape.diagnosis.compare import compare, write_compare
     from fenicsx_drape.diagnosis.forming_runs import resolution
     from fenicsx_drape.model import default_model, load_model
@@ -35,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model) if args.model else default_model()
     if args.forming_cell_mm is not None and not args.forming_cell_mm > 0:
         raise DrapeInputError(f"--forming-cell-mm {args.forming_cell_mm} must be > 0 (mm)")
-    with resolution(args.forming_cell_mm):
+    with resolution(args.forming_cell_mm), forming_runs_setting(args):
         result = compare(bundle, model, fit=not args.no_fit,
                          progress=lambda line: print(line, file=sys.stderr))
     if not result.tests:

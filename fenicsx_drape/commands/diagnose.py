@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fenicsx_drape.cli import petsc_option_argument
+from fenicsx_drape.cli import forming_runs_arguments, petsc_option_argument
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -34,11 +34,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         "tool_offset_mm; none given: no set-up candidates)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
     petsc_option_argument(parser)
+    forming_runs_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose, write the report and print its summary; returns the exit status."""
-    from fenicsx_drape.cli import load_bundle_reported
+    from fenicsx_drape.cli import forming_runs_setting, load_bundle_reported
     from fenicsx_drape.diagnosis.diagnose import confirm, diagnose, summary, write_diagnosis
     from fenicsx_drape.diagnosis.forming_runs import resolution
     from fenicsx_drape.errors import DrapeInputError
@@ -51,11 +52,12 @@ def run(args: argparse.Namespace) -> int:
     bundle = load_bundle_reported(args.bundle)
     model = load_model(args.model) if args.model else default_model()
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
-    with resolution(args.forming_cell_mm):
-        report = diagnose(bundle, model, progress=progress, setup=args.setup)
     forming = any(t.kind == "forming" for t in bundle.tests)
-    if forming and args.confirm_cell_mm and report["candidates"]:
-        report["confirmation"] = confirm(bundle, report, args.confirm_cell_mm, progress)
+    with forming_runs_setting(args):
+        with resolution(args.forming_cell_mm):
+            report = diagnose(bundle, model, progress=progress, setup=args.setup)
+        if forming and args.confirm_cell_mm and report["candidates"]:
+            report["confirmation"] = confirm(bundle, report, args.confirm_cell_mm, progress)
     write_diagnosis(report, args.json, args.out, bundle=bundle)
     print(summary(report))
     for label, entry in report.get("confirmation", {}).items():

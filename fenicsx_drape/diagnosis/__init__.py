@@ -12,4 +12,8 @@
   the table of kinds, :data:`~fenicsx_drape.diagnosis.compare.KINDS`);
 - :mod:`~fenicsx_drape.diagnosis.diagnose`: which physical effect the model is missing;
 - :mod:`~fenicsx_drape.diagnosis.ledger`: the history of model versions and their errors.
+- :mod:`~fenicsx_drape.diagnosis.forming_runs`: the forming runs of compare and diagnose,
+  through :mod:`concurrent.futures` on every core (:mod:`~fenicsx_drape.diagnosis.mpi_pool`:
+  on the ranks of an MPI job) and remembered on disk
+  (:mod:`~fenicsx_drape.diagnosis.run_store`).
 """

@@ -1,16 +1,23 @@
-"""The forming runs of compare and diagnose: cached, and in worker processes.
+"""The forming runs of compare and diagnose: remembered, and run on every core.
 
 A forming test is simulated by forming its part for a model: its forming case (the paper's
 hemisphere is ``meshes/hemisphere/case.toml``) run by
-:func:`~fenicsx_drape.forming.running.run.run_case`. A diagnosis asks for a few dozen such
-runs, many of them the same. :func:`form_many` forms ``(case, model)`` jobs: every run is
-cached by the case's content (its tables and the bytes of its geometry files, not the path
-it was read from) and the model (the :data:`_CACHE_SIZE` latest), and the new runs of one call
-go to :data:`WORKERS` persistent worker processes at once (under ``mpirun`` they run one
-after the other on all ranks). The cells of the runs are set with :func:`resolution`: by
-default a case runs on its own blank's ``cell_mm`` (the hemisphere's: :data:`FULL_CELL_MM`,
-the paper's Δ); a resolution replaces it. A run that stops short of full travel is
-kept as far as it got, and :func:`stopped_at` tells the travel it reached.
+:func:`~fenicsx_drape.forming.running.run.run_case`. A diagnosis asks for dozens to hundreds
+of such runs, many of them the same. :func:`form_many` forms ``(case, model)`` jobs: every
+run is known by the case's content (its tables and the bytes of its geometry files, not the
+path it was read from), the model and the solver options; it is kept in memory (the
+:data:`_CACHE_SIZE` latest) and, inside :func:`execution` with a cache folder, on disk
+(:mod:`~fenicsx_drape.diagnosis.run_store`, across commands). The new runs of one call go
+through :mod:`concurrent.futures`, chosen by :func:`executor`: a pool of local processes (as
+many as the machine has cores, or ``DRAPE_WORKERS``, or :func:`execution`'s), the shared pool
+of ``mpi4py.futures`` when run as ``mpiexec -n N python3 -m mpi4py.futures -m fenicsx_drape
+...``, and, under plain ``mpirun``, one run after the other on all ranks. The results are
+gathered in the order the runs were asked, whichever process formed them: the same report
+from every executor. A run that fails is raised after the others have finished, its case and
+model named. The cells of the runs are set with :func:`resolution`: by default a case runs on
+its own blank's ``cell_mm`` (the hemisphere's: :data:`FULL_CELL_MM`, the paper's Δ); a
+resolution replaces it. A run that stops short of full travel is kept as far as it got, and
+:func:`stopped_at` tells the travel it reached.
 
 This module knows forming cases and models, not tests: the forming kind
 (:mod:`~fenicsx_drape.diagnosis.forming_kind`) turns a test into a case.
@@ -18,7 +25,6 @@ This module knows forming cases and models, not tests: the forming kind
 
 from __future__ import annotations
 
-import atexit
 import contextlib
 import json
 import os
@@ -34,18 +40,27 @@ from fenicsx_drape.provenance import file_digest
 from fenicsx_drape.trust import set_trusted, trusted
 
 if TYPE_CHECKING:
+    from concurrent.futures import Executor
+
+    from fenicsx_drape.diagnosis.run_store import RunStore
     from fenicsx_drape.forming.running.post import FormedGrid
     from fenicsx_drape.model import Model
 
 FULL_CELL_MM = 10.0  # unit cell of the forming runs (mm), the paper's Δ
 SCREEN_CELL_MM = 20.0  # a coarse screening mesh (mm), for data formed on it (tests)
-WORKERS = max(1, min(2, os.cpu_count() or 1))  # processes running forming solves at once
+WORKERS_ENV = "DRAPE_WORKERS"  # processes forming at once, when not given
+# The PETSc options a user gives every solve (fe.newton.SOLVER_PREFIXES and log_*): those a
+# run depends on, unlike the ones each problem keeps under its own prefix while it lives.
+USER_OPTIONS = ("snes_", "ksp_", "pc_", "mat_", "npc_", "sub_", "log_")
 
-_settings: dict[str, float | None] = {"cell_mm": None}  # None: each case's own cell
+_settings: dict[str, Any] = {"cell_mm": None,  # None: each case's own cell
+                             "workers": None,  # None: default_workers()
+                             "store": None}  # a RunStore, or None: runs kept in memory only
 _cache: dict[tuple, FormedGrid] = {}
 _stopped: dict[tuple, float] = {}  # travel (mm) reached by the runs that stopped short
 _forces: dict[tuple, dict] = {}  # the tools' force curves of the cached runs (run.tool_forces)
 _CACHE_SIZE = 256
+counts = {"formed": 0, "from_disk": 0}  # runs formed and runs read from the disk cache
 
 
 @contextlib.contextmanager
@@ -69,6 +84,54 @@ def cell_override() -> float | None:
     return _settings["cell_mm"]
 
 
+def default_workers() -> int:
+    """Processes forming at once by default: ``DRAPE_WORKERS``, else the cores available.
+
+    Raises:
+        DrapeInputError: ``DRAPE_WORKERS`` is not a whole number >= 1.
+    """
+    given = os.environ.get(WORKERS_ENV, "").strip()
+    if given:
+        if not (given.isdigit() and int(given) >= 1):
+            raise DrapeInputError(f"{WORKERS_ENV}={given!r}: a number of processes >= 1")
+        return int(given)
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def execution(workers: int | None = None,
+              cache: str | os.PathLike | None = None) -> Iterator[None]:
+    """Form the runs of :func:`form_many` inside on ``workers`` processes, remembered in ``cache``.
+
+    Args:
+        workers: Local processes forming at once (None: :func:`default_workers`; 1: in this
+            process). Under ``python3 -m mpi4py.futures`` the MPI job's ranks are the workers.
+        cache: A folder where runs are kept across commands
+            (:class:`~fenicsx_drape.diagnosis.run_store.RunStore`); None: in memory only.
+
+    Raises:
+        DrapeInputError: ``workers`` < 1, or ``cache`` is not a usable folder.
+    """
+    from fenicsx_drape.diagnosis.run_store import RunStore
+
+    if workers is None:
+        default_workers()  # a bad DRAPE_WORKERS is refused before anything runs
+    elif not (int(workers) == workers and workers >= 1):
+        raise DrapeInputError(f"--workers {workers}: a number of processes >= 1")
+    old = dict(_settings)
+    store = RunStore(cache) if cache is not None else None
+    _settings.update(workers=workers, store=store)
+    try:
+        yield
+    finally:
+        _settings.update(workers=old["workers"], store=old["store"])
+        if store is not None:
+            store.close()
+
+
 def case_key(case) -> str:
     """What a forming run of ``case`` depends on, as text.
 
@@ -88,8 +151,49 @@ def case_key(case) -> str:
 
 def _key(case, model: Model) -> tuple:
     params = tuple(sorted((k, float(v)) for k, v in model.parameters.items()))
-    return (case_key(case), tuple(sorted(model.effects)), params,
-            tuple(str(p) for p in model.plugins))
+    plugins = tuple(file_digest(p) if Path(p).is_file() else f"missing {p}"
+                    for p in model.plugins)
+    return (case_key(case), tuple(sorted(model.effects)), params, plugins, _solver_options())
+
+
+def _solver_options() -> tuple[tuple[str, str], ...]:
+    """The user's PETSc options (``--petsc-option``, ``PETSC_OPTIONS``): a run depends on them.
+
+    Read from PETSc's database, without the options each problem keeps under its own prefix
+    while it lives (``drape_truss_N_``), and given to each worker with its job.
+    """
+    import sys
+
+    if "petsc4py.PETSc" not in sys.modules:  # nothing was set: no need to load PETSc
+        return tuple(sorted(_options_from_env().items()))
+    from petsc4py import PETSc
+
+    return tuple(sorted((k, "" if v is None else str(v))  # None: a flag without a value
+                        for k, v in PETSc.Options().getAll().items()
+                        if k.startswith(USER_OPTIONS)))
+
+
+def _options_from_env() -> dict[str, str]:
+    import shlex
+
+    given: dict[str, str] = {}
+    name = None
+    for token in shlex.split(os.environ.get("PETSC_OPTIONS", "")):
+        if token.startswith("-") and not token.lstrip("-")[:1].isdigit():
+            name = token.lstrip("-")
+            given[name] = ""
+        elif name is not None:
+            given[name] = token
+    return {k: v for k, v in given.items() if k.startswith(USER_OPTIONS)}
+
+
+def describe(case, model: Model) -> str:
+    """A run as a person names it: the case and the model's effects and parameters."""
+    effects = ", ".join(model.effects) or "no effects"
+    params = ", ".join(f"{k} = {float(v):.6g}" for k, v in sorted(model.parameters.items()))
+    return (f"the forming run of case {case.name!r}"
+            + (f" ({case.path})" if getattr(case, "path", None) else "")
+            + f" with the model [{effects}]" + (f" ({params})" if params else ""))
 
 
 def _form(case, model: Model, comm=None) -> tuple[FormedGrid, float | None, dict]:
@@ -111,120 +215,202 @@ def _form(case, model: Model, comm=None) -> tuple[FormedGrid, float | None, dict
     return run.grid, (run.travel_mm if run.stopped else None), curves
 
 
-def _in_workers(jobs: list[tuple[Any, Model]]) -> list[tuple]:
-    """Run forming jobs on :data:`WORKERS` persistent worker processes, a batch at a time.
+_applied: dict[str, str] = {}  # the PETSc options a worker was last given
 
-    Fresh processes (not forks: MPI is initialised here) started once and kept: each imports
-    DOLFINx and compiles the forms once, then reads pickled jobs on stdin and writes the
-    pickled grids on stdout. The MPI launcher's environment is left out so that each runs as
-    its own single-process MPI job.
+
+def _run(case, model: Model, trust: bool, options: tuple) -> tuple[str, Any]:
+    """A job in a worker process: ``("ok", run)`` or ``("error", exception)``.
+
+    The parent's trust and PETSc options come with each job (a worker outlives a command).
+    Errors come back as values, in a form that unpickles in the parent.
     """
     import pickle
 
-    results: list = [None] * len(jobs)
-    pending = list(enumerate(jobs))
-    while pending:
-        batch, pending = pending[:WORKERS], pending[WORKERS:]
-        workers = _pool(len(batch))
-        for (_, job), proc in zip(batch, workers):
-            pickle.dump((*job, trusted()), proc.stdin)  # the trust of now, not of the start
-            proc.stdin.flush()
-        for (i, _), proc in zip(batch, workers):
+    set_trusted(trust)
+    wanted = dict(options)
+    if wanted != _applied:
+        from petsc4py import PETSc
+
+        db = PETSc.Options()
+        for name in set(_applied) - set(wanted):
+            db.delValue(name)
+        for name, value in wanted.items():
+            db[name] = value
+        _applied.clear()
+        _applied.update(wanted)
+    try:
+        return "ok", _form(case, model)
+    except DrapeInputError as error:  # its subclasses may not unpickle: send the message
+        return "error", DrapeInputError(str(error))
+    except Exception as error:  # sent back and raised in the parent
+        try:
+            pickle.loads(pickle.dumps(error))
+        except Exception:
+            return "error", RuntimeError(f"{type(error).__name__}: {error}")
+        return "error", error
+
+
+_pools: dict[str, Executor] = {}  # the executor in use, kept between calls (warm workers)
+
+
+def executor() -> tuple[str, Executor | None]:
+    """The executor of the forming runs, by name: ``mpi4py.futures``, ``processes`` or None.
+
+    None (``"this process"`` or ``"all ranks"``): the runs are formed here one after the
+    other, on this process alone or, under ``mpirun`` without ``mpi4py.futures``, on all ranks.
+    """
+    from fenicsx_drape.diagnosis import mpi_pool
+
+    if mpi_pool.shared_pool():
+        if "mpi" not in _pools:
+            _pools["mpi"] = mpi_pool.pool()
+        return "mpi4py.futures", _pools["mpi"]
+    from mpi4py import MPI
+
+    if MPI.COMM_WORLD.size > 1:
+        return "all ranks", None
+    workers = _settings["workers"] or default_workers()
+    if workers == 1:
+        return "this process", None
+    name = f"processes {workers}"
+    if name not in _pools:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        _shutdown()
+        # Fresh processes (not forks of one where MPI is initialised).
+        _pools[name] = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+    return "processes", _pools[name]
+
+
+def _shutdown() -> None:
+    for name, pool in _pools.items():
+        if name != "mpi":  # the shared pool of mpi4py.futures ends with the job
+            pool.shutdown(wait=True, cancel_futures=True)
+    _pools.clear()
+
+
+@contextlib.contextmanager
+def _fresh_workers() -> Iterator[None]:
+    """Start local workers as fresh programs: each its own MPI job, not the caller's script.
+
+    Without the MPI launcher's environment a worker is a job of one process; without the
+    caller's ``__main__`` (the worker would run a script again, e.g. a demo, to import it) it
+    imports only this package.
+    """
+    import sys
+    import types
+
+    launcher = {k: v for k, v in os.environ.items() if k.startswith(("OMPI_", "PMIX_", "PMI_"))}
+    for k in launcher:
+        del os.environ[k]
+    main = sys.modules["__main__"]
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        yield
+    finally:
+        sys.modules["__main__"] = main
+        os.environ.update(launcher)
+
+
+def _form_all(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
+    """``("ok", run)`` or ``("error", exception)`` for each job, in the order of ``jobs``."""
+    from mpi4py import MPI
+
+    name, pool = executor()
+    if pool is None or (len(jobs) == 1 and name != "mpi4py.futures"):
+        comm = MPI.COMM_WORLD if name == "all ranks" else MPI.COMM_SELF
+        results = []
+        for case, model in jobs:
             try:
-                status, value = pickle.load(proc.stdout)
-            except EOFError:
-                _workers.remove(proc)
-                raise RuntimeError(f"forming worker failed (exit status {proc.wait()})") from None
-            if status == "error":
-                raise value
-            results[i] = value
+                results.append(("ok", _form(case, model, comm)))
+            except Exception as error:  # raised after the others
+                results.append(("error", error))
+        return results
+    from concurrent.futures import BrokenExecutor
+
+    options = _solver_options()
+    try:
+        with _fresh_workers():
+            futures = [pool.submit(_run, c, m, trusted(), options) for c, m in jobs]
+    except BrokenExecutor:  # a worker died since the last batch: a new pool
+        _shutdown()
+        name, pool = executor()
+        with _fresh_workers():
+            futures = [pool.submit(_run, c, m, trusted(), options) for c, m in jobs]
+    results, broken = [], False
+    for future in futures:  # in the order asked: the same gathering whichever finishes first
+        try:
+            results.append(future.result())
+        except Exception as error:  # a worker that died, a job that did not pickle
+            broken |= isinstance(error, BrokenExecutor)
+            results.append(("error", RuntimeError(f"forming worker failed: {error!r}")))
+    if broken:  # the next batch starts a new pool
+        _shutdown()
     return results
 
 
-_workers: list = []  # the persistent worker processes of _in_workers
-
-
-def _pool(n: int) -> list:
-    """``n`` live worker processes, started on first use and stopped at exit."""
-    import subprocess
-    import sys
-
-    _workers[:] = [p for p in _workers if p.poll() is None]
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
-    command = [sys.executable, "-c",
-               "from fenicsx_drape.diagnosis.forming_runs import _worker; _worker()"]
-    while len(_workers) < n:
-        _workers.append(subprocess.Popen(command, stdin=subprocess.PIPE,
-                                         stdout=subprocess.PIPE, env=env))
-    return _workers[:n]
-
-
-@atexit.register
-def _stop_workers() -> None:
-    for proc in _workers:
-        proc.stdin.close()
-        proc.wait()
-    _workers.clear()
-
-
-def _worker() -> None:
-    """Entry point of a worker process (:func:`_in_workers`): jobs until stdin closes."""
-    import pickle
-    import sys
-
-    jobs, result = sys.stdin.buffer, os.fdopen(os.dup(1), "wb")
-    os.dup2(2, 1)  # whatever the solver prints goes to stderr, not into the pickles
-    while True:
-        try:
-            case, model, trust = pickle.load(jobs)
-        except EOFError:
-            return
-        set_trusted(trust)
-        try:
-            reply = ("ok", _form(case, model))
-        except DrapeInputError as error:  # its subclasses may not unpickle: send the message
-            reply = ("error", DrapeInputError(str(error)))
-        except Exception as error:  # sent back and raised in the parent
-            reply = ("error", error)
-        try:
-            data = pickle.dumps(reply)
-        except Exception:
-            data = pickle.dumps(("error", RuntimeError(f"forming worker: {reply[1]!r}")))
-        result.write(data)
-        result.flush()
-
-
 def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
-    """Formed sheets (modelled parts) of ``(case, model)`` jobs: cached, new ones in parallel.
+    """Formed sheets (modelled parts) of ``(case, model)`` jobs: remembered, new ones at once.
 
-    With one MPI process the new runs go to :data:`WORKERS` worker processes; under
-    ``mpirun`` they run one after the other on all ranks.
+    The runs not in memory are looked up in the disk cache of :func:`execution`, the rest
+    formed by :func:`executor`'s processes and stored. A run that fails is raised (its
+    message naming the case and model) once the others are formed and kept.
     """
-    from mpi4py import MPI
-
     keys = [_key(case, model) for case, model in jobs]
     todo = {k: job for k, job in zip(keys, jobs) if k not in _cache}
+    store: RunStore | None = _settings["store"]
+    names = {}
+    if store is not None:
+        from fenicsx_drape.diagnosis.run_store import run_key
+
+        names = {k: run_key(k) for k in todo}
+        for k in list(todo):
+            found = store.get(names[k])
+            if found is not None:
+                _keep(k, found)
+                counts["from_disk"] += 1
+                del todo[k]
+    failed = []
     if todo:
-        comm = MPI.COMM_WORLD
-        if comm.size > 1 or WORKERS == 1 or len(todo) == 1:
-            results = [_form(c, m, comm) for c, m in todo.values()]
-        else:
-            results = _in_workers(list(todo.values()))
-        for k, (grid, stopped_mm, curves) in zip(todo, results):
-            if len(_cache) >= _CACHE_SIZE:
-                oldest = next(iter(_cache))
-                del _cache[oldest]
-                _stopped.pop(oldest, None)
-                _forces.pop(oldest, None)
-            _cache[k] = grid
-            _forces[k] = curves
-            if stopped_mm is not None:
-                _stopped[k] = stopped_mm
+        for (k, job), (status, value) in zip(todo.items(), _form_all(list(todo.values()))):
+            if status == "error":
+                failed.append((job, value))
+                continue
+            counts["formed"] += 1
+            _keep(k, value)
+            if store is not None:
+                store.put(names[k], *value)
+    if failed:
+        (case, model), error = failed[0]
+        raise _named(error, describe(case, model))
     return [_cache[k] for k in keys]
 
 
+def _named(error: Exception, run: str) -> Exception:
+    """``error`` with ``run`` (the case and model) in front of its message."""
+    if error.args and isinstance(error.args[0], str) and run not in error.args[0]:
+        error.args = (f"{run}: {error.args[0]}", *error.args[1:])
+    elif not error.args:
+        error.args = (run,)
+    return error
+
+
+def _keep(key: tuple, run: tuple[FormedGrid, float | None, dict]) -> None:
+    grid, stopped_mm, curves = run
+    if len(_cache) >= _CACHE_SIZE:
+        oldest = next(iter(_cache))
+        del _cache[oldest]
+        _stopped.pop(oldest, None)
+        _forces.pop(oldest, None)
+    _cache[key] = grid
+    _forces[key] = curves
+    if stopped_mm is not None:
+        _stopped[key] = stopped_mm
+
+
 def cached(case, model: Model) -> bool:
-    """Whether a run of ``(case, model)`` is in the cache (:func:`form_many` will not form it)."""
+    """Whether a run of ``(case, model)`` is in memory (:func:`form_many` will not form it)."""
     return _key(case, model) in _cache
 
 

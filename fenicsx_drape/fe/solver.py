@@ -114,6 +114,10 @@ class SolverOptions:
     # converged step (solver docstring); the residual, hence the solution, is unchanged.
     limit_geometric_stiffness: bool = True
     predictor: bool = True  # extrapolate the last increment, then let nodal terms project
+    # The tow bending's part of the Jacobian: "full" (its stencils), or "diagonal" (K's
+    # diagonal only: the Jacobian keeps a plain net's pattern; the residual, hence the
+    # solution, keeps the full term). A prototype of issue 39, point 5.
+    bending_jacobian: str = "full"
     # Extra SNES/KSP/PC options (those of the command line, fe.newton.set_petsc_options, win).
     petsc_options: dict = dataclasses.field(default_factory=dict)
 
@@ -121,6 +125,9 @@ class SolverOptions:
         for name in ("tows_per_mm", "snes_atol"):
             if not getattr(self, name) > 0:
                 raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be > 0")
+        if self.bending_jacobian not in ("full", "diagonal"):
+            raise DrapeInputError(f"solver option bending_jacobian = {self.bending_jacobian!r}: "
+                                  "choose from full, diagonal")
         if self.line_search not in LINE_SEARCHES:
             raise DrapeInputError(f"solver option line_search = {self.line_search!r}: choose "
                                   f"from {', '.join(LINE_SEARCHES)}")
@@ -212,7 +219,7 @@ class TrussProblem:
         if self._couplings:
             self._setup_couplings()
         self._bending = None
-        self._bending_in_A: tuple[PETSc.Mat, PETSc.Mat] | None = None
+        self._bending_in_A: tuple[PETSc.Mat, PETSc.Mat | PETSc.Vec] | None = None
         if options.tow_bending_EI_Nmm2 > 0 and (sheet.grid is not None or sheet.plies):
             self._setup_bending()
         self._setup_newton()
@@ -356,6 +363,8 @@ class TrussProblem:
         the Jacobian gets the union of both patterns, allocated once.
         """
         self._bending = TowBending(self, self.options.tow_bending_EI_Nmm2)
+        if self.options.bending_jacobian == "diagonal":  # the form's pattern is enough
+            return
         fem_petsc.assemble_matrix(self._A, self.jacobian_form)
         self._A.assemble()
         A = self._A.duplicate(copy=True)
@@ -372,6 +381,11 @@ class TrussProblem:
         is a plain pass over the values: ten times faster than adding it on its own pattern.
         """
         source = self._bending.constrained_matrix
+        if self.options.bending_jacobian == "diagonal":
+            if self._bending_in_A is None or self._bending_in_A[0] is not source:
+                self._bending_in_A = (source, source.getDiagonal())
+            A.setDiagonal(self._bending_in_A[1], addv=PETSc.InsertMode.ADD_VALUES)
+            return
         if self._bending_in_A is None or self._bending_in_A[0] is not source:
             same = A.duplicate(copy=False)
             same.axpy(1.0, source, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)

@@ -1,0 +1,267 @@
+"""The forming runs at scale: every core through concurrent.futures, and remembered on disk.
+
+The runs are those of the small octagon case of ``test_forming_case_diagnosis.py`` (39
+nodes, a few seconds each). The same runs on 1, 2 and 3 worker processes (and under
+``mpi4py.futures``) give the same sheets to the last digit, in the order asked; a run that
+fails comes back as its error, naming its case and model, after the others; a second
+``compare`` of a bundle with its cache forms nothing; a damaged cache entry or one of another
+code is not used.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fenicsx_drape.cli import main
+from fenicsx_drape.diagnosis import forming_runs as runs
+from fenicsx_drape.diagnosis import run_store
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.forming.running.post import FormedGrid
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).parent))
+from test_forming_case_diagnosis import MESHED, STL, write_case  # noqa: E402
+
+
+@pytest.fixture
+def dolfinx():
+    return pytest.importorskip("dolfinx")
+
+
+@pytest.fixture
+def fresh_memory():
+    """No run in memory before or after the test (the disk cache is the test's own)."""
+    runs._cache.clear()
+    yield
+    runs._cache.clear()
+
+
+def octagon_jobs(folder: Path):
+    from fenicsx_drape.forming.case.format import load_case
+    from fenicsx_drape.model import default_model
+
+    case = load_case(write_case(folder / "part"))
+    return [(case, default_model().with_parameters(mu=mu)) for mu in (0.2, 0.3, 0.45)]
+
+
+@pytest.mark.slow
+@pytest.mark.skip_in_parallel
+def test_the_same_runs_on_one_two_and_three_workers_and_a_failed_run_named(
+        tmp_path, dolfinx, fresh_memory):
+    from fenicsx_drape.forming.case.format import load_case
+
+    jobs = octagon_jobs(tmp_path)
+    sheets = {}
+    for workers in (1, 2, 3):
+        runs._cache.clear()
+        with runs.execution(workers=workers):
+            assert runs.executor()[0] == ("this process" if workers == 1 else "processes")
+            sheets[workers] = runs.form_many(jobs)
+    for workers in (2, 3):  # bit for bit, in the order asked
+        for a, b in zip(sheets[1], sheets[workers]):
+            assert np.array_equal(a.x, b.x, equal_nan=True)
+            assert np.array_equal(a.X, b.X, equal_nan=True)
+    # The holder's friction draws the sheet in differently: the order is the jobs' own.
+    first, _, last = sheets[1]
+    assert np.nanmax(np.abs(first.x - last.x)) > 1e-3
+
+    # A case whose punch surface is empty cannot run: its error names it, the others are kept.
+    write_case(tmp_path / "plate", MESHED)
+    (tmp_path / "plate" / "punch.stl").write_text(STL)
+    plate = load_case(tmp_path / "plate" / "case.toml")
+    runs._cache.clear()
+    with runs.execution(workers=2), pytest.raises(Exception) as info:
+        runs.form_many([jobs[0], (plate, jobs[1][1]), jobs[2]])
+    assert "forming run of case 'plate'" in str(info.value) and "mu = 0.3" in str(info.value)
+    assert runs.cached(*jobs[0]) and runs.cached(*jobs[2]) and not runs.cached(plate, jobs[1][1])
+
+
+def test_workers_and_cache_options_are_checked(tmp_path, monkeypatch, capsys):
+    with pytest.raises(DrapeInputError, match="--workers 0"):
+        with runs.execution(workers=0):
+            pass
+    monkeypatch.setenv("DRAPE_WORKERS", "two")
+    with pytest.raises(DrapeInputError, match="DRAPE_WORKERS='two'"):
+        with runs.execution():
+            pass
+    monkeypatch.setenv("DRAPE_WORKERS", "3")
+    assert runs.default_workers() == 3
+    monkeypatch.delenv("DRAPE_WORKERS")
+    assert runs.default_workers() == len(os.sched_getaffinity(0))
+    (tmp_path / "file").write_text("")
+    with pytest.raises(DrapeInputError, match="not a folder"):
+        runs.execution(cache=tmp_path / "file").__enter__()
+    # On the command line: exit status 2, before anything runs.
+    with pytest.raises(SystemExit) as info:
+        main(["compare", str(tmp_path), "--out", str(tmp_path / "o"), "--workers", "0"])
+    assert info.value.code == 2
+    assert "--workers: '0' is not a whole number" in capsys.readouterr().err
+    monkeypatch.setenv("DRAPE_CACHE", str(tmp_path / "c"))
+    assert run_store.default_folder() == tmp_path / "c"
+    monkeypatch.setenv("DRAPE_CACHE", "off")
+    assert run_store.default_folder() is None
+    monkeypatch.delenv("DRAPE_CACHE")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert run_store.default_folder() == tmp_path / "xdg" / "fenicsx-drape" / "runs"
+
+
+def made_up_run():
+    X = np.stack(np.meshgrid(np.arange(3.0), np.arange(4.0), [0.0], indexing="ij"), -1)[:, :, 0]
+    x = X + 0.5
+    x[0, 0] = np.nan
+    return FormedGrid(X, x, False, ("x",)), 41.5, {"time_s": np.arange(3.0),
+                                                  "punch": np.array([1.0, 2.0, 4.0])}
+
+
+def test_a_stored_run_comes_back_whole_and_a_damaged_one_or_another_codes_never(
+        tmp_path, monkeypatch):
+    store = runs_store = run_store.RunStore(tmp_path / "cache")
+    grid, stopped, curves = made_up_run()
+    key = run_store.run_key(["a case", "a model"])
+    assert key != run_store.run_key(["a case", "another model"])
+    store.put(key, grid, stopped, curves)
+    back, back_stopped, back_curves = store.get(key)
+    assert np.array_equal(back.x, grid.x, equal_nan=True) and np.array_equal(back.X, grid.X)
+    assert (back.quarter, back.symmetry, back_stopped) == (False, ("x",), 41.5)
+    assert back_curves.keys() == curves.keys()
+    assert all(np.array_equal(back_curves[k], curves[k]) for k in curves)
+    # A run that reached full travel, of a quarter: no stopped travel, both planes.
+    full = FormedGrid(grid.X, grid.x, True)
+    store.put(key, full, None, {})
+    again = store.get(key)
+    assert again[0].symmetry is None and again[0].planes == ("x", "y") and again[1] is None
+
+    # One byte changed in the stored bytes: not used, and dropped.
+    data = bytearray(runs_store._cache.get(key))
+    data[-100] ^= 0xFF
+    runs_store._cache.set(key, bytes(data))
+    assert store.get(key) is None and runs_store._cache.get(key) is None
+    runs_store._cache.set(key, b"not a run")
+    assert store.get(key) is None
+    # The entry of another code version (same name): not used.
+    store.put(key, grid, stopped, curves)
+    monkeypatch.setattr(run_store, "_code", ["another code"])
+    assert store.get(key) is None
+    # Another code's runs have other names: the same inputs, another key.
+    assert run_store.run_key(["a case", "a model"]) != key
+    store.close()
+
+    # A database that cannot be opened: a warning, and runs are formed as without a cache.
+    shutil.rmtree(tmp_path / "cache")
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / "cache.db").write_bytes(b"garbage" * 1000)
+    damaged = run_store.RunStore(tmp_path / "cache")
+    assert damaged.get(key) is None
+    damaged.put(key, grid, stopped, curves)
+    assert len(damaged) == 0
+
+
+@pytest.mark.slow
+@pytest.mark.skip_in_parallel
+def test_a_second_compare_forms_nothing_and_reports_the_same(tmp_path, dolfinx, fresh_memory,
+                                                             capsys):
+    """The README's loop repeated: compare, then compare again, with the runs on disk."""
+    from fenicsx_drape.forming.case.format import load_case
+    from fenicsx_drape.forming.running.outputs import form_case
+
+    case = load_case(write_case(tmp_path / "part"))
+    form_case(tmp_path / "formed", case, fields=False, pictures=False)
+    bundle, cache = tmp_path / "formed" / "bundle", tmp_path / "runs"
+    reports = []
+    for k in range(2):
+        runs._cache.clear()
+        before = dict(runs.counts)
+        assert main(["compare", str(bundle), "--out", str(tmp_path / f"c{k}"),
+                     "--cache", str(cache), "--workers", "2"]) == 0
+        formed = runs.counts["formed"] - before["formed"]
+        read = runs.counts["from_disk"] - before["from_disk"]
+        reports.append((formed, read, (tmp_path / f"c{k}" / "compare.json").read_text()))
+    (formed, read, first), (formed_again, read_again, second) = reports
+    assert formed > 0 and read == 0
+    assert formed_again == 0 and read_again == formed
+    assert json.loads(first)["per_test"] == json.loads(second)["per_test"]
+
+
+@pytest.mark.slow
+@pytest.mark.skip_in_parallel
+def test_the_same_report_whichever_executor_and_workers(tmp_path, dolfinx):
+    """compare.json of a bundle: one process, two and three workers, mpi4py.futures."""
+    from fenicsx_drape.forming.case.format import load_case
+    from fenicsx_drape.forming.running.outputs import form_case
+    from fenicsx_drape.model import default_model
+
+    case = load_case(write_case(tmp_path / "part"))
+    form_case(tmp_path / "formed", case, default_model().with_parameters(mu=0.35),
+              fields=False, pictures=False)
+    bundle = tmp_path / "formed" / "bundle"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    compare = ["-m", "fenicsx_drape", "compare", str(bundle), "--no-cache"]
+    commands = {f"{n} workers": [sys.executable, *compare, "--workers", str(n)]
+                for n in (1, 2, 3)}
+    if shutil.which("mpiexec"):
+        commands["mpi4py.futures"] = ["mpiexec", "-n", "3", sys.executable, "-m",
+                                      "mpi4py.futures", *compare]
+    reports = {}
+    for label, command in commands.items():
+        out = tmp_path / label.replace(" ", "_")
+        subprocess.run([*command, "--out", str(out)], check=True, env=env, timeout=600,
+                       capture_output=True)
+        reports[label] = json.loads((out / "compare.json").read_text())
+        reports[label].pop("provenance", None)
+    first = reports.pop("1 workers")
+    assert first["per_test"] and all(r == first for r in reports.values())
+
+
+@pytest.mark.skip_in_parallel
+def test_a_worker_that_dies_fails_its_runs_and_the_next_batch_has_a_new_pool(tmp_path, dolfinx,
+                                                                              fresh_memory):
+    import signal
+
+    jobs = octagon_jobs(tmp_path)[:2]
+    with runs.execution(workers=2):
+        _, pool = runs.executor()
+        with runs._fresh_workers():
+            futures = [pool.submit(signal.pause) for _ in range(2)]  # two workers, waiting
+        for process in list(pool._processes.values()):
+            process.kill()
+        assert all("terminated abruptly" in str(f.exception(timeout=60)) for f in futures)
+        # The broken pool is replaced: the runs are formed.
+        assert len(runs.form_many(jobs)) == 2 and runs.executor()[1] is not pool
+
+
+@pytest.mark.skip_in_parallel
+def test_the_petsc_options_are_in_a_runs_key_and_go_with_its_job(tmp_path, dolfinx):
+    from petsc4py import PETSc
+
+    from fenicsx_drape.fe.newton import SOLVER_PREFIXES, set_petsc_options
+
+    assert runs.USER_OPTIONS == (*SOLVER_PREFIXES, "log_")
+    case, model = octagon_jobs(tmp_path)[0]
+    db = PETSc.Options()
+    names = ("snes_linesearch_order", "ksp_converged_reason")
+    assert not any(db.hasName(n) for n in names)
+    before, plain = dict(runs._solver_options()), runs._key(case, model)
+    db["drape_truss_99_snes_atol"] = "1e-3"  # a problem's own option: not the user's
+    try:
+        assert runs._key(case, model) == plain
+        set_petsc_options("-snes_linesearch_order 2 -ksp_converged_reason")
+        given = runs._solver_options()
+        assert dict(given) == {**before, "snes_linesearch_order": "2",
+                               "ksp_converged_reason": ""}
+        assert runs._key(case, model) != plain
+    finally:
+        for name in (*names, "drape_truss_99_snes_atol"):
+            db.delValue(name)
+    assert runs._key(case, model) == plain
+    # A worker sets the job's options and drops those of its last job that are not given.
+    status, _ = runs._run(None, model, False, given)  # no case: fails after the options
+    assert status == "error" and db.getString("snes_linesearch_order") == "2"
+    assert db.hasName("ksp_converged_reason")
+    runs._run(None, model, False, tuple(before.items()))
+    assert not any(db.hasName(n) for n in names)
