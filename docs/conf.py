@@ -34,6 +34,7 @@ exclude_patterns = [
     "**/__pycache__",
     "demos/study_*.py",
     "demos/make_demo_bundle.py",
+    "demos/make_lab_bundle.py",
     "demos/user_laws",
     "demos/bundles",
     "demos/results",

@@ -83,10 +83,11 @@ def quarter():
 
 @pytest.fixture(scope="module")
 def full():
-    # The default force share ("model") gives the quarter's own nodes the whole F: the full
-    # sheet with the same force per node carries 4F.
-    return run_case(load_case("hemisphere", **COARSE, symmetry=[], holder_force_N=4 * 133.0),
-                          comm=MPI.COMM_SELF)
+    # The case's force share ("model") gives the quarter's own nodes the whole F: the full
+    # sheet, pressed as the quarter is, carries 4F (with_overrides doubles it per plane).
+    full = load_case("hemisphere", **COARSE, symmetry=[])
+    assert full.holder.force_N == 4 * 133.0
+    return run_case(full, comm=MPI.COMM_SELF)
 
 
 @pytest.mark.skip_in_parallel

@@ -237,7 +237,9 @@ def test_a_cut_back_does_not_make_the_formed_part_jump_with_the_set_up():
     from fenicsx_drape.model import default_model
 
     model = default_model()
-    stated = with_overrides(load_case("hemisphere", cell_mm=20.0), symmetry=[])
+    # (the force shared over the whole sheet's own nodes, as the premise was measured)
+    stated = with_overrides(load_case("hemisphere", cell_mm=20.0), symmetry=[],
+                            holder_force_share="model")
     cases = [with_overrides(stated, blank_offset_mm=[x, -2.0]) for x in (6.0, 6.03, 6.06)]
     middle = run_case(cases[1], model, forming_options(model))
     assert middle.cutbacks >= 1, "the premise: the middle run cuts a step back"
@@ -290,8 +292,11 @@ def test_a_whole_blank_on_tools_of_revolution_moves_smoothly_with_the_ply_angle(
     stated = load_case(hemisphere, cell_mm=20.0, step_mm=4.0)
     a, b = form_many([(with_overrides(stated, ply_angle_deg=θ), default_model())
                       for θ in (4.0, 4.006)])
-    P = 0.9 * a.X[a.present][:, :2]
-    assert np.sqrt(np.mean((a.sample(P) - b.sample(P)) ** 2)) < 0.01  # mm
+    P = a.X[a.present][:, :2]  # a's nodes; b's net is turned by 0.006°: its edge cells differ
+    d = a.sample(P, outside="nan") - b.sample(P, outside="nan")
+    ok = np.isfinite(d[:, 0])
+    assert ok.sum() > 0.8 * len(P)  # the nodes of both nets (121 of 145)
+    assert np.sqrt(np.mean(d[ok] ** 2)) < 0.01  # mm
     for g in (a, b):
         d = g.x[g.present] - g.X[g.present]
         np.testing.assert_allclose(d[:, :2].mean(axis=0), 0.0, atol=1e-6)
