@@ -360,6 +360,7 @@ def test_diagnose_names_a_hidden_effect_on_a_generic_case(tmp_path, dolfinx):
     test = fc.synthetic_case_test(default_model(), case, sd_mm=0.3, seed=3, full=True)
     fc.write_case_bundle("hidden", [test], tmp_path / "bundle")
     bundle = load_bundle(tmp_path / "bundle", read_case=case_for_test)
+    # Two candidates (no set-up stage), for time: the default path is test_lab_user_path.py's.
     report = diagnose(bundle, default_model().without_effects("tow_buckling"),
                       candidates=["tow_buckling", "tool_friction"])
     assert report["missing_effect"] == "tow_buckling"

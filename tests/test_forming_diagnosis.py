@@ -192,6 +192,8 @@ def test_mixed_bundle_reports_coupons_and_forming_and_names_the_forming_effect(d
         formed = fc.synthetic_forming_test(truth, seed=14, sd_mm=0.3, cell_mm=runs.SCREEN_CELL_MM,
                                            holder_force_N=LIGHT_HOLDER_N)
         bundle = Bundle(name="mixed", tests=(*coupons.tests, formed))
+        # One candidate (and so no set-up stage), for time: the default path on forming
+        # bundles is run by test_lab_user_path.py (the README's command) and the set-up tests.
         report = diagnose(bundle, default_model(), candidates=["tool_friction"])
     ids = {t.id for t in bundle.tests}
     assert set(report["baseline"]["error"]["per_test"]) == ids  # the report covers all tests

@@ -50,6 +50,8 @@ def test_a_hidden_effect_is_named_from_lab_data_with_a_wild_row_listed(lab_bundl
     from fenicsx_drape.diagnosis.diagnose import diagnose
     from fenicsx_drape.model import default_model
 
+    # One candidate (no set-up stage): this test is about the wild row; the default path on
+    # lab bundles is the README's command in test_lab_user_path.py.
     report = diagnose(lab_bundle, default_model().without_effects("tow_buckling"),
                       candidates=["tow_buckling"])
     # The wild row is listed (against a baseline this far off, a few scan points on its
@@ -68,6 +70,7 @@ def test_the_model_that_formed_it_stays_null(lab_bundle):
     from fenicsx_drape.diagnosis.diagnose import diagnose
     from fenicsx_drape.model import default_model
 
+    # One candidate, as above; every kind alone on the default path: test_lab_user_path.py.
     report = diagnose(lab_bundle, default_model(), candidates=["tool_friction"])
     assert report["missing_effect"] is None
     assert report["baseline"]["error"]["normalised"] < 1.5

@@ -335,6 +335,8 @@ def test_a_set_up_error_and_a_missing_effect_are_both_named():
 
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
     bundle = force_and_friction(truth, seed=12)
+    # The one set-up and the one effect that act alike here (the point of the test); every
+    # candidate on the default path: test_lab_user_path.py, the README's command.
     report = diagnose(bundle, default_model(), candidates=["tool_friction"],
                       setup=["holder_force_N"])
     assert report["setup_error"] == "holder_force_N"
