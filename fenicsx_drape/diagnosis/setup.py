@@ -607,9 +607,7 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                               "bundle"} for n in names]
         return out
     test0 = tests[0]
-    stated_runs = _Runs(tests, model, None)
-    base_values = stated_runs.values([np.zeros(0)])[0]
-    base_cmp = stated_runs.compare(base_values)
+    base_cmp = _stated(tests, model)
     if rules.adequate is not None:
         # Resolution before the set-up, too: a measurement whose residual at the stated
         # set-up is the net's own error is no evidence of a set-up error.
@@ -625,9 +623,7 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                     "stated set-up (resolution)")} for n in names]
                 return out
             test0 = tests[0]
-            stated_runs = _Runs(tests, model, None)
-            base_values = stated_runs.values([np.zeros(0)])[0]
-            base_cmp = stated_runs.compare(base_values)
+            base_cmp = _stated(tests, model)
     base_ho = normalised_error(base_cmp)  # nothing is fitted: held-out = the error
     say(f"set-up as stated: normalised error {base_ho:.3g} on {len(tests)} forming test(s)")
     out.update(stated_error=error_record(base_cmp), stated_heldout_normalised=base_ho,
@@ -745,6 +741,12 @@ def _model_note(tried: list, stated_ho: float) -> str | None:
             "whole blank on frictionless tools may slide on them as a whole once the holder's "
             "friction yields); candidates on it are judged against the stated set-up on the "
             "same model too (evidence_on_model)")
+
+
+def _stated(tests: Sequence[Test], model: Model):
+    """The comparisons of the stated set-up with the tests (nothing fitted)."""
+    runs = _Runs(tests, model, None)
+    return runs.compare(runs.values([np.zeros(0)])[0])
 
 
 def _tied_mu(entry: dict[str, Any], c: dict[str, Any], test: Test, model: Model):
