@@ -146,3 +146,39 @@ def test_a_damaged_lab_table_is_bad_input_with_its_file_and_line(tmp_path, capsy
     assert where in capsys.readouterr().err
     assert not (tmp_path / "REPORT.json").exists()
 
+
+
+@pytest.mark.parametrize("kind, parameter, truth", [
+    ("outline", "blank_offset_mm", [0.0, 6.0]),
+    pytest.param("shear_points", "ply_angle_deg", 5.0, marks=pytest.mark.bench),
+    pytest.param("surface", "blank_offset_mm", [0.0, 6.0], marks=pytest.mark.bench),
+])
+def test_a_set_up_is_read_off_one_lab_kind_and_sized_with_its_sd(tmp_path, kind, parameter,
+                                                                  truth):
+    """A blank off-centre from its edge or its scan, a turned ply from shear lines.
+
+    The set-up stage alone, on its one parameter (``fit_setup(parameters=[...])``), on the
+    truth's own case and net: each kind's reading of its parameter is sized here; the default
+    path that runs every candidate on every kind, on a lab's copy, is the README's command,
+    tested above. Measured: (−0.01, 6.01) ± 0.06 mm from the edge, (0.10, 6.13) ±
+    (0.04, 0.05) mm from the scan, 5.38 ± 0.38° from the shear lines. Before the punch's first
+    contact stuck (``forming.terms.stick``) the whole sheet slid and neither was read.
+    """
+    pytest.importorskip("dolfinx")
+    import numpy as np
+
+    from fenicsx_drape.diagnosis.diagnose import setup_rules
+    from fenicsx_drape.diagnosis.setup import fit_setup
+    from fenicsx_drape.forming.case.format import case_for_test
+    from fenicsx_drape.measurements.bundle import load_bundle
+    from fenicsx_drape.model import default_model
+
+    folder = make_lab_bundle.make(tmp_path / "bundle", seed=13, measurements=[kind],
+                                  cell_mm=20.0, step_mm=2.0, stl=False, **{parameter: truth})
+    stage = fit_setup(load_bundle(folder, read_case=case_for_test), default_model(),
+                      setup_rules(), parameters=[parameter])
+    assert stage["setup_error"] == parameter
+    (entry,) = stage["setup"]
+    fitted, sd = (np.atleast_1d(np.asarray(v, float)) for v in (entry["fitted"], entry["sd"]))
+    # within 3 sd, or a quarter of the cell's shear-free slack (the scan's 0.13 mm)
+    assert np.all(np.abs(fitted - np.atleast_1d(truth)) <= np.maximum(3.0 * sd, 0.25)), entry

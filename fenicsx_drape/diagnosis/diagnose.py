@@ -53,11 +53,13 @@ The procedure follows the diagnosis contract of ``docs/measurements.md``:
    says which net would resolve it.
 
 **The stages, in the order** :func:`diagnose` **runs them**, each a function with its inputs
-and its result: the set-up stage (:func:`~fenicsx_drape.diagnosis.setup.setup_stage`, on the
-forming tests as given: the stated set-up's own fits are its baseline, and the best set-up is
-applied to the bundle for what follows); prepare (:func:`_prepare`: each test's noise from its
-kind's one noise function, its regions, the held-out folds); the baseline with its outliers
-left out (:func:`_baseline_stage`); resolution
+and its result: the data check (:func:`~fenicsx_drape.diagnosis.data_check.data_check`);
+prepare (:func:`_prepare`: each test's noise from its kind's one noise function, its regions,
+the held-out folds); the baseline fitted, with its outliers left out (:func:`_baseline_stage`);
+the set-up stage on the bundle less its outliers
+(:func:`~fenicsx_drape.diagnosis.setup.setup_stage`: the stated set-up's own fits are its
+reference; the best set-up, when one is significant, is applied and the baseline refitted at
+it, :func:`_at_setup`); the baseline's held-out error (:func:`_with_heldout`); resolution
 (:func:`~fenicsx_drape.diagnosis.resolution.check_resolution`); the effects, one candidate at a
 time (:func:`_try_effect`); the report and its decision (:func:`_report`). The confirmation on
 a finer net is ``drape diagnose --confirm-cell-mm`` (:func:`confirm`).
@@ -246,8 +248,8 @@ def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
 
 
 def _with_setup_refitted(stage: dict[str, Any], model: Model, data: _Data, noise,
-                         outliers: Sequence[dict[str, Any]], last: dict[str, Any] | None,
-                         say: Progress) -> tuple[dict[str, Any] | None, _Data]:
+                         last: dict[str, Any] | None, say: Progress
+                         ) -> tuple[dict[str, Any] | None, _Data]:
     """The set-up stage's best parameter fitted again with ``model`` (a candidate's refit).
 
     From ``last`` (the previous round's record) or the set-up fitted alone. Returns the
@@ -264,9 +266,8 @@ def _with_setup_refitted(stage: dict[str, Any], model: Model, data: _Data, noise
     p = refit_setup(original, name, before, model, say)
     if np.allclose(p, before):
         return None, data
+    # The stage's bundle is the baseline's, its outliers already left out.
     new = _prepare(declare_noise(corrected(original, name, p, stated_model), noise))
-    if outliers:
-        new = _prepare(_without_outliers(new.bundle, outliers))
     record = {"parameter": name, "fitted": fitted_value(original, name, p, stated_model),
               "fitted_alone": fitted_value(original, name, best["p"], stated_model),
               "p": [float(v) for v in p]}
@@ -423,14 +424,17 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     # 0. Data before physics (spec version 4): each measurement checked against its case
     # before any fit; a suspect one is named first in the conclusion, no effect on it.
     suspects = data_check(bundle)
-    # 1. Set-up before physics (spec version 3): the best set-up fitted, then the effects.
-    # It runs on the bundle as given (the stated set-up's own fits are its baseline).
-    stage, bundle = setup_stage(bundle, model, SETUP_PARAMETERS if setup is None
-                                and candidates is None else setup, setup_rules(), say)
-    # 2. Prepare: each test's noise from its kind's one noise function, regions, folds.
+    # 1. Prepare: each test's noise from its kind's one noise function, regions, folds.
     data = _prepare(declare_noise(bundle, model.noise))
-    # 3. Baseline, and 4. outliers left out of it.
+    # 2. Baseline, and 3. its outliers left out (one row never decides a diagnosis).
     base = _baseline_stage(data, model, bundle.path, say)
+    # 4. Set-up before physics (spec version 3), on the bundle less its outliers: the model
+    # as stated against the set-up as stated; the best set-up is applied for what follows.
+    stage, fixed = setup_stage(base.data.bundle, model, SETUP_PARAMETERS if setup is None
+                               and candidates is None else setup, setup_rules(), say)
+    if fixed is not base.data.bundle:
+        base = _at_setup(base, _prepare(declare_noise(fixed, model.noise)), model, say)
+    base = _with_heldout(base, say)
     # 5. Resolution before physics (spec version 4): the net's own error on each measurement.
     checked = check_resolution(base.data.tests, base.model, base.compared, ADEQUATE, say)
     resolved = explained(checked)
@@ -457,7 +461,7 @@ class _Base:
     data: _Data  # the bundle compared (without the outliers' rows)
     model: Model  # fitted
     compared: list[Comparison]
-    heldout: list[Comparison]  # every row predicted by the fold that held it out
+    heldout: list[Comparison]  # every row predicted by the fold that held it out (last)
     outliers: list[dict[str, Any]]
     error_with_outliers: dict[str, Any]
     optimiser: dict[str, Any]
@@ -465,14 +469,12 @@ class _Base:
 
 
 def _baseline_stage(data: _Data, model: Model, path, say: Progress) -> _Base:
-    """The model as given fitted to the bundle, its outliers left out, its held-out error."""
+    """The model as given fitted to the bundle, and its outliers left out (refitted)."""
     say(f"baseline ({', '.join(model.effects) or 'no effects'}): fitting (global stage)")
     details: dict[str, Any] = {}
-    baseline = _fit(data.bundle, model, max_iterations=BASELINE_ITERATIONS, from_features=True,
-                    details=details)
+    baseline, compared = _baseline_fit(data, model, details)
     optimiser = optimiser_record(details.get("coupons"))
     say(f"  {optimiser['statement']}")
-    compared = data.compare(simulate(data.tests, baseline))
     # Bad and odd rows (spec version 3): one row never decides a diagnosis. The rows beyond
     # OUTLIER_SD robust sd after the fit are listed and left out; the baseline is refitted.
     outliers = find_outliers(compared, data.tests, path)
@@ -482,13 +484,35 @@ def _baseline_stage(data: _Data, model: Model, path, say: Progress) -> _Base:
             + ", ".join(f"{o['file']}:{o['line']}" for o in outliers[:5])
             + "): left out, baseline refitted")
         data = _prepare(_without_outliers(data.bundle, outliers))
-        baseline = _fit(data.bundle, model, max_iterations=BASELINE_ITERATIONS,
-                        from_features=True, details=details)
-        compared = data.compare(simulate(data.tests, baseline))
-    say(f"  normalised error {normalised_error(compared):.3g}; held-out folds")
-    heldout = data.compare(_heldout(data, baseline, say))
+        baseline, compared = _baseline_fit(data, model, details)
+    say(f"  normalised error {normalised_error(compared):.3g}")
+    return _Base(data, baseline, compared, [], outliers, error_with, optimiser, details)
+
+
+def _baseline_fit(data: _Data, model: Model, details: dict[str, Any]
+                  ) -> tuple[Model, list[Comparison]]:
+    fitted = _fit(data.bundle, model, max_iterations=BASELINE_ITERATIONS, from_features=True,
+                  details=details)
+    return fitted, data.compare(simulate(data.tests, fitted))
+
+
+def _at_setup(base: _Base, data: _Data, model: Model, say: Progress) -> _Base:
+    """The baseline refitted on the bundle with the set-up stage's best set-up applied."""
+    say("baseline at the fitted set-up: fitting")
+    details: dict[str, Any] = {}
+    fitted, compared = _baseline_fit(data, model, details)
+    say(f"  normalised error {normalised_error(compared):.3g}")
+    return dataclasses.replace(base, data=data, model=fitted, compared=compared,
+                               optimiser=optimiser_record(details.get("coupons")),
+                               details=details)
+
+
+def _with_heldout(base: _Base, say: Progress) -> _Base:
+    """The baseline's held-out error: every row predicted by the fold that held it out."""
+    say("baseline: held-out folds")
+    heldout = base.data.compare(_heldout(base.data, base.model, say))
     say(f"  held-out normalised error {normalised_error(heldout):.3g}")
-    return _Base(data, baseline, compared, heldout, outliers, error_with, optimiser, details)
+    return dataclasses.replace(base, heldout=heldout)
 
 
 def _try_effect(name: str, model: Model, base: _Base, stage: dict[str, Any] | None,
@@ -530,7 +554,7 @@ def _try_effect(name: str, model: Model, base: _Base, stage: dict[str, Any] | No
         alone = (refit, after)
         for _ in range(SETUP_ROUNDS):
             again, data_c = _with_setup_refitted(stage, refit, data_c, model.noise,
-                                                 base.outliers, joint, say)
+                                                 joint, say)
             if again is None:
                 break
             joint = again

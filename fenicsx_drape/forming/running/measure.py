@@ -165,7 +165,8 @@ def shear_at_flat(grid: FormedGrid, flat_mm: np.ndarray) -> np.ndarray:
     """
     g = grid.full()
     field = np.repeat(g.shear_nodes()[..., None], 3, axis=-1)
-    return FormedGrid(g.X, field, False).sample(np.asarray(flat_mm, float)[:, :2])[:, 0]
+    return FormedGrid(g.X, field, False).sample(np.asarray(flat_mm, float)[:, :2],
+                                                outside="nan")[:, 0]
 
 
 def shear_at_formed(grid: FormedGrid, points: np.ndarray,

@@ -1,0 +1,90 @@
+"""The punch's first point of contact sticks: a sheet without symmetry planes stays well-posed.
+
+On the paper's frictionless tools a sheet that no symmetry plane holds has a mode that costs
+almost nothing: it slides over the punch as a whole (on a hemisphere, a turn about the
+sphere's centre), while the holder's eq. 1 bars, sliding at their yield force, resist the
+draw-in on every side alike. Once they yield, the side that loses a node from under the holder
+pulls less, the sheet moves away from it, and that side draws in more: a symmetric part formed
+whole slides by millimetres one way or the other, decided by round-off (measured on
+``meshes/octagon``, a half model free in y, at 300 N: a lab's STL copy of the tools, within
+0.04 mm of them, moved the sheet's centre 9.5 mm over the punch). Any tool friction removes
+the mode (μ_t = 0.01 brings the copy within 0.3 mm of the closed form); a lab's prepreg
+sticks where the punch first presses it.
+
+This term is that stick, and only that: the sheet's node that touches the punch first (the
+deepest at the end of the first step with contact, one node for the whole sheet) is held to
+the punch's material point under it, in the punch's tangent plane at that moment, by a
+linear spring of the contact stiffness k,
+
+    f = −k P_c (x − x_c − Δx_punch),   K = k P_c,   P_c = I − n_c⊗n_c.
+
+Where a symmetric part has its apex on its symmetry planes the node does not slide anyway
+(a quarter's corner is fixed by them), so the forming of a symmetric part is unchanged; the
+stick removes the sliding mode only, and no draw-in (the rest of the sheet slides on the
+punch as before). With tool friction (``tool_friction``) the point sticks anyway; the term
+stays, so that results move smoothly as μ_t goes to 0.
+"""
+
+from __future__ import annotations
+
+from mpi4py import MPI
+
+import numpy as np
+
+
+class ApexStick:
+    """The punch's first point of contact held to the punch in its tangent plane (NodalTerm).
+
+    Args:
+        tool: the punch (``gap(x, t)`` and ``displacement(x, t0, t1)``).
+        stiffness_N_per_mm: the spring's stiffness ``k`` (the contact penalty's).
+    """
+
+    def __init__(self, tool, stiffness_N_per_mm: float) -> None:
+        self.tool = tool
+        self.k = float(stiffness_N_per_mm)
+        self.node: int | None = None  # local index, on the rank that owns it
+
+    def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
+        """Ownership and the communicator (the node is chosen across ranks)."""
+        self.owned = np.asarray(owned, dtype=bool)
+        self.comm = comm
+        self.chosen = False
+        self._trial: tuple[np.ndarray, float] | None = None
+
+    def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """The spring's force (N) and stiffness (N/mm) at positions ``x`` (zero before contact)."""
+        n = len(x)
+        f, K = np.zeros((n, 3)), np.zeros((n, 3, 3))
+        self._trial = (np.array(x, dtype=float), t)
+        if self.node is not None:
+            i = self.node
+            d = x[i] - self.x_c - self.tool.displacement(x[i:i + 1], self.t_c, t)[0]
+            f[i] = -self.k * self.P @ d
+            K[i] = self.k * self.P
+        return f, K
+
+    def commit(self) -> None:
+        """After the first step with contact: choose the deepest node and fix its anchor."""
+        if self.chosen or self._trial is None:
+            return
+        x, t = self._trial
+        mine = np.flatnonzero(self.owned)
+        phi = self.tool.gap(x[mine], t).phi if len(mine) else np.zeros(0)
+        deepest = (float(phi.min()), self.comm.rank if self.comm is not None else 0) \
+            if len(mine) else (np.inf, -1)
+        best = self.comm.allreduce(deepest, op=MPI.MIN) if self.comm is not None else deepest
+        if not best[0] <= 0.0:
+            return  # no contact yet
+        self.chosen = True
+        if best[1] != (self.comm.rank if self.comm is not None else 0):
+            return
+        i = int(mine[np.argmin(phi)])
+        g = self.tool.gap(x[i:i + 1], t)
+        n_c = g.normal[0] / np.linalg.norm(g.normal[0])
+        self.node, self.x_c, self.t_c = i, x[i].copy(), t
+        self.P = np.eye(3) - np.outer(n_c, n_c)
+
+    def revert(self) -> None:
+        """Forget the trial positions of a step that is cut back."""
+        self._trial = None
