@@ -430,8 +430,10 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     base = _baseline_stage(data, model, bundle.path, say)
     # 4. Set-up before physics (spec version 3), on the bundle less its outliers: the model
     # as stated against the set-up as stated; the best set-up is applied for what follows.
-    stage, fixed = setup_stage(base.data.bundle, model, SETUP_PARAMETERS if setup is None
-                               and candidates is None else setup, setup_rules(), say)
+    parameters = SETUP_PARAMETERS if setup is None and candidates is None else setup
+    stage, fixed = setup_stage(base.data.bundle, model, parameters, setup_rules(), say)
+    if stage is not None:
+        stage.update(parameters=list(parameters), given_model=model)
     if fixed is not base.data.bundle:
         base = _at_setup(base, _prepare(declare_noise(fixed, model.noise)), model, say)
     base = _with_heldout(base, say)
@@ -595,8 +597,10 @@ def _report(bundle: Bundle, base: _Base, tried: list[dict[str, Any]],
     ranked = rank(tried)
     best = ranked[0] if ranked else None
     missing = None
-    if best and best["significant"] and _adequate_but_for_the_net(best, say):
-        missing = best
+    if best and best["significant"]:
+        stage = _setup_with_the_effect(stage, best, base, say)
+        if _adequate_but_for_the_net(best, say):
+            missing = best
     pattern = _pattern(compared)
     models, comparisons = {"baseline": base.model}, {"baseline": compared}
     for c in ranked:
@@ -669,6 +673,46 @@ def _adequate_but_for_the_net(candidate: dict[str, Any], say: Progress) -> bool:
     candidate["resolution_after"] = checked
     rest = [c for c in after if c.id not in explained(checked)]
     return bool(checked) and (not rest or normalised_error(rest) <= ADEQUATE)
+
+
+def _setup_with_the_effect(stage: dict[str, Any] | None, missing: dict[str, Any], base: _Base,
+                           say: Progress) -> dict[str, Any] | None:
+    """The set-up stage again with the best effect in, when alone it named no set-up error.
+
+    A missing effect can hide a set-up error: its error swamps what a turned ply or a moved
+    blank changes, so the set-up alone has nothing to gain. The set-up candidates are judged
+    again with the effect added to the model as given (at the catalogue's values: the
+    effect's refit at the stated set-up has taken up some of the set-up's error); a set-up
+    error they name is reported (``found_with_effect``) and the effect is refitted at it.
+    """
+    from fenicsx_drape.calibration.coupons import declare_noise
+    from fenicsx_drape.diagnosis.setup import corrected, setup_stage
+
+    if not stage or stage["setup_error"] is not None or not stage.get("parameters"):
+        return stage
+    say(f"set-up stage again, with {missing['effect']} in")
+    with_effect = stage["given_model"].with_effects(*missing["effects"])
+    again, _ = setup_stage(base.data.bundle, with_effect, stage["parameters"], setup_rules(),
+                           say)
+    if again is None or again["setup_error"] is None:
+        return stage
+    again.update(parameters=stage["parameters"], given_model=stage["given_model"],
+                 found_with_effect=missing["effect"])
+    again["setup"][0]["found_with_effect"] = missing["effect"]
+    best = again["best"]
+    data = _prepare(declare_noise(corrected(base.data.bundle, best["parameter"], best["p"],
+                                            again["stated_model"]), base.model.noise))
+    names = _refit_parameters(missing["_model"], missing["effects"][-1])
+    refit = _no_worse(data, _fit(data.bundle, missing["_model"], parameters=names,
+                                 max_iterations=REFIT_ITERATIONS), missing["_model"])
+    after = data.compare(simulate(data.tests, refit))
+    say(f"  {missing['effect']} refitted at that set-up: normalised error "
+        f"{normalised_error(after):.3g} (at the stated set-up "
+        f"{missing['error_after']['normalised']:.3g})")
+    missing.update(error_after=error_record(after), where_after=where(after)[:3],
+                   _after=after, _tests=data.tests, _model=refit,
+                   parameters={p: float(refit.parameters[p]) for p in missing["parameters"]})
+    return again
 
 
 def _setup_with_effect(stage: dict[str, Any], missing: dict[str, Any]) -> None:

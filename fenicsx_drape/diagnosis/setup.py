@@ -905,7 +905,9 @@ def add_setup(report: dict[str, Any], stage: dict[str, Any] | None) -> None:
              f"(stated {show(s['stated'])}){also}, bringing the forming tests' normalised "
              f"error from {report['setup_stated']['error']['normalised']:.3g} to "
              f"{s['error_after']['normalised']:.3g} (evidence {s['evidence']:.3g}). "
-             "The physics candidates were tried with it fitted. ")
+             + (f"It shows once {stage['found_with_effect']} is in (alone, that effect's "
+                "error hid it). " if stage.get("found_with_effect") else
+                "The physics candidates were tried with it fitted. "))
     report["conclusion"] = words + report.get("conclusion", "")
 
 
