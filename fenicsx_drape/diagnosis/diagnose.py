@@ -89,7 +89,7 @@ from fenicsx_drape.diagnosis.compare import (
     trends,
     where,
 )
-from fenicsx_drape.diagnosis.data_check import apply_data_check, data_check
+from fenicsx_drape.diagnosis.data_check import apply_data_check, data_check, say_suspects
 from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM
 from fenicsx_drape.diagnosis.kinds import Comparison, sd_column_of
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained
@@ -423,6 +423,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     # 0. Data before physics (spec version 4): each measurement checked against its case
     # before any fit; a suspect one is named first in the conclusion, no effect on it.
     suspects = data_check(bundle)
+    say_suspects(suspects, say)
     # 1. Set-up before physics (spec version 3): the best set-up fitted, then the effects.
     # It runs on the bundle as given (the stated set-up's own fits are its baseline).
     stage, bundle = setup_stage(bundle, model, SETUP_PARAMETERS if setup is None
