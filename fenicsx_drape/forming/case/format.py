@@ -1358,7 +1358,8 @@ def _meshed_tool(case: FormingCase, spec: ToolSpec):
 
         parts = pieces(surface)
         if len(parts) > 1:
-            each = ", ".join(f"{m} triangles around ({', '.join(f'{v:.4g}' for v in c)}) mm"
+            each = ", ".join(f"{m} triangles around ("
+                             + ", ".join(f"{v:g}" for v in np.round(c, 1) + 0.0) + ") mm"
                              for m, c in parts[:3])
             raise CaseError([f"{where}: {spec.path.name}: the {spec.role}'s surface is "
                              f"{len(parts)} separate pieces ({each}): a {spec.role} must be "
