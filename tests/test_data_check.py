@@ -132,9 +132,14 @@ def test_a_suspect_measurement_comes_first_and_names_no_effect():
     assert report["conclusion"].startswith("Check the data: dd/file: x and z look swapped")
     assert "tool_friction" not in report["conclusion"]
     assert report["candidates"] == [{"effect": "x"}]  # what the fit found stays
-    clean = {"missing_effect": "tool_friction", "conclusion": "tool_friction is missing."}
-    apply_data_check(clean, entries[1:])
-    assert clean["missing_effect"] == "tool_friction" and clean["data_check"] == entries[1:]
+    clean = {"missing_effect": "tool_friction", "conclusion": "tool_friction is missing.",
+             "notes": []}
+    chosen = {"test": "dd", "measurement": "file", "suspect": False,
+              "why": "chosen: a blank placed off-centre by about (-4, 0) mm"}
+    apply_data_check(clean, [*entries[1:], chosen])
+    assert clean["missing_effect"] == "tool_friction"
+    assert clean["data_check"] == [*entries[1:], chosen]
+    assert clean["notes"] == ["dd/file: chosen: a blank placed off-centre by about (-4, 0) mm"]
 
 
 def swap_x_and_z(c, rows):
@@ -171,9 +176,9 @@ def test_compare_checks_the_data_before_it_fits_and_fits_nothing_on_them(formed,
 
 @pytest.mark.slow
 def test_diagnose_names_the_data_first_and_no_effect(formed, tmp_path, capsys):
-    # One candidate (tool friction, every other effect in the model) and no set-up, to keep
-    # the test short: the data check does not depend on them. The default path (every
-    # candidate and set-up) runs on a lab bundle in test_lab_user_path.py.
+    # One candidate (tool friction, every other effect in the model), no set-up and 40 mm
+    # cells, to keep the test short: the data check does not depend on them. The default
+    # path (every candidate and set-up) runs on a lab bundle in test_lab_user_path.py.
     from fenicsx_drape.effects import EFFECTS
     from fenicsx_drape.model import default_model
 
@@ -181,7 +186,7 @@ def test_diagnose_names_the_data_first_and_no_effect(formed, tmp_path, capsys):
     model = default_model().with_effects(*[e for e in EFFECTS if e != "tool_friction"])
     (tmp_path / "model.toml").write_text(model.to_toml())
     assert main(["diagnose", str(folder), "--model", str(tmp_path / "model.toml"), "--setup",
-                 "--json", str(tmp_path / "r.json")]) == 0
+                 "--forming-cell-mm", "40", "--json", str(tmp_path / "r.json")]) == 0
     out, err = capsys.readouterr()
     assert err.splitlines()[0].startswith("check the data: double_dome-200N-40s/file: x and z "
                                           "look swapped")
@@ -296,3 +301,9 @@ def test_a_shift_without_a_symmetry_plane_is_found_or_read_as_a_blank_offset(who
     assert entry["why"].startswith("chosen: a blank placed off-centre by about (-4, ")
     assert "blank_offset_mm" in entry["why"] and "every flat position lies on the blank" \
         in entry["why"]
+    # compare says the reading it chose in its conclusion.
+    assert main(["compare", str(tmp_path / "near"), "--out", str(tmp_path / "cmp"),
+                 "--no-fit"]) == 0
+    report = json.loads((tmp_path / "cmp" / "compare.json").read_text())
+    assert report["data_check"] == [entry]
+    assert report["conclusion"].endswith(f"octagon-100N-20s/file: {entry['why']}.")

@@ -483,7 +483,9 @@ def compare(bundle: Bundle, model: Model, *, fit: bool = True,
 def conclusion(result: CompareResult) -> str:
     """The comparison in a sentence; data that cannot be of the case named first."""
     bad = [e for e in result.data_check or () if e["suspect"]]
-    text = f"The model is {result.normalised:.3g} × the noise floor (normalised error)."
+    text = f"The model is {result.normalised:.3g} × the noise floor (normalised error)." + "".join(
+        f" {e['test']}/{e['measurement']}: {e['why']}." for e in result.data_check or ()
+        if not e["suspect"] and e["why"].startswith("chosen:"))  # a reading of the data
     if not bad:
         return text
     return ("Check the data: " + "; ".join(f"{e['test']}/{e['measurement']}: {e['why']}"

@@ -168,14 +168,15 @@ def _top_shift(test, case, spacing: float) -> tuple[bool, str] | None:
         return None
     z = np.abs(p[:, 4])
     top = z >= z.max() - 0.5 * case.blank.cell_mm
-    d = np.median(p[top, :2] - p[top, 2:4], axis=0)  # flat - formed
+    d = np.round(np.median(p[top, :2] - p[top, 2:4], axis=0), 2) + 0.0  # flat - formed
+    b = -d + 0.0  # the blank offset that explains it
     tol = max(SHIFT_OF_GRID * spacing, SHIFT_TOLERANCE_MM)
     if not np.abs(d).max() > tol:
         return None
     out = _outside_polygon(p[:, :2], np.asarray(case.blank.polygon(), dtype=float))
     what = " and ".join(f"{a} by {v:+.3g} mm" for a, v in zip("xy", d) if abs(v) > tol)
     seen = (f"the {int(top.sum())} grid point(s) at the punch's top (formed within half a "
-            f"cell of the farthest) moved {-d[0]:+.3g}, {-d[1]:+.3g} mm in plane, where the "
+            f"cell of the farthest) moved {b[0]:+.3g}, {b[1]:+.3g} mm in plane, where the "
             f"top holds the sheet (tolerance {tol:.3g} mm)")
     if out.max() > SHIFT_TOLERANCE_MM:
         k = int(np.argmax(out))
@@ -183,7 +184,7 @@ def _top_shift(test, case, spacing: float) -> tuple[bool, str] | None:
                       f"position ({p[k, 0]:.4g}, {p[k, 1]:.4g}) mm lies {out[k]:.3g} mm "
                       "outside the blank (a grid drawn on the blank lies on it wherever the "
                       "blank was placed: the data's frame, not a set-up)")
-    return False, (f"chosen: a blank placed off-centre by about ({-d[0]:.3g}, {-d[1]:.3g}) "
+    return False, (f"chosen: a blank placed off-centre by about ({b[0]:.3g}, {b[1]:.3g}) "
                    f"mm, a set-up error the set-up stage sizes (blank_offset_mm), not a "
                    f"shifted frame: {seen}, and every flat position lies on the blank")
 
@@ -351,9 +352,13 @@ def apply_data_check(report: dict[str, Any], entries: list[dict[str, Any]]) -> N
 
     With a suspect measurement no effect is named (``missing_effect`` null, ``add_effects``
     empty): the conclusion starts "Check the data: ..." with each suspect's ``why``; what the
-    fit found stays in the report's other fields (candidates, set-up).
+    fit found stays in the report's other fields (candidates, set-up). A reading chosen for
+    data that are not suspect (a blank offset rather than a shifted frame) goes to ``notes``.
     """
     report["data_check"] = entries
+    report.setdefault("notes", []).extend(
+        f"{e['test']}/{e['measurement']}: {e['why']}" for e in entries
+        if not e["suspect"] and e["why"].startswith("chosen:"))
     bad = [e for e in entries if e["suspect"]]
     if not bad:
         return
