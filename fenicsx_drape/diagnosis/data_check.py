@@ -21,8 +21,8 @@ entries (``suspect`` with ``why``, the first reason found):
   shifted. A blank placed off-centre (a set-up error the set-up stage sizes) breaks the
   plane, and its test has no plane to check: the ``why`` says which was chosen.
 - *a shifted frame without a symmetry plane*: the punch's top holds the sheet where it
-  first touches it, so the grid's points formed farthest along the punch's travel (within
-  half a cell of the farthest) keep their flat x and y (median difference ≈ 0: below
+  first touches it, so the grid's points formed farthest from the flat plane (|z| within
+  half a cell of the largest) keep their flat x and y (median difference ≈ 0: below
   0.01 mm on the shipped parts formed whole on 20 mm cells). A median difference beyond the
   same tolerance is a shift of the flat frame, or a blank placed off-centre by as much; a
   grid drawn on the blank lies on it wherever the blank was placed, so the data are named
@@ -304,7 +304,8 @@ def data_check(bundle) -> list[dict[str, Any]]:
 
     Returns:
         One entry per measurement: ``test`` (the forming test's id), ``measurement``
-        (``"file"`` for the grid, or the lab measurement's name), ``suspect`` and ``why``.
+        (``"file"`` for the grid, or the lab measurement's name), ``suspect`` and ``why``
+        (not suspect, a ``why`` starting "chosen:" is the reading of the data chosen).
 
     Raises:
         DrapeInputError: a travel against the tool's motion (``travel_mm`` ≤ 0).
