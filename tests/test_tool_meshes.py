@@ -7,6 +7,7 @@ small raw meshes for duplicates, degenerate, mis-wound and folded triangles.
 
 from __future__ import annotations
 
+import re
 import warnings
 from pathlib import Path
 
@@ -17,7 +18,7 @@ from test_untrusted_input import dome_stl
 from fenicsx_drape.cli import main
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case.format import CaseError, build_tools, load_case
-from fenicsx_drape.forming.tools.checks import holes, mesh_defects
+from fenicsx_drape.forming.tools.checks import holes, mesh_defects, pieces
 from fenicsx_drape.forming.tools.surfaces import TriangleSurface, load_surface
 
 CASE = """\
@@ -188,3 +189,25 @@ def test_a_clean_mesh_from_gmsh_passes(tmp_path):
     # A plate with a round opening: two boundary loops; the opening is a hole (40 mm).
     found = sorted(holes(surface), key=lambda h: h[1])
     assert found[0][1] == pytest.approx(40.0, rel=0.02)
+
+
+def test_a_punch_of_two_separate_shells_is_refused_and_a_holder_of_two_blocks_is_not(
+        tmp_path, capsys):
+    # The dome and a copy of it 200 mm away in one file: two pieces where one is expected.
+    items = facets(dome(tmp_path))
+    moved = [[*f[:2], *[f"  vertex {x + 200.0} {y} {z}" for x, y, z in vertices(f)], *f[5:]]
+             for f in items]
+    write_facets(tmp_path / "two.stl", items + moved)
+    assert len(pieces(load_surface(tmp_path / "two.stl", comm=None))) == 2
+    assert [m for m, _ in pieces(load_surface(dome(tmp_path), comm=None))] == [len(items)]
+    case = tmp_path / "case.toml"
+    case.write_text(CASE.format(role="punch", stl="two.stl", holder="two.stl"))
+    assert main(["form", str(case), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert re.search(rf"\[\[tool\]\] 1 \('punch'\): two\.stl: the punch's surface is 2 "
+                     rf"separate pieces \({len(items)} triangles around \(0, 0, \S+\) mm, "
+                     rf"{len(items)} triangles around \(200, 0, \S+\) mm\): a punch must be "
+                     r"one closed surface or one surface", err), err
+    # The same file as the holder only (two clamping blocks): accepted.
+    case.write_text(CASE.format(role="punch", stl="dome.stl", holder="two.stl"))
+    assert set(build_tools(load_case(case))) == {"punch", "holder"}

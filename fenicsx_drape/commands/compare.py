@@ -28,7 +28,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Fit, compare, write the outputs and print the summary; returns the exit status."""
     from fenicsx_drape.cli import forming_runs_setting, load_bundle_reported
-    from fenicsx_drape.diagnosis.compare import compare, write_compare
+    from fenicsx_drape.diagnosis.compare import compare, conclusion, write_compare
     from fenicsx_drape.diagnosis.forming_runs import resolution
     from fenicsx_drape.model import default_model, load_model
 
@@ -42,6 +42,8 @@ def run(args: argparse.Namespace) -> int:
     if not result.tests:
         raise DrapeInputError(f"{args.bundle}: nothing to compare")
     write_compare(result, bundle, args.out, model_path=args.model)
+    if any(e["suspect"] for e in result.data_check or ()):
+        print(conclusion(result))  # data that cannot be of the case, first
     print(summary(result))
     print(f"written to {args.out}")
     return 0

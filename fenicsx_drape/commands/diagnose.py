@@ -59,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
         if forming and args.confirm_cell_mm and report["candidates"]:
             report["confirmation"] = confirm(bundle, report, args.confirm_cell_mm, progress)
     write_diagnosis(report, args.json, args.out, bundle=bundle)
+    if any(e["suspect"] for e in report.get("data_check", ())):
+        print(report["conclusion"])  # data that cannot be of the case, first
     print(summary(report))
     for label, entry in report.get("confirmation", {}).items():
         if label != "cell_mm":

@@ -357,6 +357,8 @@ class CompareResult:
     metrics: Mapping[str, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
     outliers: tuple[Mapping[str, Any], ...] = ()  # rows beyond OUTLIER_SD (find_outliers)
     compared: tuple[Test, ...] = ()  # the tests compared (to leave the outliers' rows out)
+    # The data check run before the fit (spec version 4); None: not run (evaluate alone).
+    data_check: tuple[Mapping[str, Any], ...] | None = None
 
     @property
     def normalised(self) -> float:
@@ -447,6 +449,11 @@ def compare(bundle: Bundle, model: Model, *, fit: bool = True,
             progress: Callable[[str], None] | None = None) -> CompareResult:
     """Fit ``model`` to ``bundle`` (unless ``fit=False``) and compare it with every test.
 
+    The measurements are checked against their cases first
+    (:func:`~fenicsx_drape.diagnosis.data_check.data_check`, spec version 4): the fit leaves
+    out those that cannot be of their case (all of them suspect: no fit), and the result
+    carries the check (``data_check``), named first in :func:`conclusion`.
+
     Args:
         bundle: The measurements.
         model: The model (effects and starting parameters).
@@ -456,9 +463,35 @@ def compare(bundle: Bundle, model: Model, *, fit: bool = True,
     Returns:
         How far the model is from each test and where it fails.
     """
-    if fit:
-        model = fit_bundle(bundle, model, progress=progress)
-    return evaluate(bundle, model)
+    from fenicsx_drape.diagnosis.data_check import data_check, say_suspects, suspect_tests
+
+    # Data before physics (spec version 4): each measurement checked against its case before
+    # any fit; no parameter is fitted on the evidence of a suspect one.
+    checked = data_check(bundle)
+    say_suspects(checked, progress or (lambda line: None))
+    suspect = suspect_tests(bundle, checked)
+    kept = [t.id for t in bundle.tests if t.id not in suspect]
+    if fit and kept:
+        model = fit_bundle(bundle, model, tests=kept if suspect else None, progress=progress)
+    result = evaluate(bundle, model)
+    skipped = (f"not fitted on {', '.join(sorted(suspect))}: data that cannot be of the case "
+               "(data_check)",) if fit and suspect else ()
+    return dataclasses.replace(result, data_check=tuple(checked),
+                               skipped=result.skipped + skipped)
+
+
+def conclusion(result: CompareResult) -> str:
+    """The comparison in a sentence; data that cannot be of the case named first."""
+    bad = [e for e in result.data_check or () if e["suspect"]]
+    text = f"The model is {result.normalised:.3g} × the noise floor (normalised error)." + "".join(
+        f" {e['test']}/{e['measurement']}: {e['why']}." for e in result.data_check or ()
+        if not e["suspect"] and e["why"].startswith("chosen:"))  # a reading of the data
+    if not bad:
+        return text
+    return ("Check the data: " + "; ".join(f"{e['test']}/{e['measurement']}: {e['why']}"
+                                           for e in bad)
+            + ". No parameter was fitted on them and their error says nothing of the model. "
+            + text)
 
 
 def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
@@ -589,11 +622,12 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
 
     out = Path(out_dir)
     record = result.to_dict()
-    # Data before physics (spec version 4): each measurement checked
-    # against its case.
-    from fenicsx_drape.diagnosis.data_check import data_check
+    if result.data_check is None:  # a result of evaluate: checked here (spec version 4)
+        from fenicsx_drape.diagnosis.data_check import data_check
 
-    record["data_check"] = data_check(bundle)
+        result = dataclasses.replace(result, data_check=tuple(data_check(bundle)))
+    record["data_check"] = list(result.data_check)
+    record["conclusion"] = conclusion(result)
     path = write_json(out / "compare.json", record)
     atomic_write_text(out / "model.toml", result.model.to_toml())
     tests = {t.id: t for t in bundle.tests}

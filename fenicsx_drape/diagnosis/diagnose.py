@@ -91,7 +91,12 @@ from fenicsx_drape.diagnosis.compare import (
     trends,
     where,
 )
-from fenicsx_drape.diagnosis.data_check import apply_data_check, data_check
+from fenicsx_drape.diagnosis.data_check import (
+    apply_data_check,
+    data_check,
+    say_suspects,
+    suspect_tests,
+)
 from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM
 from fenicsx_drape.diagnosis.kinds import Comparison, sd_column_of
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained
@@ -424,6 +429,11 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     # 0. Data before physics (spec version 4): each measurement checked against its case
     # before any fit; a suspect one is named first in the conclusion, no effect on it.
     suspects = data_check(bundle)
+    say_suspects(suspects, say)
+    bad = suspect_tests(bundle, suspects)
+    if bad and len(bad) < len(bundle.tests):  # the others are diagnosed without them
+        bundle = dataclasses.replace(bundle, tests=tuple(t for t in bundle.tests
+                                                         if t.id not in bad))
     # 1. Prepare: each test's noise from its kind's one noise function, regions, folds.
     data = _prepare(declare_noise(bundle, model.noise))
     # 2. Baseline, and 3. its outliers left out (one row never decides a diagnosis).

@@ -1354,8 +1354,17 @@ def _meshed_tool(case: FormingCase, spec: ToolSpec):
     surface = load_surface(spec.path, spec.params or None, spec.mesh_mm, spec.order or 1,
                            sheet_side=spec.side)
     if spec.role != "holder":  # a holder's opening is a hole by design
-        from fenicsx_drape.forming.tools.checks import holes
+        from fenicsx_drape.forming.tools.checks import holes, pieces
 
+        parts = pieces(surface)
+        if len(parts) > 1:
+            each = ", ".join(f"{m} triangles around ("
+                             + ", ".join(f"{v:g}" for v in np.round(c, 1) + 0.0) + ") mm"
+                             for m, c in parts[:3])
+            raise CaseError([f"{where}: {spec.path.name}: the {spec.role}'s surface is "
+                             f"{len(parts)} separate pieces ({each}): a {spec.role} must be "
+                             "one closed surface or one surface (a second shell in the "
+                             "file?)"])
         found = holes(surface)
         if found:
             centre, size = found[0]

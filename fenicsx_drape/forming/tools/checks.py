@@ -17,6 +17,10 @@ the loop's mean plane, no line through its middle or halfway to its points cross
 within the loop's diameter.
 The rim of an open surface (a dome's foot) encloses the surface; a holder's opening is a hole
 by this test and allowed for holders (``forming.case.format`` decides by role).
+
+A punch or a die is one piece (:func:`pieces`: triangles joined through shared points): two
+separate shells in one file (a surface given twice, shifted; a stray part) are refused, with
+the size and place of each; holders may be made of separate blocks.
 """
 
 from __future__ import annotations
@@ -249,3 +253,22 @@ def holes(surface) -> list[tuple[np.ndarray, float]]:
         if not any(_hits(surface, o, vt[-1], size) for o in inner):
             out.append((centre, size))
     return out
+
+
+def pieces(surface) -> list[tuple[int, np.ndarray]]:
+    """The separate pieces of a surface: (triangles, centre in mm) of each, largest first."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    t, n = surface.triangles, len(surface.points)
+    if not len(t):
+        return []
+    rows, cols = t[:, [0, 1, 2]].ravel(), t[:, [1, 2, 0]].ravel()
+    _, label = connected_components(
+        coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)), directed=False)
+    of_triangle = label[t[:, 0]]
+    out = []
+    for k in np.unique(of_triangle):
+        mine = t[of_triangle == k]
+        out.append((len(mine), surface.points[np.unique(mine)].mean(axis=0)))
+    return sorted(out, key=lambda e: -e[0])
