@@ -673,15 +673,16 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                                       "sensitivity": c["sensitivity"]})
             say(f"  untestable: {c['reason']}")
             continue
+        ratio = base_ho / c["heldout_normalised"] if c["heldout_normalised"] > 0 else math.inf
         entry = {"parameter": name, "stated": stated(test0, name, model),
                  "fitted": _fitted(name, c["p"], test0, model),
                  "sd": _sd(name, c["sd_internal"], test0, model),
                  "sd_fit": _sd(name, c["sd_fit"], test0, model),
                  "error_after": error_record(c["after"]),
                  "heldout_normalised": c["heldout_normalised"],
-                 "evidence": base_ho / c["heldout_normalised"],
+                 "evidence": ratio,
                  "evidence_on_model": c["evidence"],
-                 "significant": bool(min(base_ho / c["heldout_normalised"], c["evidence"])
+                 "significant": bool(min(ratio, c["evidence"])
                                      >= rules.evidence and _distinct(c)),
                  "sensitivity": c["sensitivity"],
                  "stated_on_model": c["stated_normalised"],
