@@ -10,6 +10,10 @@
 
 # # Which physics is a formed double dome missing? Diagnosis on any forming case
 #
+# **Not run on this site**: it takes one to two minutes on two cores, so this page shows the
+# code without its output; run it as below to get the pictures it names
+# (`tests/test_demos_diagnosis.py` runs it on a copy of the double dome with 20 mm cells).
+#
 # A part is formed, its drawn grid is measured, and the model that should predict it misses:
 # which physical effect is it lacking? The hemisphere's demo (`demo_forming_diagnosis.py`)
 # answers this for the paper's part; here the part is any forming case (`case.toml`), by
@@ -31,9 +35,6 @@
 # Pictures: `OUT/compare/residual_<test>.png` (the baseline's error map),
 # `OUT/diagnose/residual_<test>.png` (baseline and winner side by side, error by region),
 # `OUT/diagnose/candidates.png`, `OUT/after/residual_<test>.png` (the model with the effect).
-#
-# It takes one to two minutes on two cores: the docs show it without running it
-# (`tests/test_demos_diagnosis.py` runs it on a copy of the double dome with 20 mm cells).
 
 # +
 import sys

@@ -10,6 +10,10 @@
 
 # # Finding the missing physics: compare, diagnose, add, compare again
 #
+# **Not run on this site**: it takes about 2 minutes on two cores, so this page shows the
+# code without its output; `./drape exec python3 demos/demo_diagnosis.py OUT` writes the
+# pictures it names (`tests/test_demos_diagnosis.py` runs it).
+#
 # A model of a woven prepreg is only as good as the physics it includes. This walkthrough
 # follows a user who calibrates the truss model of Skordos, Monroy Aceves & Sutcliffe on
 # coupon tests, asks `fenicsx_drape` **how far** and **where** the model misses, asks
@@ -27,9 +31,6 @@
 # ./drape diagnose BUNDLE --model MODEL.toml --json REPORT.json --out DIR
 # ./drape history DIR1 DIR2 ... --out DIR
 # ```
-#
-# It takes about 2 minutes on two cores: the docs show it without running it
-# (`tests/test_demos_diagnosis.py` runs it).
 
 # +
 import sys

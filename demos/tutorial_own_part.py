@@ -227,6 +227,11 @@ print("peak force of each tool (N):",
       {k: round(v, 1) for k, v in summary["max_tool_force_N"].items()})
 # -
 
+# Each tool's force is its reaction along its direction of motion, for the whole part: the
+# punch's is the press force, the die's is negative (it holds the blank back), and the
+# holder's stays near zero, because the holder clamps the blank in its plane and resists the
+# draw-in by friction, across the travel rather than along it.
+#
 # ## The pictures
 #
 # The formed sheet coloured by shear angle (the quarter mirrored to the whole part), and the
@@ -242,5 +247,15 @@ if not SCRIPT:
 #
 # - A finer sheet: `./drape form results/own_part/part/case.toml --out DIR --cell-mm 5`; the
 #   whole blank rather than a quarter: `--full`; a turned ply: `--ply-angle-deg 30`.
-# - Measured parts compared with the model, and a diagnosis of what the model lacks:
-#   {doc}`the diagnosis </diagnosis>`.
+# - The formed part is a measurement bundle (`results/own_part/formed/bundle/`: its node grid
+#   and a copy of the case). A model that lacks an effect misses it, and `diagnose` names
+#   the effect (here the paper's model without tow buckling; a few minutes on two cores):
+#
+#       ./drape compare results/own_part/formed/bundle \
+#           --model demos/models/without_tow_buckling.toml --out results/own_part/v1
+#       ./drape diagnose results/own_part/formed/bundle \
+#           --model demos/models/without_tow_buckling.toml \
+#           --json results/own_part/REPORT.json --out results/own_part/diagnose
+#
+#   A measured part is a bundle of the same kind, with the lab's own measurements:
+#   {doc}`the diagnosis </diagnosis>` and {doc}`lab measurements </lab-measurements>`.
