@@ -12,7 +12,7 @@
 #
 # **Not run on this site**: it forms several stacks, about a minute on two cores, too long
 # for each build of the docs; this page shows the code without its output
-# (`tests/test_demo_laminates.py` runs it). [Laminates](../laminates.md) shows a stack's
+# (`tests/test_demo_laminates.py` runs it). {doc}`Laminates </laminates>` shows a stack's
 # pictures and this demo's table.
 #
 # The paper's hemisphere formed from stacks of woven plies instead of one ply: the
