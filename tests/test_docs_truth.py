@@ -68,6 +68,13 @@ def readme_loop() -> list[list[str]]:
     return [shlex.split(c)[1:] for c in commands if c.startswith("./drape ")]
 
 
+def test_the_diagnosis_page_shows_the_readme_loop():
+    text = (ROOT / "docs" / "diagnosis.md").read_text()
+    block = text.split("```sh\n", 1)[1].split("```", 1)[0]
+    commands = block.replace("\\\n", " ").splitlines()
+    assert [shlex.split(c)[1:] for c in commands if c.startswith("./drape ")] == readme_loop()
+
+
 def test_the_readme_loop_adds_exactly_one_effect():
     from fenicsx_drape.model import load_model
 
