@@ -118,4 +118,4 @@ print(f"pictures: {out / 'compare'} and {out / 'diagnose'}")
 # the shear angles read along the two measuring lines (dots, ±1°), the baseline lacking tow
 # buckling and the winning candidate.
 #
-# ![Measured and model shear along the two measuring lines](../lab_shear_lines.png)
+# ![Measured and model shear along the two measuring lines](/lab_shear_lines.png)
