@@ -261,5 +261,10 @@ if not SCRIPT:
 #           --model demos/models/without_tow_buckling.toml \
 #           --json results/own_part/REPORT.json --out results/own_part/diagnose
 #
+#   `results/own_part/diagnose/residual_bump-200N-20s.png` from that run: the baseline's
+#   error at each node of the drawn grid, the winner's, and the error by region of the part.
+#
+#   ![The own part's diagnosis: the error without and with tow buckling](/own_part_diagnosis.png)
+#
 #   A measured part is a bundle of the same kind, with the lab's own measurements:
 #   {doc}`the diagnosis </diagnosis>` and {doc}`lab measurements </lab-measurements>`.
