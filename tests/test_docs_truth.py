@@ -119,7 +119,7 @@ def demo_pages() -> tuple[list[Path], set[str]]:
     conf = (ROOT / "docs" / "conf.py").read_text()
     excluded = conf[conf.index("nb_execution_excludepatterns"):].split("]", 1)[0]
     names = set(re.findall(r'"demos/([\w.]+\.py)"', excluded))
-    pages = sorted((ROOT / "demos").glob("demo_*.py")) + [ROOT / "demos/tutorial_own_part.py"]
+    pages = [*sorted((ROOT / "demos").glob("demo_*.py")), ROOT / "demos/tutorial_own_part.py"]
     return pages, names
 
 
