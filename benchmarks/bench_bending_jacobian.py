@@ -1,4 +1,4 @@
-"""The tow bending's Jacobian: full stencils against its diagonal alone (issue 39, point 5).
+"""The tow bending's Jacobian: full stencils against its diagonal alone.
 
 Forms the hemisphere case on cells of ``CELL_MM`` (default 10) with
 ``SolverOptions(bending_jacobian="full")`` and ``"diagonal"``, and prints each run's wall

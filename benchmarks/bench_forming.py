@@ -12,7 +12,7 @@
 
 A JIT warm-up run (30 mm cells) comes first. ``--before`` runs the first solver
 (backtracking line search, exact geometric stiffness, penetrating nodes projected onto the
-tool surface) for the tables of docs/solver-notes.md. Every line: nodes, unknowns, ranks, wall
+tool surface; CHANGELOG.md, the solver study). Every line: nodes, unknowns, ranks, wall
 time, accepted steps, cut-backs, SNES iterations (per step), Jacobians, Krylov iterations, residual
 evaluations, maximum shear, the travel reached if the run stopped short; the machine's load
 average before the run; with ``--reference`` the largest and mean node distance to the nodes

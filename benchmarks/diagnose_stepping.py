@@ -25,8 +25,8 @@ poor predictor). The table gives each cause's share of the wasted iterations.
 ``--before`` runs the first solver: backtracking line search (``bt``), the
 exact geometric stiffness and a predictor that projected penetrating nodes onto the tool
 surface (lifting pressed nodes off). The attribution is by coincidence, not cause: a switch
-that happens in a wasted iteration is blamed. docs/solver-notes.md gives, beside it, what
-removing each cause saved (each change measured alone).
+that happens in a wasted iteration is blamed (docs/solver-notes.md has the table; CHANGELOG.md
+what removing each cause saved, each change measured alone).
 """
 
 import argparse

@@ -2,7 +2,7 @@
 
 Each fitted set-up should lie "within its reported uncertainty (or two of them)". One
 bundle cannot say whether an sd is honest; this study repeats the fit. Per trial, a blank
-offset is drawn in the issue's range (x 5-15 mm, y ±5 mm, ``numpy.random.default_rng(--seed)``),
+offset is drawn in the study's range (x 5-15 mm, y ±5 mm, ``numpy.random.default_rng(--seed)``),
 the whole hemisphere is formed with it (the paper's case, ``--cell-mm`` net, solver
 tolerances 100× tighter than the diagnosis's), its lab grid (``--grid-mm``) is drawn on the
 blank where the stated case puts it and given 0.3 mm of Gaussian noise (seed ``--seed`` + trial),

@@ -5,14 +5,14 @@ residual tolerances 100× tighter than the diagnosis's forming runs (``snes_atol
 ``node_atol_N`` / 100), the whole blank's grid (the diagnosis models the part its set-up
 needs), and Gaussian position noise of 0.3 mm per coordinate from seed 2027 (never used while
 the code was written). The test names the case *as stated* (the file's set-up); the part was
-formed with a hidden one, its values drawn once in the issue's ranges with
+formed with a hidden one, its values drawn once in the study's ranges with
 ``numpy.random.default_rng(2711)`` (ply 3-6°, blank x 5-15 mm and y ±5 mm, μ_tool 0.5-1)
 after the code was written, none of them a scan point or a value the code was tried on:
 
 - ``ply``: the ply turned by 5.51°;
 - ``blank``: the blank placed [8.86, 3.54] mm off-centre (the lab's grid is drawn on the
   blank, so its flat positions are where the stated set-up puts the material);
-- ``force2x``: 400 N on the holder where the sheet says 200 N (the issue's factor);
+- ``force2x``: 400 N on the holder where the sheet says 200 N (twice the stated force);
 - ``ply+tool_friction``: the ply turned by 4.17° and tool friction (μ_tool = 0.52) the model
   lacks;
 - ``null``: nothing hidden;

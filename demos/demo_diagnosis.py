@@ -10,6 +10,11 @@
 
 # # Finding the missing physics: compare, diagnose, add, compare again
 #
+# **Not run on this site**: it takes about 2 minutes on two cores, so this page shows the
+# code without its output and two of its pictures from a run (at the end);
+# `./drape exec python3 demos/demo_diagnosis.py OUT` writes them all
+# (`tests/test_demos_diagnosis.py` runs it).
+#
 # A model of a woven prepreg is only as good as the physics it includes. This walkthrough
 # follows a user who calibrates the truss model of Skordos, Monroy Aceves & Sutcliffe on
 # coupon tests, asks `fenicsx_drape` **how far** and **where** the model misses, asks
@@ -27,9 +32,6 @@
 # ./drape diagnose BUNDLE --model MODEL.toml --json REPORT.json --out DIR
 # ./drape history DIR1 DIR2 ... --out DIR
 # ```
-#
-# It takes about 2 minutes on two cores: the docs show it without running it
-# (`tests/test_demos_diagnosis.py` runs it).
 
 # +
 import sys
@@ -150,3 +152,11 @@ print(f"v3 ({', '.join(v3.effects)}): normalised error {result.normalised:.2f}")
 
 versions = history([out / d for d in ("v1", "v2", "v2-wide", "v3-wide")], out / "history")
 print(table(versions))
+
+# From a run of this demo (fenicsx_drape 0.1.0, 3.7 min on a busy two-core machine): the user
+# law named against the catalogue's candidates (`diagnose-v2-plugin/candidates.png`), and the
+# model's versions (`history/history.png`).
+#
+# ![The diagnosis with the user law as a candidate](/demo_diagnosis_candidates.png)
+#
+# ![The normalised error version by version](/demo_diagnosis_history.png)

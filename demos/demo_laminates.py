@@ -10,13 +10,16 @@
 
 # # Layups on the hemisphere: how the plies of a stack form together
 #
-# The paper's hemisphere formed from stacks of woven plies instead of one ply
-# (docs/laminates.md): the [0/90, 0/90] and [0/90, ±45] stacks of two plies and a four-ply
-# quasi-isotropic stack [0/90, ±45, ∓45, 90/0], against the single ply; then the [0/90, ±45]
-# stack with the inter-ply Coulomb coefficient μ and the film viscosity η_f at the ends of
-# their published ranges. A coarse net (30 mm cells, the whole blank) and a fast stroke (8 s)
-# keep it to about a minute, still long for the docs build: this page shows it without
-# its output, and `tests/test_demo_laminates.py` runs it (docs/laminates.md has its table).
+# **Not run on this site**: it forms several stacks, about a minute on two cores, too long
+# for each build of the docs; this page shows the code without its output
+# (`tests/test_demo_laminates.py` runs it). {doc}`Laminates </laminates>` shows a stack's
+# pictures and this demo's table.
+#
+# The paper's hemisphere formed from stacks of woven plies instead of one ply: the
+# [0/90, 0/90] and [0/90, ±45] stacks of two plies and a four-ply quasi-isotropic stack
+# [0/90, ±45, ∓45, 90/0], against the single ply; then the [0/90, ±45] stack with the
+# inter-ply Coulomb coefficient μ and the film viscosity η_f at the ends of their published
+# ranges. A coarse net (30 mm cells, the whole blank) and a fast stroke (8 s) keep it short.
 # `./drape form meshes/hemisphere/stack_0_45.toml --out DIR` forms one stack with every output.
 
 # +

@@ -227,6 +227,11 @@ print("peak force of each tool (N):",
       {k: round(v, 1) for k, v in summary["max_tool_force_N"].items()})
 # -
 
+# Each tool's force is its reaction along its direction of motion, for the whole part: the
+# punch's is the press force, the die's is negative (it holds the blank back), and the
+# holder's stays near zero, because the holder clamps the blank in its plane and resists the
+# draw-in by friction, across the travel rather than along it.
+#
 # ## The pictures
 #
 # The formed sheet coloured by shear angle (the quarter mirrored to the whole part), and the
@@ -242,5 +247,25 @@ if not SCRIPT:
 #
 # - A finer sheet: `./drape form results/own_part/part/case.toml --out DIR --cell-mm 5`; the
 #   whole blank rather than a quarter: `--full`; a turned ply: `--ply-angle-deg 30`.
-# - Measured parts compared with the model, and a diagnosis of what the model lacks:
-#   {doc}`the diagnosis </diagnosis>`.
+# - The formed part is a measurement bundle (`results/own_part/formed/bundle/`: its node grid
+#   and a copy of the case). A model that lacks an effect misses it, and `diagnose` names
+#   the effect. Here the model is the paper's without tow buckling: `compare` gives a
+#   normalised error of 9.7 (40 % of it on the flat base, 37 % under the holder), and
+#   `diagnose` (6 min on a busy two-core machine) names `tow_buckling`, which brings its
+#   baseline's 15.1 (refitted, two outlying nodes left out) to 0:
+#   the formed grid carries no noise, so the model with the effect meets it exactly
+#   (evidence `inf`); a measured part has its noise, given as `position_sd_mm`.
+#
+#       ./drape compare results/own_part/formed/bundle \
+#           --model demos/models/without_tow_buckling.toml --out results/own_part/v1
+#       ./drape diagnose results/own_part/formed/bundle \
+#           --model demos/models/without_tow_buckling.toml \
+#           --json results/own_part/REPORT.json --out results/own_part/diagnose
+#
+#   `results/own_part/diagnose/residual_bump-200N-20s.png` from that run: the baseline's
+#   error at each node of the drawn grid, the winner's, and the error by region of the part.
+#
+#   ![The own part's diagnosis: the error without and with tow buckling](/own_part_diagnosis.png)
+#
+#   A measured part is a bundle of the same kind, with the lab's own measurements:
+#   {doc}`the diagnosis </diagnosis>` and {doc}`lab measurements </lab-measurements>`.

@@ -1,5 +1,6 @@
-"""The docs state what is true now: links resolve, the contract version is the code's, and the
-numbers the README quotes from its diagnosis loop are what the loop gives.
+"""The docs state what is true now: links resolve, the contract version is the code's, the
+numbers the README quotes from its diagnosis loop are what the loop gives, and every demo page
+shows its pictures or says why the site does not run it.
 
 Each kind of drift that can be checked has a test here; that the command lines the docs show
 are real is :mod:`test_docs_commands`.
@@ -67,6 +68,13 @@ def readme_loop() -> list[list[str]]:
     return [shlex.split(c)[1:] for c in commands if c.startswith("./drape ")]
 
 
+def test_the_diagnosis_page_shows_the_readme_loop():
+    text = (ROOT / "docs" / "diagnosis.md").read_text()
+    block = text.split("```sh\n", 1)[1].split("```", 1)[0]
+    commands = block.replace("\\\n", " ").splitlines()
+    assert [shlex.split(c)[1:] for c in commands if c.startswith("./drape ")] == readme_loop()
+
+
 def test_the_readme_loop_adds_exactly_one_effect():
     from fenicsx_drape.model import load_model
 
@@ -104,3 +112,24 @@ def test_the_readme_loop_gives_the_numbers_it_quotes(tmp_path, monkeypatch, caps
     assert f"evidence {evidence};" in table and f"| {after} | — |" in table
     start = " ".join((ROOT / "docs" / "getting-started.md").read_text().split())
     assert f"error {before} → {after}, evidence {evidence}" in start
+
+
+def demo_pages() -> tuple[list[Path], set[str]]:
+    """The demos the site renders as pages, and those ``docs/conf.py`` does not execute."""
+    conf = (ROOT / "docs" / "conf.py").read_text()
+    excluded = conf[conf.index("nb_execution_excludepatterns"):].split("]", 1)[0]
+    names = set(re.findall(r'"demos/([\w.]+\.py)"', excluded))
+    pages = [*sorted((ROOT / "demos").glob("demo_*.py")), ROOT / "demos/tutorial_own_part.py"]
+    return pages, names
+
+
+def test_every_demo_page_shows_its_pictures_or_says_why_it_is_not_run():
+    pages, not_run = demo_pages()
+    assert not_run and not_run <= {p.name for p in pages}
+    for page in pages:
+        text = page.read_text()
+        if page.name in not_run:  # said under the title, before the first code
+            head = text[text.index("\n# # "):].split("\n\n", 1)[0]
+            assert "**Not run on this site**" in head, f"{page.name}: not run, and not said why"
+        elif ".png" in text:  # it draws pictures: the page shows them
+            assert "display(Image(" in text, f"{page.name}: its pictures are not shown"

@@ -116,7 +116,7 @@ class SolverOptions:
     predictor: bool = True  # extrapolate the last increment, then let nodal terms project
     # The tow bending's part of the Jacobian: "full" (its stencils), or "diagonal" (K's
     # diagonal only: the Jacobian keeps a plain net's pattern; the residual, hence the
-    # solution, keeps the full term). A prototype of issue 39, point 5.
+    # solution, keeps the full term). Converges at 10 mm cells, not at 5 (docs/solver-notes.md).
     bending_jacobian: str = "full"
     # Extra SNES/KSP/PC options (those of the command line, fe.newton.set_petsc_options, win).
     petsc_options: dict = dataclasses.field(default_factory=dict)
