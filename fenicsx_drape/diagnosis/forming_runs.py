@@ -60,7 +60,10 @@ _cache: dict[tuple, FormedGrid] = {}
 _stopped: dict[tuple, float] = {}  # travel (mm) reached by the runs that stopped short
 _forces: dict[tuple, dict] = {}  # the tools' force curves of the cached runs (run.tool_forces)
 _CACHE_SIZE = 256
-counts = {"formed": 0, "from_disk": 0}  # runs formed and runs read from the disk cache
+# Runs asked (each distinct run once per call of form_many), formed, read from the disk cache,
+# and found in memory, since the process started.
+counts = {"asked": 0, "formed": 0, "from_disk": 0, "from_memory": 0}
+_executions: list[dict[str, Any]] = []  # the record of the last (or running) execution()
 
 
 @contextlib.contextmanager
@@ -124,12 +127,38 @@ def execution(workers: int | None = None,
     old = dict(_settings)
     store = RunStore(cache) if cache is not None else None
     _settings.update(workers=workers, store=store)
+    _executions[:] = [{"cache": None if store is None else str(store.folder.resolve()),
+                       "counts": dict(counts)}]
     try:
         yield
     finally:
+        _executions[0].update(execution_record())
         _settings.update(workers=old["workers"], store=old["store"])
         if store is not None:
             store.close()
+
+
+def execution_record() -> dict[str, Any] | None:
+    """How the forming runs of the last (or the running) :func:`execution` were made.
+
+    For ``provenance.json``: the executor (``processes``, ``mpi4py.futures``, ``this
+    process`` or ``all ranks``), its ``workers`` (runs formed at once; ``ranks`` a run's MPI
+    ranks), the ``cache`` folder (None: none on disk), and the ``runs`` asked, ``formed``,
+    read ``from_disk`` and found ``from_memory`` (``reused``: the last two) inside it. None
+    when no :func:`execution` was entered.
+    """
+    if not _executions:
+        return None
+    if "executor" in _executions[0]:  # a finished one
+        return {k: v for k, v in _executions[0].items() if k != "counts"}
+    from mpi4py import MPI
+
+    name, workers = _executor_kind()
+    runs = {k: counts[k] - _executions[0]["counts"][k] for k in counts}
+    runs["reused"] = runs["from_disk"] + runs["from_memory"]
+    return {"executor": name, "workers": workers,
+            "ranks": MPI.COMM_WORLD.size if name == "all ranks" else 1,
+            "cache": _executions[0]["cache"], "runs": runs}
 
 
 def case_key(case) -> str:
@@ -261,17 +290,13 @@ def executor() -> tuple[str, Executor | None]:
     """
     from fenicsx_drape.diagnosis import mpi_pool
 
-    if mpi_pool.shared_pool():
+    kind, workers = _executor_kind()
+    if kind == "mpi4py.futures":
         if "mpi" not in _pools:
             _pools["mpi"] = mpi_pool.pool()
         return "mpi4py.futures", _pools["mpi"]
-    from mpi4py import MPI
-
-    if MPI.COMM_WORLD.size > 1:
-        return "all ranks", None
-    workers = _settings["workers"] or default_workers()
-    if workers == 1:
-        return "this process", None
+    if kind != "processes":
+        return kind, None
     name = f"processes {workers}"
     if name not in _pools:
         import multiprocessing
@@ -281,6 +306,20 @@ def executor() -> tuple[str, Executor | None]:
         # Fresh processes (not forks of one where MPI is initialised).
         _pools[name] = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
     return "processes", _pools[name]
+
+
+def _executor_kind() -> tuple[str, int]:
+    """The name of :func:`executor`'s choice and how many runs it forms at once."""
+    from mpi4py import MPI
+
+    from fenicsx_drape.diagnosis import mpi_pool
+
+    if mpi_pool.shared_pool():
+        return "mpi4py.futures", MPI.COMM_WORLD.size - 1
+    if MPI.COMM_WORLD.size > 1:
+        return "all ranks", 1
+    workers = _settings["workers"] or default_workers()
+    return ("this process", 1) if workers == 1 else ("processes", workers)
 
 
 def _shutdown() -> None:
@@ -359,6 +398,8 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     """
     keys = [_key(case, model) for case, model in jobs]
     todo = {k: job for k, job in zip(keys, jobs) if k not in _cache}
+    counts["asked"] += len(set(keys))
+    counts["from_memory"] += len(set(keys)) - len(todo)
     store: RunStore | None = _settings["store"]
     names = {}
     if store is not None:
