@@ -55,6 +55,7 @@ USER_OPTIONS = ("snes_", "ksp_", "pc_", "mat_", "npc_", "sub_", "log_")
 
 _settings: dict[str, Any] = {"cell_mm": None,  # None: each case's own cell
                              "workers": None,  # None: default_workers()
+                             "ranks_per_run": None,  # under mpirun; None: all ranks
                              "store": None}  # a RunStore, or None: runs kept in memory only
 _cache: dict[tuple, FormedGrid] = {}
 _stopped: dict[tuple, float] = {}  # travel (mm) reached by the runs that stopped short
@@ -105,8 +106,8 @@ def default_workers() -> int:
 
 
 @contextlib.contextmanager
-def execution(workers: int | None = None,
-              cache: str | os.PathLike | None = None) -> Iterator[None]:
+def execution(workers: int | None = None, cache: str | os.PathLike | None = None, *,
+              ranks_per_run: int | None = None) -> Iterator[None]:
     """Form the runs of :func:`form_many` inside on ``workers`` processes, remembered in ``cache``.
 
     Args:
@@ -114,26 +115,37 @@ def execution(workers: int | None = None,
             process). Under ``python3 -m mpi4py.futures`` the MPI job's ranks are the workers.
         cache: A folder where runs are kept across commands
             (:class:`~fenicsx_drape.diagnosis.run_store.RunStore`); None: in memory only.
+        ranks_per_run: Under plain ``mpirun -n N`` (no ``mpi4py.futures``): each run on
+            this many ranks, N / ``ranks_per_run`` runs at once (runs × ranks); None: every
+            run on all N ranks, one after the other.
 
     Raises:
-        DrapeInputError: ``workers`` < 1, or ``cache`` is not a usable folder.
+        DrapeInputError: ``workers`` < 1, ``ranks_per_run`` does not divide the job's
+            ranks, or ``cache`` is not a usable folder.
     """
+    from mpi4py import MPI
+
     from fenicsx_drape.diagnosis.run_store import RunStore
 
     if workers is None:
         default_workers()  # a bad DRAPE_WORKERS is refused before anything runs
     elif not (int(workers) == workers and workers >= 1):
         raise DrapeInputError(f"--workers {workers}: a number of processes >= 1")
+    size = MPI.COMM_WORLD.size
+    if ranks_per_run is not None and not (ranks_per_run >= 1 and size % ranks_per_run == 0):
+        raise DrapeInputError(f"--ranks-per-run {ranks_per_run}: a divisor of the job's "
+                              f"{size} ranks")
     old = dict(_settings)
     store = RunStore(cache) if cache is not None else None
-    _settings.update(workers=workers, store=store)
+    _settings.update(workers=workers, store=store, ranks_per_run=ranks_per_run)
     _executions[:] = [{"cache": None if store is None else str(store.folder.resolve()),
                        "counts": dict(counts)}]
     try:
         yield
     finally:
         _executions[0].update(execution_record())
-        _settings.update(workers=old["workers"], store=old["store"])
+        _settings.update(workers=old["workers"], store=old["store"],
+                         ranks_per_run=old["ranks_per_run"])
         if store is not None:
             store.close()
 
@@ -157,7 +169,7 @@ def execution_record() -> dict[str, Any] | None:
     runs = {k: counts[k] - _executions[0]["counts"][k] for k in counts}
     runs["reused"] = runs["from_disk"] + runs["from_memory"]
     return {"executor": name, "workers": workers,
-            "ranks": MPI.COMM_WORLD.size if name == "all ranks" else 1,
+            "ranks": MPI.COMM_WORLD.size // workers if name == "all ranks" else 1,
             "cache": _executions[0]["cache"], "runs": runs}
 
 
@@ -253,8 +265,6 @@ def _run(case, model: Model, trust: bool, options: tuple) -> tuple[str, Any]:
     The parent's trust and PETSc options come with each job (a worker outlives a command).
     Errors come back as values, in a form that unpickles in the parent.
     """
-    import pickle
-
     set_trusted(trust)
     wanted = dict(options)
     if wanted != _applied:
@@ -269,14 +279,21 @@ def _run(case, model: Model, trust: bool, options: tuple) -> tuple[str, Any]:
         _applied.update(wanted)
     try:
         return "ok", _form(case, model)
-    except DrapeInputError as error:  # its subclasses may not unpickle: send the message
-        return "error", DrapeInputError(str(error))
     except Exception as error:  # sent back and raised in the parent
-        try:
-            pickle.loads(pickle.dumps(error))
-        except Exception:
-            return "error", RuntimeError(f"{type(error).__name__}: {error}")
-        return "error", error
+        return "error", _sendable(error)
+
+
+def _sendable(error: Exception) -> Exception:
+    """``error`` in a form that unpickles in another process."""
+    import pickle
+
+    if isinstance(error, DrapeInputError):  # its subclasses may not unpickle: the message
+        return DrapeInputError(str(error))
+    try:
+        pickle.loads(pickle.dumps(error))
+    except Exception:
+        return RuntimeError(f"{type(error).__name__}: {error}")
+    return error
 
 
 _pools: dict[str, Executor] = {}  # the executor in use, kept between calls (warm workers)
@@ -317,7 +334,8 @@ def _executor_kind() -> tuple[str, int]:
     if mpi_pool.shared_pool():
         return "mpi4py.futures", MPI.COMM_WORLD.size - 1
     if MPI.COMM_WORLD.size > 1:
-        return "all ranks", 1
+        return "all ranks", MPI.COMM_WORLD.size // (_settings["ranks_per_run"]
+                                                    or MPI.COMM_WORLD.size)
     workers = _settings["workers"] or default_workers()
     return ("this process", 1) if workers == 1 else ("processes", workers)
 
@@ -357,6 +375,9 @@ def _form_all(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
     from mpi4py import MPI
 
     name, pool = executor()
+    groups = _executor_kind()[1] if name == "all ranks" else 1
+    if groups > 1 and len(jobs) > 1:
+        return _form_in_groups(jobs, groups)
     if pool is None or (len(jobs) == 1 and name != "mpi4py.futures"):
         comm = MPI.COMM_WORLD if name == "all ranks" else MPI.COMM_SELF
         results = []
@@ -386,6 +407,34 @@ def _form_all(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
             results.append(("error", RuntimeError(f"forming worker failed: {error!r}")))
     if broken:  # the next batch starts a new pool
         _shutdown()
+    return results
+
+
+def _form_in_groups(jobs: list[tuple[Any, Model]], groups: int) -> list[tuple[str, Any]]:
+    """The jobs under plain ``mpirun``, in ``groups`` groups of ranks, each run on one group.
+
+    Group g (ranks g·K to g·K + K − 1) forms the jobs g, g + groups, ...; every rank gets
+    every result, in the order of ``jobs``.
+    """
+    from mpi4py import MPI
+
+    world = MPI.COMM_WORLD
+    size = world.size // groups
+    colour = world.rank // size
+    group = world.Split(colour, world.rank)
+    mine = []
+    try:
+        for j in range(colour, len(jobs), groups):
+            try:
+                mine.append((j, ("ok", _form(*jobs[j], group))))
+            except Exception as error:  # raised after the others
+                mine.append((j, ("error", _sendable(error))))
+    finally:
+        group.Free()
+    results: list[tuple[str, Any]] = [("error", RuntimeError("not formed"))] * len(jobs)
+    for part in world.allgather(mine if world.rank % size == 0 else []):
+        for j, result in part:
+            results[j] = result
     return results
 
 
