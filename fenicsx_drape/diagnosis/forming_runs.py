@@ -11,7 +11,8 @@ path it was read from), the model and the solver options; it is kept in memory (
 through :mod:`concurrent.futures`, chosen by :func:`executor`: a pool of local processes (as
 many as the machine has cores, or ``DRAPE_WORKERS``, or :func:`execution`'s), the shared pool
 of ``mpi4py.futures`` when run as ``mpiexec -n N python3 -m mpi4py.futures -m fenicsx_drape
-...``, and, under plain ``mpirun``, one run after the other on all ranks. The results are
+...``, and, under plain ``mpirun``, one run after the other on all ranks (or, with
+``ranks_per_run``, runs at once on groups of ranks: runs × ranks). The results are
 gathered in the order the runs were asked, whichever process formed them: the same report
 from every executor. A run that fails is raised after the others have finished, its case and
 model named. The cells of the runs are set with :func:`resolution`: by default a case runs on
