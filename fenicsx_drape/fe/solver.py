@@ -92,10 +92,10 @@ BENDING_JACOBIANS = ("full", "diagonal", "preconditioner")
 
 BENDING_PRECONDITIONER = {
     "ksp_type": "gmres", "ksp_pc_side": "right", "ksp_norm_type": "unpreconditioned",
-    "ksp_rtol": 1e-8, "ksp_atol": 0.0, "ksp_max_it": 100, "ksp_gmres_restart": 100}
+    "ksp_rtol": 1e-5, "ksp_atol": 0.0, "ksp_max_it": 100, "ksp_gmres_restart": 100}
 """The Krylov solve of ``bending_jacobian = "preconditioner"`` (``petsc_options`` override
-it): GMRES on the full Jacobian to 10⁻⁸ of the residual, right-preconditioned by the factor of
-the plain net's matrix, so that Newton's step is the full Jacobian's."""
+it): GMRES on the full Jacobian to 10⁻⁵ of the residual, right-preconditioned by the factor of
+the plain net's matrix, so that Newton's step is the full Jacobian's to that accuracy."""
 
 
 @dataclasses.dataclass
@@ -128,7 +128,8 @@ class SolverOptions:
     # The tow bending's part of the Jacobian (the residual, hence the solution, keeps the full
     # term): "full" (its stencils, factored), "diagonal" (K's diagonal only: a plain net's
     # pattern), or "preconditioner" (the full Jacobian as GMRES's operator, preconditioned by
-    # the factor of the plain net's matrix with K's diagonal: BENDING_PRECONDITIONER).
+    # the factor of the plain net's matrix with K's neighbour couplings, the couplings two
+    # nodes apart lumped on the diagonal: BENDING_PRECONDITIONER).
     bending_jacobian: str = "full"
     # Extra SNES/KSP/PC options (those of the command line, fe.newton.set_petsc_options, win).
     petsc_options: dict = dataclasses.field(default_factory=dict)
@@ -397,8 +398,13 @@ class TrussProblem:
         is a plain pass over the values: ten times faster than adding it on its own pattern.
         """
         source = self._bending.constrained_matrix
-        if self.options.bending_jacobian != "full":
-            A.setDiagonal(self._bending_parts()[0], addv=PETSc.InsertMode.ADD_VALUES)
+        if self.options.bending_jacobian == "diagonal":
+            if self._bending_in_A is None or self._bending_in_A[0] is not source:
+                self._bending_in_A = (source, source.getDiagonal())
+            A.setDiagonal(self._bending_in_A[1], addv=PETSc.InsertMode.ADD_VALUES)
+            return
+        if self.options.bending_jacobian == "preconditioner":
+            A.axpy(1.0, self._bending_split()[0], PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             return
         if self._bending_in_A is None or self._bending_in_A[0] is not source:
             same = A.duplicate(copy=False)
@@ -406,20 +412,42 @@ class TrussProblem:
             self._bending_in_A = (source, same)
         A.axpy(1.0, self._bending_in_A[1], PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
 
-    def _bending_parts(self) -> tuple[PETSc.Vec, PETSc.Mat]:
-        """K's diagonal and K without it (constraints applied), rebuilt with the constraints."""
-        source = self._bending.constrained_matrix
-        if self._bending_in_A is None or self._bending_in_A[0] is not source:
-            diagonal = source.getDiagonal()
-            rest = source.copy()
-            zero = diagonal.duplicate()
-            zero.set(0.0)
-            rest.setDiagonal(zero)
-            self._bending_in_A = (source, diagonal, rest)
+    def _bending_split(self) -> tuple[PETSc.Mat, PETSc.Mat]:
+        """K = near + far, constraints applied (``bending_jacobian = "preconditioner"``).
+
+        ``near`` (in ``self._A``'s pattern) holds K's couplings of nodes that a bar joins (a
+        tow line's neighbours) and, on the diagonal, each row's other entries lumped (so that
+        near, like K, costs nothing under a rigid motion and is positive semidefinite: per
+        stencil, twice the Laplacian of the path a-b-c); ``far`` the rest (the couplings of
+        nodes two apart, less that lumping). Rebuilt when the constraints change.
+        """
+        K = self._bending.constrained_matrix
+        if self._bending_in_A is None or self._bending_in_A[0] is not K:
+            first = K.getOwnershipRange()[0]
+            ki, kj, kv = K.getValuesCSR()
+            ai, aj, _ = self._A.getValuesCSR()
+            n, width = len(ki) - 1, K.getSize()[1]
+            rows = np.repeat(np.arange(n), np.diff(ki))
+            in_A = np.isin(rows * width + kj,
+                           np.repeat(np.arange(n), np.diff(ai)) * width + aj)
+            diagonal = kj == rows + first
+            lumped = np.bincount(rows, np.where(in_A, 0.0, kv), minlength=n)
+            near = np.where(in_A, kv, 0.0) + np.where(diagonal, lumped[rows], 0.0)
+            far = kv - near
+            keep = in_A | diagonal
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=n))])
+            sizes = K.getSizes()
+            own = PETSc.Mat().createAIJ(sizes, csr=(indptr.astype(PETSc.IntType), kj[keep],
+                                                    near[keep]), comm=self.comm)
+            near_in_A = self._A.duplicate(copy=False)
+            near_in_A.axpy(1.0, own, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            own.destroy()
+            rest = PETSc.Mat().createAIJ(sizes, csr=(ki, kj, far), comm=self.comm)
+            self._bending_in_A = (K, near_in_A, rest)
         return self._bending_in_A[1], self._bending_in_A[2]
 
     def _operator(self) -> PETSc.Mat:
-        """The full Jacobian as an operator: the assembled net (with K's diagonal) + K's rest.
+        """The full Jacobian as an operator: the assembled net (with K's near part) + K's far.
 
         ``bending_jacobian = "preconditioner"``: ``self._A`` holds a plain net's pattern and is
         what is factored; the Krylov solve applies this sum, so Newton's step is the full
@@ -430,7 +458,7 @@ class TrussProblem:
         class FullJacobian:
             def mult(self, mat, x, y):
                 problem._A.mult(x, y)
-                problem._bending_parts()[1].multAdd(x, y, y)
+                problem._bending_split()[1].multAdd(x, y, y)
 
         J = PETSc.Mat().createPython(self._A.getSizes(), FullJacobian(), comm=self.comm)
         J.setBlockSize(3)
