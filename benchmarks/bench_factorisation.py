@@ -57,6 +57,11 @@ ORDERINGS = {  # name: MUMPS options (ICNTL(7) sequential, ICNTL(28)/(29) parall
     # The factor in single precision (PETSc's mixed-precision MUMPS, -pc_precision).
     "PORD single": {"mat_mumps_icntl_7": 4, "pc_precision": "single"},
     "AMF single": {"mat_mumps_icntl_7": 2, "pc_precision": "single"},
+    # Without MUMPS's scaling (ICNTL(8) = 0: none; the default 77 chooses one at every
+    # factorisation), and with the analysis's amalgamation relaxed (ICNTL(6) = 0: no
+    # maximum transversal).
+    "PORD noscale": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_8": 0},
+    "PORD notrans": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_6": 0},
     # The root front factorised by one process instead of with ScaLAPACK (ICNTL(13) = 1).
     "PORD root1": {"mat_mumps_icntl_7": 4, "mat_mumps_icntl_13": 1},
     # PETSc's own sequential factorisations with its nested dissection (one rank only).

@@ -76,7 +76,7 @@ def petsc_option_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def forming_runs_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--workers N``, ``--cache DIR``, ``--no-cache``: where forming runs go and are kept."""
+    """``--workers``, ``--cache``, ``--no-cache``, ``--ranks-per-run``: where runs go, kept."""
     import os
 
     try:
@@ -92,6 +92,9 @@ def forming_runs_arguments(parser: argparse.ArgumentParser) -> None:
                         "(default: DRAPE_CACHE, else $XDG_CACHE_HOME/fenicsx-drape/runs; "
                         "remove it to clear it)")
     parser.add_argument("--no-cache", action="store_true", help="keep no forming run on disk")
+    parser.add_argument("--ranks-per-run", type=positive_int, default=None, metavar="K",
+                        help="under plain mpirun: each run on K ranks, (ranks / K) runs at "
+                        "once (default: every run on all ranks, one after the other)")
 
 
 def forming_runs_setting(args: argparse.Namespace):
@@ -100,7 +103,7 @@ def forming_runs_setting(args: argparse.Namespace):
     from fenicsx_drape.diagnosis.run_store import default_folder
 
     cache = None if args.no_cache else (args.cache or default_folder())
-    return execution(args.workers, cache)
+    return execution(args.workers, cache, ranks_per_run=args.ranks_per_run)
 
 
 def main(argv: list[str] | None = None) -> int:

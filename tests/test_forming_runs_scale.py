@@ -44,9 +44,14 @@ def fresh_memory():
 
 def octagon_jobs(folder: Path):
     from fenicsx_drape.forming.case.format import load_case
+
+    return models_of(load_case(write_case(folder / "part")))
+
+
+def models_of(case):
+    """The octagon case's jobs: three holder frictions."""
     from fenicsx_drape.model import default_model
 
-    case = load_case(write_case(folder / "part"))
     return [(case, default_model().with_parameters(mu=mu)) for mu in (0.2, 0.3, 0.45)]
 
 
@@ -82,9 +87,71 @@ def test_the_same_runs_on_one_two_and_three_workers_and_a_failed_run_named(
     assert runs.cached(*jobs[0]) and runs.cached(*jobs[2]) and not runs.cached(plate, jobs[1][1])
 
 
+@pytest.mark.parallel
+@pytest.mark.slow
+def test_runs_times_ranks_under_mpirun_give_each_rank_every_run(tmp_path_factory, dolfinx,
+                                                                fresh_memory):
+    """``ranks_per_run = 1`` under ``mpirun -n N``: N runs at once, one rank each; every rank
+    gets every sheet, in the order asked, bit for bit that of the run formed on one process."""
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    folder = Path(comm.bcast(str(tmp_path_factory.mktemp("runs")) if comm.rank == 0 else None))
+    if comm.rank == 0:
+        octagon_jobs(folder)  # writes the case once
+    comm.Barrier()
+    from fenicsx_drape.forming.case.format import load_case
+
+    case = load_case(folder / "part" / "case.toml")
+    jobs = models_of(case)
+    with runs.execution(workers=1, ranks_per_run=1):  # workers: on one process, itself
+        sheets = runs.form_many(jobs)
+        record = runs.execution_record()
+    assert record["executor"] == ("all ranks" if comm.size > 1 else "this process")
+    assert record["workers"] == comm.size and record["ranks"] == 1
+    alone = runs._form(*jobs[comm.rank % len(jobs)], MPI.COMM_SELF)[0]
+    assert np.array_equal(sheets[comm.rank % len(jobs)].x, alone.x, equal_nan=True)
+    everywhere = comm.allgather([s.x for s in sheets])
+    assert all(np.array_equal(a, b, equal_nan=True)
+               for other in everywhere for a, b in zip(other, everywhere[0]))
+
+
+def test_the_execution_record_counts_the_runs_asked_formed_and_reused(tmp_path, monkeypatch):
+    """What provenance.json records of an execution(), with the forming replaced by a stub
+    that counts its calls: the counts must agree with the calls made."""
+    calls = []
+
+    def form(case, model, comm=None):
+        calls.append((case, model))
+        return FormedGrid(np.zeros((2, 2, 3)), np.ones((2, 2, 3)), False), None, {}
+
+    monkeypatch.setattr(runs, "_form", form)
+    monkeypatch.setattr(runs, "_key", lambda case, model: (case, model))
+    monkeypatch.setattr(runs, "_cache", {})
+    with runs.execution(workers=1, cache=tmp_path / "runs"):
+        runs.form_many([("a", "m"), ("b", "m"), ("a", "m")])  # "a" twice: asked once
+        runs.form_many([("a", "m"), ("c", "m")])  # "a" from memory
+    record = runs.execution_record()
+    assert len(calls) == 3
+    assert record["executor"] == "this process" and record["workers"] == 1
+    assert record["cache"] == str((tmp_path / "runs").resolve())
+    assert record["runs"] == {"asked": 4, "formed": 3, "from_disk": 0, "from_memory": 1,
+                              "reused": 1}
+    runs._cache.clear()
+    with runs.execution(workers=3, cache=None):
+        runs.form_many([("a", "m")])
+        assert runs.execution_record()["executor"] == "processes"  # while it runs
+    record = runs.execution_record()
+    assert record["cache"] is None and record["workers"] == 3
+    assert record["runs"]["formed"] == 1 and len(calls) == 4
+
+
 def test_workers_and_cache_options_are_checked(tmp_path, monkeypatch, capsys):
     with pytest.raises(DrapeInputError, match="--workers 0"):
         with runs.execution(workers=0):
+            pass
+    with pytest.raises(DrapeInputError, match="--ranks-per-run 2: a divisor of the job's 1"):
+        with runs.execution(ranks_per_run=2):
             pass
     monkeypatch.setenv("DRAPE_WORKERS", "two")
     with pytest.raises(DrapeInputError, match="DRAPE_WORKERS='two'"):
@@ -182,6 +249,12 @@ def test_a_second_compare_forms_nothing_and_reports_the_same(tmp_path, dolfinx, 
         formed = runs.counts["formed"] - before["formed"]
         read = runs.counts["from_disk"] - before["from_disk"]
         reports.append((formed, read, (tmp_path / f"c{k}" / "compare.json").read_text()))
+        # provenance.json says how the runs were made and which were reused.
+        made = json.loads((tmp_path / f"c{k}" / "provenance.json").read_text())["forming_runs"]
+        assert made["executor"] == "processes" and made["workers"] == 2
+        assert made["cache"] == str(cache.resolve())
+        assert made["runs"]["formed"] == formed and made["runs"]["from_disk"] == read
+        assert made["runs"]["reused"] == made["runs"]["asked"] - formed
     (formed, read, first), (formed_again, read_again, second) = reports
     assert formed > 0 and read == 0
     assert formed_again == 0 and read_again == formed

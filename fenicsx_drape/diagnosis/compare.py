@@ -618,6 +618,7 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
         The path of ``compare.json``.
     """
     from fenicsx_drape.diagnosis import ledger
+    from fenicsx_drape.diagnosis.forming_runs import execution_record
     from fenicsx_drape.provenance import atomic_write_text, write_json, write_provenance
 
     out = Path(out_dir)
@@ -642,6 +643,7 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
     write_provenance(out, bundle=str(bundle.path) if bundle.path else bundle.name,
                      model=str(model_path) if model_path else "default",
                      effects=list(result.model.effects),
-                     parameters=record["model"]["parameters"], seed=None)
+                     parameters=record["model"]["parameters"], seed=None,
+                     forming_runs=execution_record())
     return path
 

@@ -1045,6 +1045,7 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     each test), plus ``provenance.json``.
     """
     from fenicsx_drape.diagnosis.compare import locate, plot_residuals, plot_where, safe_name
+    from fenicsx_drape.diagnosis.forming_runs import execution_record
     from fenicsx_drape.provenance import write_json, write_provenance
 
     path = write_json(json_path, report)
@@ -1070,7 +1071,8 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     write_provenance(out, bundle=report["bundle"], report=str(Path(json_path).resolve()),
                      effects=report["baseline"]["effects"],
                      parameters=report["baseline"]["parameters"],
-                     missing_effect=report["missing_effect"], seed=None)
+                     missing_effect=report["missing_effect"], seed=None,
+                     forming_runs=execution_record())
     return path
 
 

@@ -11,7 +11,8 @@ path it was read from), the model and the solver options; it is kept in memory (
 through :mod:`concurrent.futures`, chosen by :func:`executor`: a pool of local processes (as
 many as the machine has cores, or ``DRAPE_WORKERS``, or :func:`execution`'s), the shared pool
 of ``mpi4py.futures`` when run as ``mpiexec -n N python3 -m mpi4py.futures -m fenicsx_drape
-...``, and, under plain ``mpirun``, one run after the other on all ranks. The results are
+...``, and, under plain ``mpirun``, one run after the other on all ranks (or, with
+``ranks_per_run``, runs at once on groups of ranks: runs × ranks). The results are
 gathered in the order the runs were asked, whichever process formed them: the same report
 from every executor. A run that fails is raised after the others have finished, its case and
 model named. The cells of the runs are set with :func:`resolution`: by default a case runs on
@@ -55,12 +56,16 @@ USER_OPTIONS = ("snes_", "ksp_", "pc_", "mat_", "npc_", "sub_", "log_")
 
 _settings: dict[str, Any] = {"cell_mm": None,  # None: each case's own cell
                              "workers": None,  # None: default_workers()
+                             "ranks_per_run": None,  # under mpirun; None: all ranks
                              "store": None}  # a RunStore, or None: runs kept in memory only
 _cache: dict[tuple, FormedGrid] = {}
 _stopped: dict[tuple, float] = {}  # travel (mm) reached by the runs that stopped short
 _forces: dict[tuple, dict] = {}  # the tools' force curves of the cached runs (run.tool_forces)
 _CACHE_SIZE = 256
-counts = {"formed": 0, "from_disk": 0}  # runs formed and runs read from the disk cache
+# Runs asked (each distinct run once per call of form_many), formed, read from the disk cache,
+# and found in memory, since the process started.
+counts = {"asked": 0, "formed": 0, "from_disk": 0, "from_memory": 0}
+_executions: list[dict[str, Any]] = []  # the record of the last (or running) execution()
 
 
 @contextlib.contextmanager
@@ -102,8 +107,8 @@ def default_workers() -> int:
 
 
 @contextlib.contextmanager
-def execution(workers: int | None = None,
-              cache: str | os.PathLike | None = None) -> Iterator[None]:
+def execution(workers: int | None = None, cache: str | os.PathLike | None = None, *,
+              ranks_per_run: int | None = None) -> Iterator[None]:
     """Form the runs of :func:`form_many` inside on ``workers`` processes, remembered in ``cache``.
 
     Args:
@@ -111,25 +116,62 @@ def execution(workers: int | None = None,
             process). Under ``python3 -m mpi4py.futures`` the MPI job's ranks are the workers.
         cache: A folder where runs are kept across commands
             (:class:`~fenicsx_drape.diagnosis.run_store.RunStore`); None: in memory only.
+        ranks_per_run: Under plain ``mpirun -n N`` (no ``mpi4py.futures``): each run on
+            this many ranks, N / ``ranks_per_run`` runs at once (runs × ranks); None: every
+            run on all N ranks, one after the other.
 
     Raises:
-        DrapeInputError: ``workers`` < 1, or ``cache`` is not a usable folder.
+        DrapeInputError: ``workers`` < 1, ``ranks_per_run`` does not divide the job's
+            ranks, or ``cache`` is not a usable folder.
     """
+    from mpi4py import MPI
+
     from fenicsx_drape.diagnosis.run_store import RunStore
 
     if workers is None:
         default_workers()  # a bad DRAPE_WORKERS is refused before anything runs
     elif not (int(workers) == workers and workers >= 1):
         raise DrapeInputError(f"--workers {workers}: a number of processes >= 1")
+    size = MPI.COMM_WORLD.size
+    if ranks_per_run is not None and not (ranks_per_run >= 1 and size % ranks_per_run == 0):
+        raise DrapeInputError(f"--ranks-per-run {ranks_per_run}: a divisor of the job's "
+                              f"{size} ranks")
     old = dict(_settings)
     store = RunStore(cache) if cache is not None else None
-    _settings.update(workers=workers, store=store)
+    _settings.update(workers=workers, store=store, ranks_per_run=ranks_per_run)
+    _executions[:] = [{"cache": None if store is None else str(store.folder.resolve()),
+                       "counts": dict(counts)}]
     try:
         yield
     finally:
-        _settings.update(workers=old["workers"], store=old["store"])
+        _executions[0].update(execution_record())
+        _settings.update(workers=old["workers"], store=old["store"],
+                         ranks_per_run=old["ranks_per_run"])
         if store is not None:
             store.close()
+
+
+def execution_record() -> dict[str, Any] | None:
+    """How the forming runs of the last (or the running) :func:`execution` were made.
+
+    For ``provenance.json``: the executor (``processes``, ``mpi4py.futures``, ``this
+    process`` or ``all ranks``), its ``workers`` (runs formed at once; ``ranks`` a run's MPI
+    ranks), the ``cache`` folder (None: none on disk), and the ``runs`` asked, ``formed``,
+    read ``from_disk`` and found ``from_memory`` (``reused``: the last two) inside it. None
+    when no :func:`execution` was entered.
+    """
+    if not _executions:
+        return None
+    if "executor" in _executions[0]:  # a finished one
+        return {k: v for k, v in _executions[0].items() if k != "counts"}
+    from mpi4py import MPI
+
+    name, workers = _executor_kind()
+    runs = {k: counts[k] - _executions[0]["counts"][k] for k in counts}
+    runs["reused"] = runs["from_disk"] + runs["from_memory"]
+    return {"executor": name, "workers": workers,
+            "ranks": MPI.COMM_WORLD.size // workers if name == "all ranks" else 1,
+            "cache": _executions[0]["cache"], "runs": runs}
 
 
 def case_key(case) -> str:
@@ -224,8 +266,6 @@ def _run(case, model: Model, trust: bool, options: tuple) -> tuple[str, Any]:
     The parent's trust and PETSc options come with each job (a worker outlives a command).
     Errors come back as values, in a form that unpickles in the parent.
     """
-    import pickle
-
     set_trusted(trust)
     wanted = dict(options)
     if wanted != _applied:
@@ -240,14 +280,21 @@ def _run(case, model: Model, trust: bool, options: tuple) -> tuple[str, Any]:
         _applied.update(wanted)
     try:
         return "ok", _form(case, model)
-    except DrapeInputError as error:  # its subclasses may not unpickle: send the message
-        return "error", DrapeInputError(str(error))
     except Exception as error:  # sent back and raised in the parent
-        try:
-            pickle.loads(pickle.dumps(error))
-        except Exception:
-            return "error", RuntimeError(f"{type(error).__name__}: {error}")
-        return "error", error
+        return "error", _sendable(error)
+
+
+def _sendable(error: Exception) -> Exception:
+    """``error`` in a form that unpickles in another process."""
+    import pickle
+
+    if isinstance(error, DrapeInputError):  # its subclasses may not unpickle: the message
+        return DrapeInputError(str(error))
+    try:
+        pickle.loads(pickle.dumps(error))
+    except Exception:
+        return RuntimeError(f"{type(error).__name__}: {error}")
+    return error
 
 
 _pools: dict[str, Executor] = {}  # the executor in use, kept between calls (warm workers)
@@ -261,17 +308,13 @@ def executor() -> tuple[str, Executor | None]:
     """
     from fenicsx_drape.diagnosis import mpi_pool
 
-    if mpi_pool.shared_pool():
+    kind, workers = _executor_kind()
+    if kind == "mpi4py.futures":
         if "mpi" not in _pools:
             _pools["mpi"] = mpi_pool.pool()
         return "mpi4py.futures", _pools["mpi"]
-    from mpi4py import MPI
-
-    if MPI.COMM_WORLD.size > 1:
-        return "all ranks", None
-    workers = _settings["workers"] or default_workers()
-    if workers == 1:
-        return "this process", None
+    if kind != "processes":
+        return kind, None
     name = f"processes {workers}"
     if name not in _pools:
         import multiprocessing
@@ -281,6 +324,21 @@ def executor() -> tuple[str, Executor | None]:
         # Fresh processes (not forks of one where MPI is initialised).
         _pools[name] = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
     return "processes", _pools[name]
+
+
+def _executor_kind() -> tuple[str, int]:
+    """The name of :func:`executor`'s choice and how many runs it forms at once."""
+    from mpi4py import MPI
+
+    from fenicsx_drape.diagnosis import mpi_pool
+
+    if mpi_pool.shared_pool():
+        return "mpi4py.futures", MPI.COMM_WORLD.size - 1
+    if MPI.COMM_WORLD.size > 1:
+        return "all ranks", MPI.COMM_WORLD.size // (_settings["ranks_per_run"]
+                                                    or MPI.COMM_WORLD.size)
+    workers = _settings["workers"] or default_workers()
+    return ("this process", 1) if workers == 1 else ("processes", workers)
 
 
 def _shutdown() -> None:
@@ -318,6 +376,9 @@ def _form_all(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
     from mpi4py import MPI
 
     name, pool = executor()
+    groups = _executor_kind()[1] if name == "all ranks" else 1
+    if groups > 1 and len(jobs) > 1:
+        return _form_in_groups(jobs, groups)
     if pool is None or (len(jobs) == 1 and name != "mpi4py.futures"):
         comm = MPI.COMM_WORLD if name == "all ranks" else MPI.COMM_SELF
         results = []
@@ -350,6 +411,34 @@ def _form_all(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
     return results
 
 
+def _form_in_groups(jobs: list[tuple[Any, Model]], groups: int) -> list[tuple[str, Any]]:
+    """The jobs under plain ``mpirun``, in ``groups`` groups of ranks, each run on one group.
+
+    Group g (ranks g·K to g·K + K − 1) forms the jobs g, g + groups, ...; every rank gets
+    every result, in the order of ``jobs``.
+    """
+    from mpi4py import MPI
+
+    world = MPI.COMM_WORLD
+    size = world.size // groups
+    colour = world.rank // size
+    group = world.Split(colour, world.rank)
+    mine = []
+    try:
+        for j in range(colour, len(jobs), groups):
+            try:
+                mine.append((j, ("ok", _form(*jobs[j], group))))
+            except Exception as error:  # raised after the others
+                mine.append((j, ("error", _sendable(error))))
+    finally:
+        group.Free()
+    results: list[tuple[str, Any]] = [("error", RuntimeError("not formed"))] * len(jobs)
+    for part in world.allgather(mine if world.rank % size == 0 else []):
+        for j, result in part:
+            results[j] = result
+    return results
+
+
 def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     """Formed sheets (modelled parts) of ``(case, model)`` jobs: remembered, new ones at once.
 
@@ -359,6 +448,8 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     """
     keys = [_key(case, model) for case, model in jobs]
     todo = {k: job for k, job in zip(keys, jobs) if k not in _cache}
+    counts["asked"] += len(set(keys))
+    counts["from_memory"] += len(set(keys)) - len(todo)
     store: RunStore | None = _settings["store"]
     names = {}
     if store is not None:

@@ -133,9 +133,10 @@ class Newton:
     Args:
         residual: ``residual(x, F) -> bool`` fills ``F(x)``; False (on every rank) when ``x``
             is outside the domain.
-        jacobian: ``jacobian(x, local)`` assembles ``J(x)`` into ``A``; ``local`` says that
-            Newton converges fast (see :meth:`solve`), where the exact Jacobian is due.
-        A: The Jacobian matrix.
+        jacobian: ``jacobian(x, local)`` assembles ``J(x)`` into ``A`` (into ``P`` when
+            given); ``local`` says that Newton converges fast (see :meth:`solve`), where the
+            exact Jacobian is due.
+        A: The Jacobian matrix (the Krylov solve's operator).
         F: The residual vector (the layout of the unknowns); holds F at the last iterate.
         prefix: PETSc options prefix of this solver.
         atol, rtol, max_it: Convergence test (see the module docstring).
@@ -145,13 +146,15 @@ class Newton:
             in PETSc's database until :meth:`release_options`.
         monitor: Called with an :class:`Iterate` at the start and after every iteration,
             when the problem's state is that of the iterate.
+        P: The matrix the preconditioner is built from, when it is not ``A`` (SNES's J/P
+            split); ``A`` then applies the Jacobian, built on ``P``'s values.
     """
 
     def __init__(self, residual: Callable[[PETSc.Vec, PETSc.Vec], bool],
                  jacobian: Callable[[PETSc.Vec, bool], None], A: PETSc.Mat, F: PETSc.Vec, *,
                  prefix: str, atol: float, rtol: float, max_it: int, node_atol: float = 0.0,
                  line_search: str = "full-l2", options: Mapping[str, object] | None = None,
-                 monitor: Callable[[Iterate], None] | None = None):
+                 monitor: Callable[[Iterate], None] | None = None, P: PETSc.Mat | None = None):
         if line_search not in LINE_SEARCHES:
             raise ValueError(f"line search {line_search!r}: choose from "
                              f"{', '.join(LINE_SEARCHES)}")
@@ -177,7 +180,7 @@ class Newton:
         snes = PETSc.SNES().create(A.getComm())
         snes.setOptionsPrefix(prefix)
         snes.setFunction(self._function, F)
-        snes.setJacobian(self._jacobian, A)
+        snes.setJacobian(self._jacobian, A, P)
         snes.setConvergenceTest(self._converged)
         snes.setMonitor(self._monitor)
         snes.setFromOptions()

@@ -87,6 +87,17 @@ MUMPS) and solve to 10⁻³ with GMRES on that factor: 7-15 % faster on the hemi
 about 10⁻¹."""
 
 
+BENDING_JACOBIANS = ("full", "diagonal", "preconditioner")
+"""``SolverOptions.bending_jacobian``: how the tow bending's stencils enter Newton's solve."""
+
+BENDING_PRECONDITIONER = {
+    "ksp_type": "gmres", "ksp_pc_side": "right", "ksp_norm_type": "unpreconditioned",
+    "ksp_rtol": 1e-5, "ksp_atol": 0.0, "ksp_max_it": 100, "ksp_gmres_restart": 100}
+"""The Krylov solve of ``bending_jacobian = "preconditioner"`` (``petsc_options`` override
+it): GMRES on the full Jacobian to 10⁻⁵ of the residual, right-preconditioned by the factor of
+the plain net's matrix, so that Newton's step is the full Jacobian's to that accuracy."""
+
+
 @dataclasses.dataclass
 class SolverOptions:
     """Options of the truss model and of its solver.
@@ -114,9 +125,11 @@ class SolverOptions:
     # converged step (solver docstring); the residual, hence the solution, is unchanged.
     limit_geometric_stiffness: bool = True
     predictor: bool = True  # extrapolate the last increment, then let nodal terms project
-    # The tow bending's part of the Jacobian: "full" (its stencils), or "diagonal" (K's
-    # diagonal only: the Jacobian keeps a plain net's pattern; the residual, hence the
-    # solution, keeps the full term). Converges at 10 mm cells, not at 5 (docs/solver-notes.md).
+    # The tow bending's part of the Jacobian (the residual, hence the solution, keeps the full
+    # term): "full" (its stencils, factored), "diagonal" (K's diagonal only: a plain net's
+    # pattern), or "preconditioner" (the full Jacobian as GMRES's operator, preconditioned by
+    # the factor of the plain net's matrix with K's neighbour couplings, the couplings two
+    # nodes apart lumped on the diagonal: BENDING_PRECONDITIONER).
     bending_jacobian: str = "full"
     # Extra SNES/KSP/PC options (those of the command line, fe.newton.set_petsc_options, win).
     petsc_options: dict = dataclasses.field(default_factory=dict)
@@ -125,9 +138,9 @@ class SolverOptions:
         for name in ("tows_per_mm", "snes_atol"):
             if not getattr(self, name) > 0:
                 raise DrapeInputError(f"solver option {name} = {getattr(self, name)} must be > 0")
-        if self.bending_jacobian not in ("full", "diagonal"):
+        if self.bending_jacobian not in BENDING_JACOBIANS:
             raise DrapeInputError(f"solver option bending_jacobian = {self.bending_jacobian!r}: "
-                                  "choose from full, diagonal")
+                                  f"choose from {', '.join(BENDING_JACOBIANS)}")
         if self.line_search not in LINE_SEARCHES:
             raise DrapeInputError(f"solver option line_search = {self.line_search!r}: choose "
                                   f"from {', '.join(LINE_SEARCHES)}")
@@ -321,8 +334,12 @@ class TrussProblem:
 
     def _setup_newton(self) -> None:
         opts = self.options
-        options = {"pc_factor_mat_solver_type": opts.linear_solver, **opts.petsc_options}
-        self.newton = Newton(self._residual, self._jacobian, self._A, self._b,
+        split = self._bending is not None and opts.bending_jacobian == "preconditioner"
+        options = {"pc_factor_mat_solver_type": opts.linear_solver,
+                   **(BENDING_PRECONDITIONER if split else {}), **opts.petsc_options}
+        operator = self._operator() if split else self._A
+        self.newton = Newton(self._residual, self._jacobian, operator, self._b,
+                             P=self._A if split else None,
                              prefix=f"drape_truss_{next(_ids)}_", atol=opts.snes_atol,
                              rtol=opts.snes_rtol, max_it=opts.snes_max_it,
                              node_atol=opts.node_atol_N, line_search=opts.line_search,
@@ -363,7 +380,7 @@ class TrussProblem:
         the Jacobian gets the union of both patterns, allocated once.
         """
         self._bending = TowBending(self, self.options.tow_bending_EI_Nmm2)
-        if self.options.bending_jacobian == "diagonal":  # the form's pattern is enough
+        if self.options.bending_jacobian != "full":  # the form's pattern is enough
             return
         fem_petsc.assemble_matrix(self._A, self.jacobian_form)
         self._A.assemble()
@@ -386,11 +403,67 @@ class TrussProblem:
                 self._bending_in_A = (source, source.getDiagonal())
             A.setDiagonal(self._bending_in_A[1], addv=PETSc.InsertMode.ADD_VALUES)
             return
+        if self.options.bending_jacobian == "preconditioner":
+            A.axpy(1.0, self._bending_split()[0], PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            return
         if self._bending_in_A is None or self._bending_in_A[0] is not source:
             same = A.duplicate(copy=False)
             same.axpy(1.0, source, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
             self._bending_in_A = (source, same)
         A.axpy(1.0, self._bending_in_A[1], PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+
+    def _bending_split(self) -> tuple[PETSc.Mat, PETSc.Mat]:
+        """K = near + far, constraints applied (``bending_jacobian = "preconditioner"``).
+
+        ``near`` (in ``self._A``'s pattern) holds K's couplings of nodes that a bar joins (a
+        tow line's neighbours) and, on the diagonal, each row's other entries lumped (so that
+        near, like K, costs nothing under a rigid motion and is positive semidefinite: per
+        stencil, twice the Laplacian of the path a-b-c); ``far`` the rest (the couplings of
+        nodes two apart, less that lumping). Rebuilt when the constraints change.
+        """
+        K = self._bending.constrained_matrix
+        if self._bending_in_A is None or self._bending_in_A[0] is not K:
+            first = K.getOwnershipRange()[0]
+            ki, kj, kv = K.getValuesCSR()
+            ai, aj, _ = self._A.getValuesCSR()
+            n, width = len(ki) - 1, K.getSize()[1]
+            rows = np.repeat(np.arange(n), np.diff(ki))
+            in_A = np.isin(rows * width + kj,
+                           np.repeat(np.arange(n), np.diff(ai)) * width + aj)
+            diagonal = kj == rows + first
+            lumped = np.bincount(rows, np.where(in_A, 0.0, kv), minlength=n)
+            near = np.where(in_A, kv, 0.0) + np.where(diagonal, lumped[rows], 0.0)
+            far = kv - near
+            keep = in_A | diagonal
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=n))])
+            sizes = K.getSizes()
+            own = PETSc.Mat().createAIJ(sizes, csr=(indptr.astype(PETSc.IntType), kj[keep],
+                                                    near[keep]), comm=self.comm)
+            near_in_A = self._A.duplicate(copy=False)
+            near_in_A.axpy(1.0, own, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            own.destroy()
+            rest = PETSc.Mat().createAIJ(sizes, csr=(ki, kj, far), comm=self.comm)
+            self._bending_in_A = (K, near_in_A, rest)
+        return self._bending_in_A[1], self._bending_in_A[2]
+
+    def _operator(self) -> PETSc.Mat:
+        """The full Jacobian as an operator: the assembled net (with K's near part) + K's far.
+
+        ``bending_jacobian = "preconditioner"``: ``self._A`` holds a plain net's pattern and is
+        what is factored; the Krylov solve applies this sum, so Newton's step is the full
+        Jacobian's. The sum is applied, never formed (one extra product with K's stencils).
+        """
+        problem = self
+
+        class FullJacobian:
+            def mult(self, mat, x, y):
+                problem._A.mult(x, y)
+                problem._bending_split()[1].multAdd(x, y, y)
+
+        J = PETSc.Mat().createPython(self._A.getSizes(), FullJacobian(), comm=self.comm)
+        J.setBlockSize(3)
+        J.setUp()
+        return J
 
     def _evaluate(self, x: PETSc.Vec) -> bool:
         """Displacement, material state and nodal terms at the iterate ``x``.
