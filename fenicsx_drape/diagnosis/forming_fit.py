@@ -135,6 +135,22 @@ def on_sheet(test: Test, sheet: FormedGrid, model: Model, shift: np.ndarray | No
     return (fk.sample(part, P, test.id) * M).ravel()
 
 
+def widened(test: Test, extra: float) -> Test:
+    """``test`` with ``extra`` (in its unit) added in quadrature to every row's noise.
+
+    A model error of known size weighed as noise: the net's own error on a measurement whose
+    residual it explains (:mod:`~fenicsx_drape.diagnosis.resolution`).
+    """
+    column = _sd_column(test)
+    sd = test.column(column)
+    if sd is None:
+        lab = _lab(test)
+        sd = np.full(test.n_rows, lab.noise(test)[0]) if lab is not None else fk.row_noise(test)
+    columns = dict(test.columns)
+    columns[column] = np.hypot(np.asarray(sd, float), float(extra))
+    return dataclasses.replace(test, columns=columns)
+
+
 def _sd_column(test: Test) -> str:
     from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
 

@@ -88,7 +88,14 @@ import numpy as np
 
 from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.compare import compare_tests, error_record, normalised_error
-from fenicsx_drape.diagnosis.forming_fit import FORMING, mirrorable, moved, on_sheet, value_sd
+from fenicsx_drape.diagnosis.forming_fit import (
+    FORMING,
+    mirrorable,
+    moved,
+    on_sheet,
+    value_sd,
+    widened,
+)
 from fenicsx_drape.diagnosis.forming_runs import cached, form_many
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained
 from fenicsx_drape.errors import DrapeInputError, SolverError
@@ -614,14 +621,13 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         out["resolution"] = check_resolution(tests, model, base_cmp, rules.adequate, say)
         resolved = explained(out["resolution"])
         if resolved:
+            # They still count: a set-up that moves the part far from them must pay for it.
+            # Their noise is widened by the net's own error (what the net cannot resolve).
             say(f"  set-up stage: the net explains the residual of {', '.join(sorted(resolved))}"
-                "; the set-up is judged on the others")
-            tests = [t for t in tests if t.id not in resolved]
-            if not tests:
-                out["untestable"] = [{"effect": n, "setup": True, "reason": (
-                    "the model's net explains every forming measurement's residual at the "
-                    "stated set-up (resolution)")} for n in names]
-                return out
+                "; their noise is widened by the net's own error")
+            error = {e["measurement"]: e["discretisation_error"] for e in out["resolution"]
+                     if e["explains"]}
+            tests = [widened(t, error[t.id]) if t.id in error else t for t in tests]
             test0 = tests[0]
             base_cmp = _stated(tests, model)
     base_ho = normalised_error(base_cmp)  # nothing is fitted: held-out = the error
