@@ -16,6 +16,7 @@ import pytest
 from fenicsx_drape.cli import main
 from fenicsx_drape.forming.case.format import PlySpec, load_case
 from fenicsx_drape.forming.running.run import case_model, forming_options, run_case
+from fenicsx_drape.model import load_model
 
 pytestmark = pytest.mark.skip_in_parallel  # a stack runs on one rank
 COARSE = {"cell_mm": 30.0, "duration_s": 8.0}
@@ -81,3 +82,24 @@ def test_drape_form_writes_each_ply_and_the_interfaces(tmp_path):
     again = load_case(out / "bundle" / "case" / "case.toml")
     assert [p.angle_deg for p in again.plies] == [0.0, 45.0]
     assert again.blank.ply_angle_deg == 90.0
+
+
+def test_a_ply_of_its_own_model_forms_as_that_model_says(tmp_path):
+    """Frictionless plies, the second of its own model (tows that carry compression: without
+    tow_buckling): each forms like the single ply of its model with half the holding force."""
+    own = tmp_path / "own.toml"
+    own.write_text('effects = ["rate_dependence", "strain_dependent_viscosity", "decrimping", '
+                   '"holder_friction"]\n')
+    case = stack({"mu_ply": 0.0, "eta_f_MPa_s_per_mm": 0.0})
+    case = dataclasses.replace(case, plies=(case.plies[0],
+                                            dataclasses.replace(case.plies[1], model=own)))
+    run = run_case(case)
+    half = load_case("hemisphere", **COARSE, holder_force_N=133.0 / 2)
+    paper = numbers(run_case(half).grid)
+    theirs = numbers(run_case(half, load_model(own)).grid)
+    assert abs(theirs[1] - paper[1]) > 0.2 * abs(paper[1])  # the two models differ
+    for ply, single in zip(run.plies, (paper, theirs)):
+        γ, w, x = numbers(ply)
+        assert γ == pytest.approx(single[0], abs=0.5)
+        assert w == pytest.approx(single[1], rel=0.05)
+        assert np.nanmax(np.abs(x[..., :2] - single[2][..., :2])) < 1.0
