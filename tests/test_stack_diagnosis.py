@@ -146,9 +146,7 @@ def test_a_ply_turned_within_the_stack_is_named_by_the_set_up_stage(tmp_path):
     assert stage["setup_error"] == "ply_angle_deg/2"
     best = stage["setup"][0]
     assert best["parameter"] == "ply_angle_deg/2" and best["significant"]
-    print({k: best[k] for k in ("fitted", "sd", "evidence", "heldout_normalised", "runs")},
-          best["error_after"]["normalised"], stage["stated_heldout_normalised"],
-          [(e["parameter"], e["fitted"], e["heldout_normalised"]) for e in stage["setup"]])
+    # Measured: 50.5 ± 0.7°, normalised 2.5 from the stated 18.1, evidence 7.3 (26 runs).
     assert best["fitted"] == pytest.approx(51.0, abs=max(1.0, 2 * best["sd"]))
     # The turned ply's net is clipped to the blank cell by cell: the fit leaves more than the
     # noise, but most of the stated set-up's error goes.
