@@ -45,19 +45,9 @@ friction, symmetric, as for the exact surfaces.
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
 from fenicsx_drape.errors import ParameterError
-
-_FAR = 1e30  # the gap (mm) of a node that cannot touch the tool
-
-
-class _Gap(NamedTuple):
-    phi: np.ndarray
-    normal: np.ndarray
-    hessian: np.ndarray
 
 
 def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -76,14 +66,10 @@ class PenaltyContact:
         slip_regularisation_mm: ``s_ε``, the slip below which friction is not yet at
             its Coulomb limit.
         smoothing_force_N: ``f_s``, the force below which the penalty law is quadratic.
-        only: The nodes that can touch the tool, as a function of the reference positions
-            (n, 3) giving a mask (a stack: the punch touches ply 1, the die the last ply);
-            None: every node. The others are not evaluated (no gap, no force).
     """
 
     def __init__(self, tool, stiffness_N_per_mm: float, *, friction: float = 0.0,
-                 slip_regularisation_mm: float = 0.01, smoothing_force_N: float = 100.0,
-                 only=None) -> None:
+                 slip_regularisation_mm: float = 0.01, smoothing_force_N: float = 100.0) -> None:
         if not stiffness_N_per_mm > 0.0:
             raise ParameterError(f"contact with {tool.name}: penalty stiffness "
                                  f"{stiffness_N_per_mm} N/mm must be positive")
@@ -103,26 +89,11 @@ class PenaltyContact:
         self._x_n: np.ndarray | None = None  # positions at the last converged step
         self._t_n = 0.0
         self._trial: tuple[np.ndarray, float] | None = None
-        self._only = only
-        self._on: np.ndarray | None = None  # the nodes evaluated (None: all)
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
         """Remember the reference positions (the slip of the first step starts there)."""
         self._x_n = np.array(X, dtype=float)
         self._t_n = 0.0
-        if self._only is not None:
-            self._on = np.flatnonzero(np.asarray(self._only(self._x_n), dtype=bool))
-
-    def _gap(self, x: np.ndarray, t: float):
-        """The tool's gap at every node; nodes that cannot touch it are far (no contact)."""
-        if self._on is None:
-            return self.tool.gap(x, t)
-        g = self.tool.gap(x[self._on], t)
-        n = len(x)
-        phi = np.full(n, _FAR)
-        normal, hessian = np.zeros((n, 3)), np.zeros((n, 3, 3))
-        phi[self._on], normal[self._on], hessian[self._on] = g.phi, g.normal, g.hessian
-        return _Gap(phi, normal, hessian)
 
     def penalty(self, φ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The normal force p(φ) ≥ 0 (N) and its slope p'(φ) (N/mm) at signed gaps φ (mm)."""
@@ -134,7 +105,7 @@ class PenaltyContact:
 
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Contact force (N) and stiffness −∂f/∂x (N/mm) at the positions ``x`` at time ``t``."""
-        g = self._gap(x, t)
+        g = self.tool.gap(x, t)
         p, dp = self.penalty(g.phi)
         n = g.normal
         f = p[:, None] * n
@@ -184,8 +155,8 @@ class PenaltyContact:
         φ ≥ 0), and the step would push it deep into the tool. Other nodes that
         penetrate are moved onto the surface.
         """
-        g = self._gap(x, t)
-        φ_n = self._gap(self._x_n, self._t_n).phi
+        g = self.tool.gap(x, t)
+        φ_n = self.tool.gap(self._x_n, self._t_n).phi
         pressed = φ_n < 0.0
         move = np.where(pressed, g.phi - φ_n, np.minimum(g.phi, 0.0))
         return x - move[:, None] * g.normal
@@ -201,4 +172,4 @@ class PenaltyContact:
 
     def penetration(self, x: np.ndarray, t: float) -> np.ndarray:
         """Penetration depth (mm, ≥ 0) of every node at time ``t``."""
-        return np.maximum(-self._gap(x, t).phi, 0.0)
+        return np.maximum(-self.tool.gap(x, t).phi, 0.0)
