@@ -92,10 +92,15 @@ layups = {
 
 
 def draw_in(X, x, direction):
-    """How far the sheet's edge point farthest along ``direction`` moved inwards (mm)."""
-    along = X @ direction
-    k = np.nanargmax(np.where(np.isnan(along), -np.inf, along))
-    i, j = np.unravel_index(k, along.shape)
+    """How far the middle of the blank's side across ``direction`` moved inwards (mm).
+
+    The node farthest along ``direction`` nearest the axis through the centre (on a ply at
+    45°, the tip of its ragged edge).
+    """
+    along = np.where(np.isnan(X[..., 0]), -np.inf, X @ direction)
+    across = np.abs(X @ np.array([-direction[1], direction[0]]))
+    edge = along >= along.max() - 1e-6 * np.abs(along.max())
+    i, j = np.unravel_index(np.argmin(np.where(edge, across, np.inf)), along.shape)
     return float(X[i, j] @ direction - x[i, j] @ direction)
 
 
