@@ -69,7 +69,9 @@ def test_a_measurement_is_compared_with_the_ply_it_names(tmp_path):
     assert tests["ply1"].ply == 1 and tests["plyn"].ply is None
     assert any("'plyn'" in n and "outermost ply" in n and "ply 2" in n for n in bundle.notes)
     # Each grid against the model it was formed with, on its own ply: at the noise (0.3 mm).
-    chosen, _ = prepare(bundle)
+    chosen, notes = prepare(bundle)  # the report's notes say which ply was taken
+    assert notes == ["test 'plyn': no ply named; compared with the outermost ply away from the "
+                     "punch (ply 2)"]
     values = simulate(chosen, SLIDING)
     for c in compare_tests(chosen, values):
         assert c.normalised == pytest.approx(1.0, abs=0.2), c.id
