@@ -349,36 +349,14 @@ def split_test(test, raw: Mapping[str, Any], folder: Path, fname: str, where, in
         index: The test's index among the [[test]] tables.
         add: ``add(file, line, problem)``.
 
+    On a stack (spec version 4) each measurement's ply comes from its ``<measurement>_ply``
+    key or its ``ply`` column (:func:`by_ply`).
+
     Returns:
         The tests (empty when the measurements have problems, each given to ``add``).
     """
     label = f"test {test.id!r}"
-    names = [m for m in MEASUREMENTS if m in raw]
-    grid = bool(test.file)
-    keys: dict[str, Any] = {}
-    for key in ("shear_sd_deg", "position_sd_mm", "force_sd_N"):
-        if key in raw:
-            v = raw[key]
-            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < math.inf):
-                add(fname, where("test", index, key), f"{label}: {key} = {v!r} must be a "
-                                                      "positive number")
-            else:
-                keys[key] = float(v)
-    magnitude = raw.get("shear_magnitude", False)
-    if not isinstance(magnitude, bool):
-        add(fname, where("test", index, "shear_magnitude"),
-            f"{label}: shear_magnitude = {magnitude!r} must be true or false")
-    tool = raw.get("force_tool", "punch")
-    if not isinstance(tool, str) or not tool:
-        add(fname, where("test", index, "force_tool"), f"{label}: force_tool must name a tool")
-        tool = "punch"
     case = getattr(test, "forming_case", None)
-    if case is not None and "punch_force" in raw and tool not in {t.name for t in case.tools}:
-        add(fname, where("test", index, "force_tool"),
-            f"{label}: force_tool = {tool!r} is not a tool of the case (its tools: "
-            f"{', '.join(t.name for t in case.tools)})")
-    frame = _frame(raw.get("frame"), fname, where("test", index, "frame"), label, add)
-    reach = reach_of(test)
     plies = (len(case.plies) or 1) if case is not None else 1
     ply_keys = {}
     for key, name in PLY_KEYS.items():
@@ -389,13 +367,10 @@ def split_test(test, raw: Mapping[str, Any], folder: Path, fname: str, where, in
                     f"of the stack, 1 (the punch side) to {plies}")
             else:
                 ply_keys[name] = v
-    out = _split(test, raw, folder, names, grid, keys, frame, reach, magnitude, tool, fname,
-                 where, index, label, add)
-    split = []
-    for t in out:
-        split += by_ply(t, ply_keys.get(measurement_of(t) or "file"), plies, folder, label,
-                        add)
-    return split
+    out = []
+    for t in _measurements(test, raw, folder, fname, where, index, add):
+        out += by_ply(t, ply_keys.get(measurement_of(t) or "file"), plies, folder, label, add)
+    return out
 
 
 def by_ply(test, ply: int | None, plies: int, folder: Path, label: str, add) -> list:
@@ -425,9 +400,36 @@ def by_ply(test, ply: int | None, plies: int, folder: Path, label: str, add) -> 
                                 id=f"{stem}/ply{k}", ply=int(k)) for k in values]
 
 
-def _split(test, raw, folder, names, grid, keys, frame, reach, magnitude, tool, fname, where,
-           index, label, add) -> list:
-    """The measurements of a forming test, each a test of its own (:func:`split_test`)."""
+def _measurements(test, raw: Mapping[str, Any], folder: Path, fname: str, where, index: int,
+                  add) -> list:
+    """The tests of each measurement of a forming test (:func:`split_test`), plies aside."""
+    label = f"test {test.id!r}"
+    names = [m for m in MEASUREMENTS if m in raw]
+    grid = bool(test.file)
+    keys: dict[str, Any] = {}
+    for key in ("shear_sd_deg", "position_sd_mm", "force_sd_N"):
+        if key in raw:
+            v = raw[key]
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < math.inf):
+                add(fname, where("test", index, key), f"{label}: {key} = {v!r} must be a "
+                                                      "positive number")
+            else:
+                keys[key] = float(v)
+    magnitude = raw.get("shear_magnitude", False)
+    if not isinstance(magnitude, bool):
+        add(fname, where("test", index, "shear_magnitude"),
+            f"{label}: shear_magnitude = {magnitude!r} must be true or false")
+    tool = raw.get("force_tool", "punch")
+    if not isinstance(tool, str) or not tool:
+        add(fname, where("test", index, "force_tool"), f"{label}: force_tool must name a tool")
+        tool = "punch"
+    case = getattr(test, "forming_case", None)
+    if case is not None and "punch_force" in raw and tool not in {t.name for t in case.tools}:
+        add(fname, where("test", index, "force_tool"),
+            f"{label}: force_tool = {tool!r} is not a tool of the case (its tools: "
+            f"{', '.join(t.name for t in case.tools)})")
+    frame = _frame(raw.get("frame"), fname, where("test", index, "frame"), label, add)
+    reach = reach_of(test)
     out = []
     if grid:
         columns = dict(test.columns)
