@@ -141,6 +141,8 @@ def setup_names(names: Sequence[str], tests: Sequence[Test]) -> list[str]:
         if name == "ply_angle_deg" and plies > 1:
             out += [f"{PLY}{k}" for k in range(1, plies + 1) if f"{PLY}{k}" not in names]
     return out
+
+
 # The scan of each parameter about its stated value, per axis (one batch of runs: a set-up
 # error may lie either side, and a turned net is clipped to the blank, so that the error is
 # not smooth through θ = 0): degrees, mm, a change of the factor on the force, μ. The
