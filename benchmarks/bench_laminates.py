@@ -6,7 +6,8 @@
 The case at its own net (quarter model), one rank: the single ply, then stacks of two and four
 plies, all at 0° (a turned ply breaks the quarter symmetry), the die's gap the stack's. Every
 line: plies, nodes, wall time, steps, cut-backs, Newton iterations (per step), time per
-iteration, the ratio of the wall time to the single ply's, and each ply's maximum shear. The
+iteration, the ratio of the wall time to the single ply's, the process's CPU time and its
+ratio (steadier than the wall time on a shared machine), and each ply's maximum shear. The
 machine's load average comes first.
 """
 
@@ -29,7 +30,7 @@ args = parser.parse_args()
 base = load_case(args.case, cell_mm=args.cell_mm, duration_s=args.duration_s)
 run_case(load_case(args.case, cell_mm=30.0))  # JIT warm-up
 print(f"load average {os.getloadavg()[0]:.2f}; case {base.name}, cell {base.blank.cell_mm:g} mm")
-single = None
+single = cpu_single = None
 for angles in ((0.0,), (0.0, 0.0), (0.0, 0.0, 0.0, 0.0)):
     # The die's gap is the stack's thickness (the double dome's offset_mm, the builtin tools'
     # ply_thickness_mm): a die closing on one ply's gap would squeeze the stack.
@@ -38,14 +39,15 @@ for angles in ((0.0,), (0.0, 0.0), (0.0, 0.0, 0.0, 0.0)):
     case = load_case(args.case, cell_mm=args.cell_mm, duration_s=args.duration_s, **gap)
     if len(angles) > 1:
         case = dataclasses.replace(case, plies=tuple(PlySpec(a, 0.3) for a in angles))
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     run = run_case(case)
-    wall = time.perf_counter() - start
-    single = single or wall
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+    single, cpu_single = single or wall, cpu_single or cpu
     grids = run.plies or [run.grid]
     shear = ", ".join(f"{np.nanmax(np.abs(g.shear_deg())):.1f}" for g in grids)
     nodes = run.problem.num_owned
     print(f"{len(angles)} plies: {nodes} nodes, {wall:.1f} s, {run.steps} steps, "
           f"{run.cutbacks} cut-backs, {run.iterations} Newton ({run.iterations / run.steps:.2f} "
           f"per step), {1e3 * wall / run.iterations:.1f} ms per iteration, "
-          f"{wall / single:.2f}x the single ply; max shear per ply {shear} deg")
+          f"{wall / single:.2f}x the single ply; CPU {cpu:.1f} s, {cpu / cpu_single:.2f}x; "
+          f"max shear per ply {shear} deg")

@@ -145,6 +145,15 @@ EFFECTS: dict[str, Effect] = {
             "mean tow stress of the cell (see this module's docstring for where it acts).",
             "shear", ("k_st",), (), ("bias_extension", "forming", "tensile"), (), False,
             "beyond the paper"),
+        Effect(
+            "interply_friction",
+            "plies of a stack slide on each other under an inter-ply friction law",
+            "The plies of a stack slide against each other under τ = τ₀ + μ p + η_f v (tack, "
+            "Coulomb regularised over a small slip, a viscous resin film; "
+            "materials/interply.py), with the values of the case's [interply] table (fitted "
+            "from interply_friction tests by drape fit). Without it adjacent plies are bonded: "
+            "they move together. It acts only on a stack of plies.",
+            "contact", (), (), ("forming",), (), False, "beyond the paper"),
     )
 }
 

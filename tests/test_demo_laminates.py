@@ -23,13 +23,23 @@ def test_demo_laminates(tmp_path):
     assert run.returncode == 0, run.stderr[-3000:]
     with open(tmp_path / "layups.csv") as f:
         rows = list(csv.DictReader(f))
-    sliding = {r["layup"]: float(r["max_sliding_mm"]) for r in rows}
-    shear = {(r["layup"], int(r["ply"])): float(r["max_shear_deg"]) for r in rows}
+    dome = [r for r in rows if r["part"] == "double dome"]
+    sliding = {r["layup"]: float(r["max_sliding_mm"]) for r in dome}
+    draw_in = {(r["layup"], int(r["ply"])): float(r["draw_in_x_mm"]) for r in dome}
+    assert all(float(r["travel_mm"]) == pytest.approx(40.0) for r in dome)
     # More friction, or a thicker film, holds the plies together: they slide less.
     assert sliding["[0/90, ±45], μ = 0.3"] < sliding["[0/90, ±45]"] < sliding[
         "[0/90, ±45], μ = 0.1"]
-    assert sliding["[0/90, ±45], η_f = 0.01"] < sliding["[0/90, ±45]"]
-    # Plies at the same angle hardly slide; the ply at 45° shears more than the one at 0°.
-    assert sliding["[0/90, 0/90]"] < 0.1 * sliding["[0/90, ±45]"]
-    assert shear[("[0/90, ±45]", 2)] > shear[("[0/90, ±45]", 1)] + 5.0
-    assert (tmp_path / "shear_ply2.png").stat().st_size > 0
+    assert sliding["[0/90, ±45], η_f = 0.01"] < sliding["[0/90, ±45]"] < sliding[
+        "[0/90, ±45], η_f = 0.0005"]
+    # Plies at the same angle hardly slide; the 0/90 ply, its tows across the side, draws in
+    # more at the middle of the blank's side than the ±45 ply (the tip of its ragged edge).
+    assert sliding["[0/90, 0/90]"] < 0.2 * sliding["[0/90, ±45]"]
+    for name in sliding:
+        if name.startswith("[0/90, ±45]"):
+            assert draw_in[(name, 1)] > draw_in[(name, 2)] + 2.0, name
+    hemisphere = [r for r in rows if r["part"] == "hemisphere"]
+    assert max(float(r["max_sliding_mm"]) for r in hemisphere) > 1.0
+    for name in ("double_dome_shear_ply2.png", "double_dome_interply.png",
+                 "hemisphere_shear_ply2.png"):
+        assert (tmp_path / name).stat().st_size > 0

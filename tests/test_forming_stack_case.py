@@ -86,18 +86,23 @@ def test_a_turned_ply_in_a_quarter_model_is_refused(tmp_path):
         load_case(stack_case(tmp_path, symmetry='["x", "y"]'))
 
 
-def test_plies_with_different_models_are_refused_by_name(tmp_path):
-    from fenicsx_drape.forming.running.run import case_model
+def test_each_ply_may_name_its_own_model(tmp_path):
+    from fenicsx_drape.forming.running.run import case_model, ply_models
 
     (tmp_path / "a.toml").write_text('effects = ["decrimping"]\n')
     (tmp_path / "b.toml").write_text('effects = ["tow_buckling"]\n')
     text = STACK.replace("thickness_mm = 0.3\n", "thickness_mm = 0.3\nmodel = 'a.toml'\n")
     text = text.replace("thickness_mm = 0.25\n", "thickness_mm = 0.25\nmodel = 'b.toml'\n")
     case = load_case(stack_case(tmp_path, text))
-    with pytest.raises(CaseError, match="different models"):
-        case_model(case)
+    # No model of the case's own: the paper's for the run (holder, tools, its plies slide),
+    # and each ply's tow and shear laws from its own model.
+    assert "interply_friction" in case_model(case).effects
+    assert [m.effects for m in ply_models(case)] == [("decrimping",), ("tow_buckling",)]
     same = text.replace("model = 'b.toml'", "model = 'a.toml'")
-    assert case_model(load_case(stack_case(tmp_path, same))).effects == ("decrimping",)
+    case = load_case(stack_case(tmp_path, same))  # one model for all: the case's
+    assert case_model(case).effects == ("decrimping",) and ply_models(case) is None
+    # The loader keeps the plies' models, and a copy of the case names no file of its folder.
+    assert "model =" not in write_case(case, tmp_path / "copy").read_text()
 
 
 def test_the_plies_share_the_cell_size_the_rectangle_fits():

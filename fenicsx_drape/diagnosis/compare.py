@@ -70,11 +70,19 @@ def conditions_of(test: Test) -> dict[str, float]:
 
 
 def prepare(bundle: Bundle) -> tuple[list[Test], list[str]]:
-    """The tests of ``bundle`` that can be compared, and a note for each that cannot."""
+    """The tests of ``bundle`` that can be compared, and notes on the others.
+
+    A note for each test that cannot be compared, and for each measurement of a stack that
+    names no ply (it is read on the outermost ply away from the punch, spec version 4).
+    """
     tests, skipped = [], []
     for test in bundle.tests:
         if test.kind in KINDS:
             tests.append(test)
+            stack = getattr(test.forming_case, "plies", ())
+            if test.kind == "forming" and test.ply is None and len(stack) > 1:
+                skipped.append(f"test {test.id!r}: no ply named; compared with the outermost "
+                               f"ply away from the punch (ply {len(stack)})")
         else:
             skipped.append(f"test {test.id!r}: {test.kind} tests cannot be compared yet "
                            "(no simulation for this kind); left out")

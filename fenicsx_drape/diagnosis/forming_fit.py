@@ -128,6 +128,7 @@ def on_sheet(test: Test, sheet: FormedGrid, model: Model, shift: np.ndarray | No
         if plane is not None:
             raise ValueError(f"test {test.id!r}: a lab measurement is not read mirrored")
         return np.asarray(lab_kind.match(test, sheet, model)["values"], float)
+    sheet = sheet.ply(test.ply)  # a stack: the ply measured
     M = np.ones(3) if plane is None else np.where(np.arange(3) == "xy".index(plane), -1.0, 1.0)
     P = fk.reference_points(test) * M[:2]
     part = sheet if all(bool((P[:, "xy".index(q)] >= -1e-9).all()) for q in sheet.planes) \

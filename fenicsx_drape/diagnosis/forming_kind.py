@@ -247,15 +247,19 @@ def extrapolated_nodes(test: Test, sheet: FormedGrid) -> int:
 
 
 def simulated_sheets(test: Test, model: Model) -> list[FormedGrid]:
-    """The simulated sheet(s) for a test: one per parameter set of a vectorised model."""
+    """The simulated sheet(s) for a test: one per parameter set of a vectorised model.
+
+    On a stack, the sheet of the ply the test was measured on (``test.ply``; None: the
+    outermost ply away from the punch).
+    """
     sizes = {np.size(v) for v in model.parameters.values() if np.ndim(v) > 0}
     case = case_of(test)
     if not sizes:
-        return [sheet_for(test, form_many([(case, model)])[0])]
+        return [sheet_for(test, form_many([(case, model)])[0].ply(test.ply))]
     (k,) = sizes
     sets = [model.with_parameters(**{n: float(v[i]) for n, v in model.parameters.items()
                                      if np.ndim(v) > 0}) for i in range(k)]
-    return [sheet_for(test, g) for g in form_many([(case, m) for m in sets])]
+    return [sheet_for(test, g.ply(test.ply)) for g in form_many([(case, m) for m in sets])]
 
 
 def simulate(test: Test, model: Model) -> np.ndarray:
@@ -573,18 +577,21 @@ def synthetic_forming_test(model: Model, *, test_id: str = "hemisphere",
 
 def synthetic_case_test(model: Model, case: FormingCase, *, test_id: str | None = None,
                         grid_mm: float | None = None, sd_mm: float = 0.3, seed: int = 0,
-                        full: bool = False, case_file: str = "case/case.toml") -> Test:
+                        full: bool = False, case_file: str = "case/case.toml",
+                        ply: int | None = None) -> Test:
     """A forming test of any case "measured" by the project's simulator plus Gaussian noise.
 
     The case formed by ``model`` (on its own cells), read at a drawn grid of ``grid_mm``
     (default: the cell) on the modelled part, or on the whole blank by symmetry (``full``),
     with noise of ``sd_mm`` per coordinate written as the ``position_sd_mm`` column (none when
     0). The test names ``case_file`` and carries the case; its keys repeat the case's
-    duration, travel and holding force. Write it with :func:`write_case_bundle`.
+    duration, travel and holding force. Write it with :func:`write_case_bundle`. On a stack,
+    ``ply`` names the ply measured (its ``file_ply`` key); None: the outermost one.
     """
     from fenicsx_drape.measurements.bundle import Test
 
     (sheet,) = form_many([(case, model)])
+    sheet = sheet.ply(ply)
     grid_mm = grid_mm or case.blank.cell_mm
     table = (sheet.full() if full else sheet).drawn_grid(grid_mm)
     rng = np.random.default_rng(seed)
@@ -599,7 +606,7 @@ def synthetic_case_test(model: Model, case: FormingCase, *, test_id: str | None 
     test_id = test_id or case.name
     return Test(id=test_id, kind="forming", file=f"{test_id}.csv", columns=columns,
                 forming={**keys, "grid_mm": grid_mm}, case=case_file, case_keys=keys,
-                forming_case=case)
+                forming_case=case, ply=ply)
 
 
 def write_case_bundle(name: str, tests: Sequence[Test], folder: str | Path, *,

@@ -187,11 +187,14 @@ def case_key(case) -> str:
     files = [t.path for t in case.tools if t.path is not None]
     if case.blank.path is not None:
         files.append(case.blank.path)
+    files += [p.model for p in case.plies if p.model is not None]  # a ply's own model
     digests = [file_digest(Path(p)) if Path(p).is_file() else f"missing {p}" for p in files]
     return json.dumps([tables, digests], sort_keys=True, default=str)
 
 
 def _key(case, model: Model) -> tuple:
+    if "interply_friction" in model.effects and not case.stack:  # it acts on stacks only
+        model = model.without_effects("interply_friction")
     params = tuple(sorted((k, float(v)) for k, v in model.parameters.items()))
     plugins = tuple(file_digest(p) if Path(p).is_file() else f"missing {p}"
                     for p in model.plugins)

@@ -326,8 +326,10 @@ def match(test: Test, grid: FormedGrid, model: Model | None = None) -> dict[str,
     """A lab measurement against one formed sheet: the model's values and how they matched.
 
     Returns ``values`` (the model's values, as :func:`measured`), ``unmatched`` (mask of the
-    rows), ``registration`` (or None) and, for a scan, ``coverage``.
+    rows), ``registration`` (or None) and, for a scan, ``coverage``. A measurement of one ply
+    of a stack (``test.ply``) is matched with that ply's sheet.
     """
+    grid = grid.ply(test.ply)
     key = (test.id, _digest(test), id(grid))
     hit = _matches.get(key)
     if hit is not None and hit["_grid"] is grid:

@@ -74,7 +74,9 @@ def encode(grid: FormedGrid, stopped_mm: float | None, curves: dict[str, np.ndar
                                    [""]),
               "stopped_mm": np.array(np.nan if stopped_mm is None else stopped_mm),
               "code": np.array(code_digest()),
-              **{f"curve {k}": np.asarray(v) for k, v in curves.items()}}
+              **{f"curve {k}": np.asarray(v) for k, v in curves.items()},
+              **{f"ply{k} {a}": getattr(p, a) for k, p in enumerate(grid.plies, 1)
+                 for a in ("X", "x")}}
     buffer = io.BytesIO()
     np.savez(buffer, **arrays)
     payload = buffer.getvalue()
@@ -93,8 +95,11 @@ def decode(data: bytes) -> tuple[FormedGrid, float | None, dict[str, np.ndarray]
             if str(z["code"]) != code_digest():
                 return None
             symmetry = [str(s) for s in z["symmetry"]]
-            grid = FormedGrid(z["X"], z["x"], bool(z["quarter"]),
-                              None if symmetry == ["-"] else tuple(s for s in symmetry if s))
+            planes = None if symmetry == ["-"] else tuple(s for s in symmetry if s)
+            plies = tuple(FormedGrid(z[f"ply{k} X"], z[f"ply{k} x"], bool(z["quarter"]), planes)
+                          for k in range(1, 1 + sum(f.endswith(" X") and f.startswith("ply")
+                                                    for f in z.files)))
+            grid = FormedGrid(z["X"], z["x"], bool(z["quarter"]), planes, plies)
             stopped = float(z["stopped_mm"])
             curves = {k[len("curve "):]: z[k] for k in z.files if k.startswith("curve ")}
     except (ValueError, KeyError, OSError):

@@ -106,6 +106,50 @@ if TYPE_CHECKING:
     from fenicsx_drape.model import Model
 
 SETUP_PARAMETERS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", "tool_offset_mm")
+# On a stack (spec version 4), ``ply_angle_deg/<k>`` is the k-th ply's angle within it (a ply
+# laid at the wrong angle), tried with ``ply_angle_deg`` (the whole stack turned); its tables'
+# entries are ``ply_angle_deg``'s.
+PLY = "ply_angle_deg/"
+
+
+def ply_index(name: str) -> int | None:
+    """The ply k of a set-up parameter ``ply_angle_deg/<k>`` (on a stack), else None."""
+    tail = name[len(PLY):] if name.startswith(PLY) else ""
+    return int(tail) if tail.isdigit() and int(tail) >= 1 else None
+
+
+def kind_of(name: str) -> str:
+    """The set-up parameter whose tables a name uses (``ply_angle_deg/<k>``: the ply angle's)."""
+    return "ply_angle_deg" if ply_index(name) else name
+
+
+class _Table(dict):
+    """A table of the set-up parameters that answers ``ply_angle_deg/<k>`` as the ply angle."""
+
+    def __missing__(self, name: str):
+        if kind_of(name) == name:
+            raise KeyError(name)
+        return self[kind_of(name)]
+
+    def get(self, name: str, default=None):
+        return super().get(kind_of(name), default)
+
+
+def setup_names(names: Sequence[str], tests: Sequence[Test]) -> list[str]:
+    """The set-up parameters to try: ``names``, with each ply's angle after the stack's.
+
+    When the forming tests are on stacks, ``ply_angle_deg`` brings ``ply_angle_deg/<k>``
+    for every ply k that all their stacks have.
+    """
+    plies = min((len(fk.forming_case_of(t).plies) for t in tests), default=0)
+    out = []
+    for name in names:
+        out.append(name)
+        if name == "ply_angle_deg" and plies > 1:
+            out += [f"{PLY}{k}" for k in range(1, plies + 1) if f"{PLY}{k}" not in names]
+    return out
+
+
 # The scan of each parameter about its stated value, per axis (one batch of runs: a set-up
 # error may lie either side, and a turned net is clipped to the blank, so that the error is
 # not smooth through θ = 0): degrees, mm, a change of the factor on the force, μ. The
@@ -115,17 +159,19 @@ SETUP_PARAMETERS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", 
 # A punch moved past its clearance to a matched die clashes with it (the double dome's die is
 # 0.3 mm off the punch): at 3 mm its runs took 2.4× as long, with cut-backs; 1 mm is the
 # finite-difference step, so a fit from the stated point reuses the scan's runs.
-SCAN = {"ply_angle_deg": (-4.0, 4.0), "blank_offset_mm": (-8.0, 8.0),
-        "holder_force_N": (-0.4, 0.8), "mu": (-0.15, 0.3), "tool_offset_mm": (-1.0, 1.0)}
+SCAN = _Table({"ply_angle_deg": (-4.0, 4.0), "blank_offset_mm": (-8.0, 8.0),
+               "holder_force_N": (-0.4, 0.8), "mu": (-0.15, 0.3), "tool_offset_mm": (-1.0, 1.0)})
 # The finite-difference step of the Gauss-Newton fit, per axis.
-STEP = {"ply_angle_deg": (1.0,), "blank_offset_mm": (1.5, 1.5), "holder_force_N": (0.2,),
-        "mu": (0.05,), "tool_offset_mm": (1.0, 1.0)}
-BOUNDS = {"ply_angle_deg": (-45.0, 45.0), "blank_offset_mm": (-60.0, 60.0),
-          "holder_force_N": (0.05, 20.0), "mu": (0.0, 2.0), "tool_offset_mm": (-30.0, 30.0)}
-MAX_STEP = {"ply_angle_deg": 10.0, "blank_offset_mm": 15.0, "holder_force_N": 2.0, "mu": 0.3,
-            "tool_offset_mm": 10.0}
+STEP = _Table({"ply_angle_deg": (1.0,), "blank_offset_mm": (1.5, 1.5), "holder_force_N": (0.2,),
+               "mu": (0.05,), "tool_offset_mm": (1.0, 1.0)})
+BOUNDS = _Table({"ply_angle_deg": (-45.0, 45.0), "blank_offset_mm": (-60.0, 60.0),
+                 "holder_force_N": (0.05, 20.0), "mu": (0.0, 2.0),
+                 "tool_offset_mm": (-30.0, 30.0)})
+MAX_STEP = _Table({"ply_angle_deg": 10.0, "blank_offset_mm": 15.0, "holder_force_N": 2.0,
+                   "mu": 0.3, "tool_offset_mm": 10.0})
 # A value of each parameter that breaks every plane it can break (the model it needs).
-GENERIC = {"ply_angle_deg": 1.0, "blank_offset_mm": (1.0, 1.0), "tool_offset_mm": (1.0, 1.0)}
+GENERIC = _Table({"ply_angle_deg": 1.0, "blank_offset_mm": (1.0, 1.0),
+                  "tool_offset_mm": (1.0, 1.0)})
 MAX_ITERATIONS = 4
 # A Gauss-Newton step smaller than this share of the fit's sd (every axis) is not taken: the
 # fit has converged within its uncertainty.
@@ -176,6 +222,8 @@ def stated(test: Test, name: str, model: Model) -> float | list[float]:
     case = fk.forming_case_of(test)
     if name == "ply_angle_deg":
         return case.blank.ply_angle_deg
+    if ply_index(name):  # the ply's warp angle to x as laid: the stack's plus its own
+        return case.blank.ply_angle_deg + case.plies[ply_index(name) - 1].angle_deg
     if name == "holder_force_N":
         return case.holder.force_N if case.holder is not None else math.nan
     if name == "mu":
@@ -198,6 +246,12 @@ def applied(test: Test, name: str | None, p: Sequence[float], model: Model
         return test, shift
     if name == "ply_angle_deg":
         changes = {"ply_angle_deg": case.blank.ply_angle_deg + float(p[0])}
+    elif ply_index(name):  # one ply turned within the stack
+        k = ply_index(name) - 1
+        plies = list(case.plies)
+        plies[k] = dataclasses.replace(plies[k], angle_deg=plies[k].angle_deg + float(p[0]))
+        case = dataclasses.replace(case, plies=tuple(plies))
+        changes = {}
     elif name == "blank_offset_mm":
         changes = {"blank_offset_mm": [float(p[0]), float(p[1])]}
         shift = np.array([float(p[0]), float(p[1])])
@@ -213,7 +267,8 @@ def applied(test: Test, name: str | None, p: Sequence[float], model: Model
     # The model the parameter needs at every value, its stated one too (the full or half
     # model, which may not form quite as the quarter does): the candidate is judged against
     # the stated set-up on that model.
-    keep = [q for q in case.planes if q not in broken_planes({name: GENERIC.get(name)})]
+    keep = [q for q in case.planes
+            if q not in broken_planes({kind_of(name): GENERIC.get(name)})]
     new = with_overrides(case, symmetry=keep, **changes)
     return dataclasses.replace(test, forming_case=new, case_keys={}), shift
 
@@ -235,6 +290,8 @@ def _why_not(name: str, tests: Sequence[Test]) -> str | None:
     if name == "tool_offset_mm" and all(not any(s.role == "punch" for s in c.tools)
                                         for c in cases):
         return "the part has no punch"
+    if ply_index(name) and any(len(c.plies) < ply_index(name) for c in cases):
+        return f"the part is not a stack of {ply_index(name)} or more plies"
     if name == "holder_force_N" and all(c.holder is None or c.holder.force_N == 0 for c in cases):
         return "the stated holding force is 0 (a factor on it changes nothing)"
     return None
@@ -339,7 +396,7 @@ def _mirrored(name: str | None, p: tuple[float, ...], plane: str) -> tuple[float
     A net turned by δθ mirrors to one turned by −δθ (in either plane); an offset's
     component across the plane changes sign; the force and μ have no image.
     """
-    if name == "ply_angle_deg":
+    if kind_of(name) == "ply_angle_deg":
         return (-p[0],)
     if name in ("blank_offset_mm", "tool_offset_mm"):
         a = "xy".index(plane)
@@ -551,13 +608,13 @@ def _sd_of(runs: _Runs, J: np.ndarray, r: np.ndarray) -> np.ndarray:
 def _step_text(name: str) -> str:
     v = min(u for u in SCAN[name] if u > 0)
     return {"ply_angle_deg": f"{v:g}°", "holder_force_N": f"a factor {1 + v:g}",
-            "mu": f"{v:g}"}.get(name, f"{v:g} mm along x and along y")
+            "mu": f"{v:g}"}.get(kind_of(name), f"{v:g} mm along x and along y")
 
 
 def _fitted(name: str, p: np.ndarray, test: Test, model: Model):
     """The fitted value in the report's units (and the stated one)."""
     s = stated(test, name, model)
-    if name == "ply_angle_deg":
+    if kind_of(name) == "ply_angle_deg":
         return s + float(p[0])
     if name == "holder_force_N":
         return s * float(p[0])
@@ -603,11 +660,12 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
     """
     say = progress or (lambda line: None)
     names = list(parameters if parameters is not None else SETUP_PARAMETERS)
-    unknown = [n for n in names if n not in SETUP_PARAMETERS]
+    unknown = [n for n in names if kind_of(n) not in SETUP_PARAMETERS]
     if unknown:
         raise DrapeInputError(f"set-up parameters {unknown}: not among "
-                              f"{', '.join(SETUP_PARAMETERS)}")
+                              f"{', '.join(SETUP_PARAMETERS)} (and {PLY}<k> on a stack)")
     tests = forming_tests(bundle)
+    names = setup_names(names, tests)
     out: dict[str, Any] = {"setup": [], "setup_error": None, "untestable": [], "best": None}
     if not tests:
         out["untestable"] = [{"effect": n, "setup": True, "reason": "no forming test in the "
@@ -704,7 +762,8 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
             f"{c['heldout_normalised']:.3g}, evidence {c['evidence']:.3g}; "
             f"{runs.formed} new forming runs ({c['folds_formed']} for the folds)")
         tried.append((entry, c))
-    order = {n: i for i, n in enumerate(SETUP_PARAMETERS)}
+    order = {n: i for i, n in enumerate(dict.fromkeys(setup_names(SETUP_PARAMETERS, tests)
+                                                       + names))}
     tried.sort(key=lambda ec: (ec[0]["heldout_normalised"], order[ec[0]["parameter"]]))
     if tried:
         top = tried[0][0]["heldout_normalised"]
@@ -853,6 +912,13 @@ def value_text(v) -> str:
 def fitted_case(case: FormingCase, entry: dict[str, Any]) -> FormingCase:
     """A case with a report's fitted set-up applied (``entry``: one of ``report["setup"]``)."""
     name, value = entry["parameter"], entry["fitted"]
+    if ply_index(name):  # the ply's angle within the stack: the fitted one less the stack's
+        k = ply_index(name) - 1
+        plies = list(case.plies)
+        plies[k] = dataclasses.replace(plies[k], angle_deg=value - case.blank.ply_angle_deg)
+        return with_overrides(dataclasses.replace(case, plies=tuple(plies)),
+                              symmetry=[q for q in case.planes
+                                        if q not in broken_planes({PLY[:-1]: value})])
     return with_overrides(case, **{name: value})
 
 

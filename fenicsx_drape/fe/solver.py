@@ -52,7 +52,7 @@ from fenicsx_drape.fe.grid import NODE_FLAGS, WARP, WEFT
 from fenicsx_drape.fe.kinematics import truss_forms
 from fenicsx_drape.fe.mesh import Sheet
 from fenicsx_drape.fe.newton import LINE_SEARCHES, Iterate, Newton, NewtonResult
-from fenicsx_drape.fe.plies import sheet_grids
+from fenicsx_drape.fe.plies import ply_of, sheet_grids
 from fenicsx_drape.fe.state import MaterialState, StrainError
 from fenicsx_drape.fe.stepping import StepReport, run
 from fenicsx_drape.materials.base import MaterialLaw
@@ -164,6 +164,8 @@ class TrussProblem:
         nodal_terms: Contact, holder or other :class:`~fenicsx_drape.nodal.NodalTerm` s.
         options: Model and solver options.
         conditions: Test conditions handed to ``model.laws`` (e.g. ``temperature_C``).
+        ply_models: A stack (``sheet.plies``): per ply, a model of its own (its tow and shear
+            laws replace ``model``'s on that ply's bars) or None (``model``'s).
 
     Example::
 
@@ -176,7 +178,8 @@ class TrussProblem:
 
     def __init__(self, sheet: Sheet, model, nodal_terms: Sequence[nodal.NodalTerm] = (),
                  options: SolverOptions | None = None,
-                 conditions: Mapping[str, float] | None = None):
+                 conditions: Mapping[str, float] | None = None,
+                 ply_models: Sequence | None = None):
         self.sheet = sheet
         self.options = options = options or SolverOptions()
         laws: Mapping[str, MaterialLaw] = (model.laws(conditions) if hasattr(model, "laws")
@@ -196,9 +199,15 @@ class TrussProblem:
         self.node_flags = self._node_flags()
 
         kinds, tows = self._bars()
-        self.state = MaterialState(self.u, kinds, tows, laws, options.buckled_tow_stiffness_N)
+        own_laws = self._ply_laws(ply_models, conditions)
+        self.state = MaterialState(self.u, kinds, tows, laws, options.buckled_tow_stiffness_N,
+                                   own_laws)
         self._coupling = None
-        if "shear_tension_coupling" in getattr(model, "effects", ()):
+        if "shear_tension_coupling" in getattr(model, "effects", ()) or any(
+                "shear_tension_coupling" in m.effects for m in ply_models or () if m):
+            if own_laws:
+                raise DrapeInputError("shear_tension_coupling acts with one model for the "
+                                      "whole sheet, not with plies of their own models")
             if sheet.grid is None:
                 raise DrapeInputError("shear_tension_coupling needs the unit cells of a "
                                       "structured sheet (truss_sheet)")
@@ -277,6 +286,21 @@ class TrussProblem:
             sides[weft] = weft_cells[near[weft, 0], lo[weft, 1]]
             tows[sides == 1] *= opts.edge_tow_factor
         return kinds, tows
+
+    def _ply_laws(self, ply_models: Sequence | None, conditions
+                  ) -> list[tuple[np.ndarray, Mapping[str, MaterialLaw]]]:
+        """The owned bars of each ply with a model of its own, and that model's laws."""
+        if not ply_models or not any(ply_models):
+            return []
+        plies = self.sheet.plies
+        if not plies or len(ply_models) != len(plies):
+            raise DrapeInputError(f"ply_models: {len(ply_models)} models for a sheet of "
+                                  f"{len(plies or [])} plies")
+        mesh = self.sheet.mesh
+        n = mesh.topology.index_map(1).size_local
+        middle = mesh.geometry.x[mesh.geometry.dofmaps[0][:n]].mean(axis=1)
+        which = ply_of(plies, middle)
+        return [(which == k, m.laws(conditions)) for k, m in enumerate(ply_models) if m]
 
     def nodes(self, where: Where) -> np.ndarray:
         """Boolean mask of the local nodes selected by ``where``.

@@ -20,7 +20,7 @@ the change, see the FE benchmark).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import dolfinx
 import numpy as np
@@ -48,10 +48,15 @@ class MaterialState:
         tows: Tows each owned bar stands for, ``n_t`` (section 4).
         laws: The law of each role, ``{"tow": ..., "shear": ...}``.
         buckled_tow_stiffness_N: Residual compressive stiffness of buckled tows (N/tow).
+        own_laws: Bars with laws of their own (a ply of a stack with its own model): pairs
+            of a boolean mask over the owned bars and the law of each role there. Their
+            groups are named ``"<role>@<k>"`` (k from 1, in order), their internal variables
+            ``"<role>@<k>.<name>"``.
     """
 
     def __init__(self, u: dolfinx.fem.Function, kinds: np.ndarray, tows: np.ndarray,
-                 laws: Mapping[str, MaterialLaw], buckled_tow_stiffness_N: float = 0.0):
+                 laws: Mapping[str, MaterialLaw], buckled_tow_stiffness_N: float = 0.0,
+                 own_laws: Sequence[tuple[np.ndarray, Mapping[str, MaterialLaw]]] = ()):
         Q = quadrature_space(u.function_space.mesh)
         self.space = Q
         n = len(kinds)
@@ -74,19 +79,29 @@ class MaterialState:
                                                   Q.element.interpolation_points)
         self._cells = np.arange(n, dtype=np.int32)
         roles = np.array([ROLE_OF_KIND[int(k)] for k in kinds]) if n else np.array([], str)
+        # A group: the bars of one law (its role's, or a ply's own), by name.
         self.groups: dict[str, tuple[np.ndarray, MaterialLaw]] = {}
         self.history: dict[str, list[dolfinx.fem.Function]] = {}
-        for role in ("tow", "shear"):
-            if role not in laws:
-                raise KeyError(f"no {role!r} law given (laws for roles: {', '.join(laws)})")
-            law = laws[role]
-            points = np.flatnonzero(roles == role)
-            self.groups[role] = (points, law)
-            funcs = [function(f"{role}.{name}") for name in law.state_names]
-            initial = law.initial_state(len(points))
-            for k, f in enumerate(funcs):
-                f.x.array[self.dofs[points]] = initial[:, k]
-            self.history[role] = funcs
+        rest = np.ones(n, dtype=bool)
+        for mask, _ in own_laws:
+            rest &= ~np.asarray(mask, dtype=bool)
+        sets = [("", rest, laws)] + [(f"@{k}", np.asarray(mask, dtype=bool), own)
+                                     for k, (mask, own) in enumerate(own_laws, 1)]
+        for suffix, mask, group_laws in sets:
+            for role in ("tow", "shear"):
+                if role not in group_laws:
+                    raise KeyError(f"no {role!r} law given (laws for roles: "
+                                   f"{', '.join(group_laws)})")
+                law = group_laws[role]
+                points = np.flatnonzero((roles == role) & mask)
+                if suffix and not len(points):
+                    continue
+                self.groups[role + suffix] = (points, law)
+                funcs = [function(f"{role}{suffix}.{name}") for name in law.state_names]
+                initial = law.initial_state(len(points))
+                for k, f in enumerate(funcs):
+                    f.x.array[self.dofs[points]] = initial[:, k]
+                self.history[role + suffix] = funcs
         self._trial: dict[str, np.ndarray] = {}
         self._committed = self._snapshot()
 
@@ -94,10 +109,10 @@ class MaterialState:
         return [f.x.array.copy() for f in (self.strain, self.stress, self.tangent, self.S,
                                            self.dS)]
 
-    def _history(self, role: str) -> np.ndarray:
-        points, law = self.groups[role]
+    def _history(self, group: str) -> np.ndarray:
+        points, law = self.groups[group]
         dofs = self.dofs[points]
-        return np.column_stack([f.x.array[dofs] for f in self.history[role]]) \
+        return np.column_stack([f.x.array[dofs] for f in self.history[group]]) \
             if law.state_names else np.zeros((len(points), 0))
 
     def evaluate(self, dt: float) -> None:
@@ -117,9 +132,11 @@ class MaterialState:
             raise StrainError(f"a bar collapsed (stretch {np.sqrt(max(λ2.min(), 0)):.2g})")
         σ = np.zeros_like(ε)
         C = np.zeros_like(ε)
-        for role, (points, law) in self.groups.items():
-            stress, tangent, self._trial[role] = law.update(ε[points], dt, self._history(role))
-            if role == "tow" and self.buckled_tow_stiffness_N and "tow_buckling" in law.effects:
+        for group, (points, law) in self.groups.items():
+            stress, tangent, self._trial[group] = law.update(ε[points], dt,
+                                                             self._history(group))
+            if (group.startswith("tow") and self.buckled_tow_stiffness_N
+                    and "tow_buckling" in law.effects):
                 compressed = ε[points] < 0
                 stress = stress + self.buckled_tow_stiffness_N * np.minimum(ε[points], 0.0)
                 tangent = tangent + self.buckled_tow_stiffness_N * compressed

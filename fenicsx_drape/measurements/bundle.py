@@ -42,7 +42,7 @@ COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "picture_frame": (("time_s", "displacement_mm", "force_N"), ("force_sd_N", "shear_deg")),
     "forming": (
         ("i", "j", "x0_mm", "y0_mm", "x_mm", "y_mm", "z_mm"),
-        ("position_sd_mm", "shear_deg", "wrinkle_strain"),
+        ("position_sd_mm", "shear_deg", "wrinkle_strain", "ply"),
     ),
     # Spec version 4: one ply pulled between two (or over one) under a normal pressure.
     "interply_friction": (("time_s", "displacement_mm", "force_N"), ("force_sd_N", "pressure_kPa")),
@@ -176,6 +176,10 @@ class Test:
     # interply_friction (version 4): contact_length_mm, contact_width_mm, interfaces,
     # pressure_kPa and, when given, ply_angles_deg
     interply: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    # forming on a stack (version 4): the ply it was measured on (1 = the punch side), from
+    # its <measurement>_ply key or its table's ply column; None: the outermost ply on the
+    # side away from the punch (the one a camera sees)
+    ply: int | None = None
 
     def column(self, name: str) -> np.ndarray | None:
         """A column of the table, or None when the table does not have it."""
@@ -419,9 +423,16 @@ def load_bundle(path: str | Path, read_case: CaseReader | None = None) -> Bundle
                           read_case, notes)
         if test is None:
             continue
-        if test.kind == "forming" and any(k in raw for k in lab.LAB_KEYS):
+        if test.kind == "forming" and (any(k in raw for k in lab.LAB_KEYS)
+                                       or "ply" in test.columns
+                                       or len(getattr(test.forming_case, "plies", ())) > 1):
             parts = lab.split_test(test, raw, folder, fname, where, index, problems.add)
             tests.extend(parts)
+            stack = getattr(test.forming_case, "plies", ())
+            for part in parts:
+                if part.ply is None and len(stack) > 1:
+                    notes.append(f"test {part.id!r}: no ply named; taken as measured on the "
+                                 f"outermost ply away from the punch (ply {len(stack)})")
             seen.update({p.id: where("test", index, "id") for p in parts})
             continue
         if bundle_noise and test.kind in ("tensile", "bias_extension", "picture_frame"):
@@ -805,6 +816,8 @@ def _read_table(path: Path, kind: str, label: str, problems: _Problems, check=No
         bad = np.flatnonzero((ij != np.round(ij)).any(axis=1))
         if bad.size:
             problems.add(fname, numbers[bad[0]], f"{label}: grid indices i, j must be integers")
+        if "ply" in columns:  # a node once per ply (spec version 4)
+            ij = np.column_stack([ij, columns["ply"]])
         _, first, counts = np.unique(ij, axis=0, return_index=True, return_counts=True)
         if (counts > 1).any():
             r = int(first[np.argmax(counts > 1)])
@@ -885,6 +898,8 @@ def write_bundle(bundle: Bundle, path: str | Path, *, comment: str = "") -> Path
             out.append(f"geometry = {_toml_value(test.geometry)}")
         if test.case is not None:
             out.append(f"case = {_toml_value(test.case)}")
+        if test.ply is not None:
+            out.append(f"file_ply = {test.ply}")
         keys = ("gauge_length_mm", "length_mm", "width_mm", "frame_side_mm", "fabric_side_mm",
                 "speed_mm_per_min")
         for key in keys:

@@ -41,8 +41,10 @@ from fenicsx_drape.measurements import plausible
 
 MEASUREMENTS = ("shear_points", "surface", "outline", "punch_force")
 # Keys of a forming [[test]] table that describe its lab measurements (not case overrides).
+# Version 4: the ply of a stack each measurement was taken on (1 = the punch side).
+PLY_KEYS = {f"{m}_ply": m for m in ("file", "shear_points", "surface", "outline")}
 LAB_KEYS = (*MEASUREMENTS, "shear_sd_deg", "position_sd_mm", "force_sd_N", "shear_magnitude",
-            "force_tool", "frame")
+            "force_tool", "frame", *PLY_KEYS)
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
 TEXT_COLUMNS = ("label", "line")
 
@@ -347,9 +349,60 @@ def split_test(test, raw: Mapping[str, Any], folder: Path, fname: str, where, in
         index: The test's index among the [[test]] tables.
         add: ``add(file, line, problem)``.
 
+    On a stack (spec version 4) each measurement's ply comes from its ``<measurement>_ply``
+    key or its ``ply`` column (:func:`by_ply`).
+
     Returns:
         The tests (empty when the measurements have problems, each given to ``add``).
     """
+    label = f"test {test.id!r}"
+    case = getattr(test, "forming_case", None)
+    plies = (len(case.plies) or 1) if case is not None else 1
+    ply_keys = {}
+    for key, name in PLY_KEYS.items():
+        if key in raw:
+            v = raw[key]
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= plies:
+                add(fname, where("test", index, key), f"{label}: {key} = {v!r} must be a ply "
+                    f"of the stack, 1 (the punch side) to {plies}")
+            else:
+                ply_keys[name] = v
+    out = []
+    for t in _measurements(test, raw, folder, fname, where, index, add):
+        out += by_ply(t, ply_keys.get(measurement_of(t) or "file"), plies, folder, label, add)
+    return out
+
+
+def by_ply(test, ply: int | None, plies: int, folder: Path, label: str, add) -> list:
+    """A measurement as one test per ply it names (spec version 4).
+
+    The ``ply`` column splits a table holding rows of several plies into tests with ids
+    ``"<test id>/<measurement>/ply<k>"`` (a table of one ply keeps its id); else the test's
+    ``<measurement>_ply`` key, else None (the outermost ply away from the punch).
+    """
+    if "ply" not in test.columns:
+        return [dataclasses.replace(test, ply=ply)]
+    column = np.asarray(test.columns["ply"])
+    where = test.lab.path if test.lab is not None else folder / test.file
+    lines = test.lab.lines if test.lab is not None else row_lines(where)
+    bad = np.flatnonzero((column != np.rint(column)) | (column < 1) | (column > plies))
+    if bad.size:
+        line = int(lines[bad[0]]) if len(lines) > bad[0] else 0
+        add(str(where), line, f"{label}: ply = {column[bad[0]]:g} must be a ply of the stack, "
+                              f"1 (the punch side) to {plies}")
+        return []
+    values = np.unique(column).astype(int)
+    if values.size == 1:
+        return [dataclasses.replace(test, ply=int(values[0]))]
+    name = measurement_of(test) or "file"
+    stem = test.id if test.id.endswith(f"/{name}") else f"{test.id}/{name}"
+    return [dataclasses.replace(without_rows(test, np.flatnonzero(column != k)),
+                                id=f"{stem}/ply{k}", ply=int(k)) for k in values]
+
+
+def _measurements(test, raw: Mapping[str, Any], folder: Path, fname: str, where, index: int,
+                  add) -> list:
+    """The tests of each measurement of a forming test (:func:`split_test`), plies aside."""
     label = f"test {test.id!r}"
     names = [m for m in MEASUREMENTS if m in raw]
     grid = bool(test.file)

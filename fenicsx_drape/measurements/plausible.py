@@ -188,8 +188,12 @@ def grid_table_check(keys: Mapping[str, Any], case: Any, toml_file: str, grid_mm
 
     def check(path, columns: Mapping[str, np.ndarray], lines: Sequence[int]):
         c = columns
-        found = grid_problems(c["i"], c["j"], c["x0_mm"], c["y0_mm"], lines,
-                              keys.get("grid_mm"))
+        found = []
+        plies = c["ply"] if "ply" in c else np.zeros(len(lines))
+        for k in np.unique(plies):  # a grid per ply of a stack (spec version 4)
+            on = np.flatnonzero(plies == k)
+            found += grid_problems(c["i"][on], c["j"][on], c["x0_mm"][on], c["y0_mm"][on],
+                                   [lines[r] for r in on], keys.get("grid_mm"))
         if reach is not None:
             flat = np.column_stack([c["x0_mm"], c["y0_mm"], np.zeros(len(lines))])
             formed = np.column_stack([c["x_mm"], c["y_mm"], c["z_mm"]])

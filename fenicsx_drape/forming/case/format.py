@@ -245,9 +245,17 @@ class FormingCase:
             blanks = [dataclasses.replace(b, cell_mm=min(fitted)) for b in blanks]
         return blanks
 
-    def interply_law(self) -> InterplyLaw:
-        """The inter-ply law of the stack (``[interply]`` over InterplyLaw's defaults)."""
-        return InterplyLaw(**dict(self.interply))
+    def interply_law(self, model=None) -> InterplyLaw:
+        """The inter-ply law of the stack (``[interply]`` over InterplyLaw's defaults).
+
+        Whether the plies slide: the table's ``interply_friction`` when it says, else the
+        effect ``interply_friction`` of ``model`` (spec version 4: without it the plies are
+        bonded), else they slide.
+        """
+        values = dict(self.interply)
+        if "interply_friction" not in values and model is not None:
+            values["interply_friction"] = "interply_friction" in model.effects
+        return InterplyLaw(**values)
 
     def tool(self, name: str) -> ToolSpec:
         """The tool of this name."""

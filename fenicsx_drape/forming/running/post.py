@@ -47,6 +47,21 @@ class FormedGrid:
     quarter: bool
     # Symmetry planes on the edges i = 0 ("x") and j = 0 ("y"); None: both if quarter.
     symmetry: tuple[str, ...] | None = None
+    # A stack: every ply's sheet, ply 1 (the punch side) first; this one is the last.
+    plies: tuple[FormedGrid, ...] = dataclasses.field(default=(), repr=False, compare=False)
+
+    def ply(self, k: int | None) -> FormedGrid:
+        """The sheet of ply ``k`` (1 = the punch side) of a stack; None: this one (the last).
+
+        Raises:
+            DrapeInputError: a ply the formed sheet does not have.
+        """
+        if k is None:
+            return self
+        n = len(self.plies) or 1
+        if not 1 <= k <= n:
+            raise DrapeInputError(f"ply {k}: the formed sheet has {n} pl{'y' if n == 1 else 'ies'}")
+        return self.plies[k - 1] if self.plies else self
 
     @property
     def planes(self) -> tuple[str, ...]:
