@@ -637,7 +637,8 @@ def _report(bundle: Bundle, base: _Base, tried: list[dict[str, Any]],
                     "the best, the one adding the fewest parameters first"),
         "missing_rule": (f"the first candidate if significant and its refit reaches "
                          f"normalised <= {ADEQUATE} (on the measurements whose residual "
-                         "its net does not explain, resolution_after)"),
+                         "its net does not explain or is within its net's own error, "
+                         "resolution_after)"),
         "conclusion": resolution_sentence(checked) + (
             _groups_conclusion(groups, missing) or (
                 _conclusion(missing, best, compared, pattern, base.optimiser, coupons,
@@ -670,8 +671,12 @@ def _adequate_but_for_the_net(candidate: dict[str, Any], say: Progress) -> bool:
 
     ``normalised <= ADEQUATE`` on every test; else the measurements it still misses are
     checked for resolution as the baseline's were (the candidate formed on half the cell),
-    and it is adequate when those the net does not explain are within ``ADEQUATE``
-    (``resolution_after`` in the candidate's entry).
+    and it is adequate when those its net does not excuse are within ``ADEQUATE``
+    (``resolution_after`` in the candidate's entry). A measurement is excused when the net
+    explains it (the baseline's rule), or when what the candidate leaves beyond the noise is
+    within its net's own error e_Δ (``within_net_error``): the candidate's parameters were
+    refitted on that net, so the finer net need not come nearer, and no net this coarse
+    can tell that residual from the truth.
     """
     if candidate["error_after"]["normalised"] <= ADEQUATE:
         return True
@@ -680,8 +685,13 @@ def _adequate_but_for_the_net(candidate: dict[str, Any], say: Progress) -> bool:
         return False
     say(f"candidate {candidate['effect']}: is what it leaves the net's?")
     checked = check_resolution(candidate["_tests"], candidate["_model"], after, ADEQUATE, say)
+    for e in checked:
+        error = e.get("discretisation_error")
+        e["within_net_error"] = bool(error is not None and math.sqrt(
+            max(0.0, e["residual"] ** 2 - e["noise"] ** 2)) <= error)
     candidate["resolution_after"] = checked
-    rest = [c for c in after if c.id not in explained(checked)]
+    excused = {e["measurement"] for e in checked if e["explains"] or e["within_net_error"]}
+    rest = [c for c in after if c.id not in excused]
     return bool(checked) and (not rest or normalised_error(rest) <= ADEQUATE)
 
 
@@ -935,7 +945,8 @@ def _conclusion(missing, best, base: list[Comparison], pattern: str,
                  "force_sd_rel in bundle.toml, [noise] in MODEL.toml) to judge against the "
                  "real one.")
     if missing:
-        nets = [e for e in missing.get("resolution_after", ()) if e["explains"]]
+        nets = [e for e in missing.get("resolution_after", ())
+                if e["explains"] or e["within_net_error"]]
         rest = (f" What it leaves on {', '.join(e['measurement'] for e in nets)} is its "
                 f"{nets[0]['cell_mm']:g} mm net's own error (resolution_after): compare on "
                 f"{min(e['suggested_cell_mm'] for e in nets):g} mm cells to resolve it."
