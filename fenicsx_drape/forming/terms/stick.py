@@ -18,10 +18,15 @@ linear spring of the contact stiffness k,
 
     f = −k P_c (x − x_c − Δx_punch),   K = k P_c,   P_c = I − n_c⊗n_c.
 
-Where a symmetric part has its apex on its symmetry planes the node does not slide anyway
-(a quarter's corner is fixed by them), so the forming of a symmetric part is unchanged; the
-stick removes the sliding mode only, and no draw-in (the rest of the sheet slides on the
-punch as before). With tool friction (``tool_friction``) the point sticks anyway; the term
+It acts on a single ply that is not held otherwise: a quarter's planes, or the centre held
+by ``hold_origin`` (a part symmetric in both planes formed whole), fix the mode already (and
+on the double dome the deepest node is on one dome, off the part's centre, where the
+symmetric part slides). On a half model whose apex lies on its plane the node does not slide
+anyway, so the forming of a symmetric part is unchanged; the stick removes the sliding mode
+only, and no draw-in (the rest of the sheet slides on the punch as before). A stack's plies
+are held to each other by the inter-ply law and keep their own sliding.
+
+With tool friction (``tool_friction``) the point sticks anyway; the term
 stays, so that results move smoothly as μ_t goes to 0.
 """
 
