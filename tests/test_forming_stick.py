@@ -31,7 +31,7 @@ class Plate:
         return np.tile([0.0, 0.0, t1 - t0], (len(np.atleast_2d(x)), 1))
 
 
-def test_the_deepest_node_sticks_in_the_tangent_plane_from_the_first_contact():
+def test_the_node_at_the_first_contact_sticks_in_the_tangent_plane():
     X = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.5], [0.0, 10.0, 0.2]])
     stick = ApexStick(Plate(), 100.0)
     stick.bind(X, np.ones(3, bool), None)
@@ -39,7 +39,7 @@ def test_the_deepest_node_sticks_in_the_tangent_plane_from_the_first_contact():
     stick.commit()
     assert stick.node is None and not f.any() and not K.any()
     x1 = X.copy()
-    stick.forces(x1, 0.1, 1.0)  # node 0 is 0.1 mm into the punch, the deepest
+    stick.forces(x1, 0.1, 1.0)  # node 0 is 0.1 mm into the punch, the only one
     stick.commit()
     assert stick.node == 0
     x2 = x1 + np.array([[0.3, -0.2, 0.7], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])

@@ -11,20 +11,20 @@ whole slides by millimetres one way or the other, decided by round-off (measured
 the mode (μ_t = 0.01 brings the copy within 0.3 mm of the closed form); a lab's prepreg
 sticks where the punch first presses it.
 
-This term is that stick, and only that: the sheet's node that touches the punch first (the
-deepest at the end of the first step with contact, one node for the whole sheet) is held to
+This term is that stick, and only that: the sheet's node at the punch's first contact (the
+node nearest the centre of the contact at the end of the first step with any, the
+penetrating nodes weighted by their depth; one node for the whole sheet) is held to
 the punch's material point under it, in the punch's tangent plane at that moment, by a
 linear spring of the contact stiffness k,
 
     f = −k P_c (x − x_c − Δx_punch),   K = k P_c,   P_c = I − n_c⊗n_c.
 
 It acts on a single ply that is not held otherwise: a quarter's planes, or the centre held
-by ``hold_origin`` (a part symmetric in both planes formed whole), fix the mode already (and
-on the double dome the deepest node is on one dome, off the part's centre, where the
-symmetric part slides). On a half model whose apex lies on its plane the node does not slide
-anyway, so the forming of a symmetric part is unchanged; the stick removes the sliding mode
-only, and no draw-in (the rest of the sheet slides on the punch as before). A stack's plies
-are held to each other by the inter-ply law and keep their own sliding.
+by ``hold_origin`` (a part symmetric in both planes formed whole), fix the mode already. On a
+half model whose apex lies on its plane the node does not slide anyway, so the forming of a
+symmetric part is unchanged; the stick removes the sliding mode only, and no draw-in (the
+rest of the sheet slides on the punch as before). A stack's plies are held to each other by
+the inter-ply law and keep their own sliding.
 
 With tool friction (``tool_friction``) the point sticks anyway; the term
 stays, so that results move smoothly as μ_t goes to 0.
@@ -70,21 +70,31 @@ class ApexStick:
         return f, K
 
     def commit(self) -> None:
-        """After the first step with contact: choose the deepest node and fix its anchor."""
+        """After the first step with contact: choose the node and fix its anchor.
+
+        The node nearest the centre of the first contact (the penetrating nodes weighted by
+        their depth): the apex a dome touches first, the part's centre between a double
+        dome's two tops, so that a symmetric part keeps its symmetry.
+        """
         if self.chosen or self._trial is None:
             return
         x, t = self._trial
         mine = np.flatnonzero(self.owned)
         phi = self.tool.gap(x[mine], t).phi if len(mine) else np.zeros(0)
-        deepest = (float(phi.min()), self.comm.rank if self.comm is not None else 0) \
-            if len(mine) else (np.inf, -1)
-        best = self.comm.allreduce(deepest, op=MPI.MIN) if self.comm is not None else deepest
-        if not best[0] <= 0.0:
+        w = np.maximum(-phi, 0.0)
+        sums = np.append(w @ x[mine], w.sum()) if len(mine) else np.zeros(4)
+        total = self.comm.allreduce(sums, op=MPI.SUM) if self.comm is not None else sums
+        if not total[3] > 0.0:
             return  # no contact yet
         self.chosen = True
-        if best[1] != (self.comm.rank if self.comm is not None else 0):
+        centre = total[:3] / total[3]
+        rank = self.comm.rank if self.comm is not None else 0
+        d = np.linalg.norm(x[mine] - centre, axis=1)
+        near = (float(d.min()), rank) if len(mine) else (np.inf, rank)
+        best = self.comm.allreduce(near, op=MPI.MIN) if self.comm is not None else near
+        if best[1] != rank:
             return
-        i = int(mine[np.argmin(phi)])
+        i = int(mine[np.argmin(d)])
         g = self.tool.gap(x[i:i + 1], t)
         n_c = g.normal[0] / np.linalg.norm(g.normal[0])
         self.node, self.x_c, self.t_c = i, x[i].copy(), t
