@@ -146,6 +146,25 @@ def test_the_execution_record_counts_the_runs_asked_formed_and_reused(tmp_path, 
     assert record["runs"]["formed"] == 1 and len(calls) == 4
 
 
+def test_a_batch_keeps_its_runs_in_memory_when_new_ones_fill_it(monkeypatch):
+    """A run remembered from before is the oldest in memory: the batch's new runs must not
+    push it out before the batch returns (a KeyError in a lab diagnosis's forming fit)."""
+
+    def form(case, model, comm=None):
+        return FormedGrid(np.full((2, 2, 3), float(ord(case))), np.ones((2, 2, 3)), False), \
+            None, {}
+
+    monkeypatch.setattr(runs, "_form", form)
+    monkeypatch.setattr(runs, "_key", lambda case, model: (case, model))
+    monkeypatch.setattr(runs, "_cache", {})
+    monkeypatch.setattr(runs, "_CACHE_SIZE", 2)
+    with runs.execution(workers=1, cache=None):
+        runs.form_many([("a", "m")])
+        sheets = runs.form_many([("a", "m"), ("b", "m"), ("c", "m")])
+    assert [float(g.X[0, 0, 0]) for g in sheets] == [ord("a"), ord("b"), ord("c")]
+    assert len(runs._cache) == 2
+
+
 def test_workers_and_cache_options_are_checked(tmp_path, monkeypatch, capsys):
     with pytest.raises(DrapeInputError, match="--workers 0"):
         with runs.execution(workers=0):

@@ -450,6 +450,10 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     message naming the case and model) once the others are formed and kept.
     """
     keys = [_key(case, model) for case, model in jobs]
+    for k in dict.fromkeys(keys):  # the batch's runs in memory are the newest: kept
+        if k in _cache:
+            _cache[k] = _cache.pop(k)
+    got = {k: _cache[k] for k in keys if k in _cache}
     todo = {k: job for k, job in zip(keys, jobs) if k not in _cache}
     counts["asked"] += len(set(keys))
     counts["from_memory"] += len(set(keys)) - len(todo)
@@ -463,6 +467,7 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
             found = store.get(names[k])
             if found is not None:
                 _keep(k, found)
+                got[k] = found[0]
                 counts["from_disk"] += 1
                 del todo[k]
     failed = []
@@ -473,12 +478,13 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
                 continue
             counts["formed"] += 1
             _keep(k, value)
+            got[k] = value[0]
             if store is not None:
                 store.put(names[k], *value)
     if failed:
         (case, model), error = failed[0]
         raise _named(error, describe(case, model))
-    return [_cache[k] for k in keys]
+    return [got[k] for k in keys]
 
 
 def _named(error: Exception, run: str) -> Exception:
