@@ -195,13 +195,16 @@ class BlankHolder:
     def _hold(self, x: np.ndarray, t: float) -> None:
         """Re-evaluate which nodes are under the holder and n_s (collective under MPI)."""
         self.under = np.asarray(self.surface.covers(x, t), dtype=bool)
+        self.bars = np.flatnonzero(self.under)
+        force, nodes = self._shares()
+        self._law = dataclasses.replace(self.law, holder_force_N=force, holder_nodes=nodes)
+
+    def _shares(self) -> tuple[np.ndarray, float]:
+        """Each bar's holding force (N) and the n_s it is shared over (sets :attr:`n_s`)."""
         local = float(self.w[self.under & self.owned].sum())
         self.n_s = self.comm.allreduce(local) if self.comm is not None else local
-        self.bars = np.flatnonzero(self.under)
-        # Each bar's share of the force: a node on a symmetry plane is half a node.
-        self._law = dataclasses.replace(self.law,
-                                        holder_force_N=self.part_force_N * self.w[self.bars],
-                                        holder_nodes=max(self.n_s, 1e-300))
+        # A node on a symmetry plane is half a node.
+        return self.part_force_N * self.w[self.bars], max(self.n_s, 1e-300)
 
     @property
     def yield_force_N(self) -> np.ndarray:
@@ -210,6 +213,10 @@ class BlankHolder:
         f_y[self.bars] = np.broadcast_to(self._law.yield_force_N, self.bars.shape)
         return f_y
 
+    def _offset(self, bars: np.ndarray) -> float | np.ndarray:
+        """How far from the surface (mm, along its normal) the given nodes are held: 0."""
+        return 0.0
+
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Clamping and friction forces (N) and stiffness −∂f/∂x (N/mm) at positions ``x``."""
         n, b = len(x), self.bars
@@ -217,7 +224,7 @@ class BlankHolder:
         K = np.zeros((n, 3, 3))
         xb = x[b]
         g = self.surface.gap(xb, t)
-        φ, nrm, H = g.phi, g.normal, g.hessian
+        φ, nrm, H = g.phi - self._offset(b), g.normal, g.hessian
         f[b] = -self.k_z * φ[:, None] * nrm
         K[b] = self.k_z * (np.einsum("ni,nj->nij", nrm, nrm) + φ[:, None, None] * H)
         # Friction bars along the total tangential displacement (eq. 1), in the tangent
@@ -261,42 +268,17 @@ class BlankHolder:
         self._trial = None
 
 
-class _PlySurface:
-    """A clamping surface lifted to one ply's height that covers only that ply's nodes.
-
-    The signed distance of the surface offset by ``z_mm`` along its normal is φ − z_mm; the
-    ply's nodes are told by their height in the flat stack (the first call, from ``bind``).
-    """
-
-    def __init__(self, surface, z_mm: float, k: int, heights: np.ndarray) -> None:
-        self.surface, self.z_mm, self.k, self.heights = surface, float(z_mm), k, heights
-        self.name = getattr(surface, "name", "holder")
-        self.flat = bool(getattr(surface, "flat", False))
-        self._mine: np.ndarray | None = None
-
-    def gap(self, x: np.ndarray, t: float) -> Gap:
-        g = self.surface.gap(x, t)
-        return Gap(g.phi - self.z_mm, g.normal, g.hessian)
-
-    def covers(self, x: np.ndarray, t: float) -> np.ndarray:
-        if self._mine is None:  # the reference positions of every local node
-            self._mine = np.argmin(np.abs(x[:, 2:3] - self.heights[None, :]), axis=1) == self.k
-        return np.asarray(self.surface.covers(x, t), dtype=bool) & self._mine
-
-    def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
-        move = getattr(self.surface, "displacement", None)
-        return np.zeros((len(x), 3)) if move is None else move(x, t0, t1)
-
-
-class StackHolder:
+class StackHolder(BlankHolder):
     """The blank holder on a stack of plies (a :class:`NodalTerm`).
 
-    Every ply under the holder is clamped at its own height in the flat stack (a
-    :class:`BlankHolder` per ply on the clamping surface lifted to the ply's mid-plane);
-    the eq. 1 friction bars act on the two outer plies, the ones the holder's plates touch,
-    each with half the holding force (so the stack's holder friction is μ F, as one ply's).
-    The inner plies are held in place by the inter-ply friction
-    (:mod:`fenicsx_drape.fe.plies`).
+    Every ply under the holder is clamped at its own height in the flat stack: on the
+    clamping surface offset along its normal by the ply's mid-plane height (the signed
+    distance φ − z_k, with φ's normal and curvature). The eq. 1 friction bars act on the two
+    outer plies, the ones the holder's plates touch, each with half the holding force shared
+    over its own nodes under the holder (so the stack's holder friction is μ F, as one ply's);
+    the inner plies' bars carry nothing and they are held in place by the inter-ply friction
+    (:mod:`fenicsx_drape.fe.plies`). All plies go through one evaluation of the surface: a
+    holder per ply cost the stack one surface search per ply and step.
 
     Args:
         law: the friction bars' law (see :class:`BlankHolder`).
@@ -308,42 +290,30 @@ class StackHolder:
     def __init__(self, law: MaterialLaw, *, heights_mm, force_N: float, force_share: str,
                  clamp_stiffness_N_per_mm: float, surface,
                  symmetry_axes: tuple[int, ...] = ()) -> None:
-        z = np.asarray(heights_mm, dtype=float)
-        if len(z) < 2:
+        self.heights = np.asarray(heights_mm, dtype=float)
+        if len(self.heights) < 2:
             raise ParameterError("StackHolder: a stack has two plies or more")
-        self.surface = surface
-        self.holders = [
-            BlankHolder(law, force_N=force_N / 2 if k in (0, len(z) - 1) else 0.0,
-                        force_share=force_share, clamp_stiffness_N_per_mm=clamp_stiffness_N_per_mm,
-                        surface=_PlySurface(surface, zk, k, z), symmetry_axes=symmetry_axes)
-            for k, zk in enumerate(z)]
-        self.flat = all(h.flat for h in self.holders)
-
-    @property
-    def n_s(self) -> float:
-        """Nodes under the holder on the punch-side ply (eq. 1's n_s of one outer ply)."""
-        return self.holders[0].n_s
+        super().__init__(law, force_N=force_N, force_share=force_share,
+                         clamp_stiffness_N_per_mm=clamp_stiffness_N_per_mm, surface=surface,
+                         symmetry_axes=symmetry_axes)
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
-        """Bind every ply's holder (see :meth:`BlankHolder.bind`)."""
-        for h in self.holders:
-            h.bind(X, owned, comm)
+        """Each node's ply from its height in the flat stack, then :meth:`BlankHolder.bind`."""
+        z = np.asarray(X, dtype=float)[:, 2:3]
+        self.ply = np.argmin(np.abs(z - self.heights[None, :]), axis=1)
+        super().bind(X, owned, comm)
 
-    def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """The plies' clamping and friction forces (N) and stiffness (N/mm), summed."""
-        f, K = np.zeros((len(x), 3)), np.zeros((len(x), 3, 3))
-        for h in self.holders:
-            fh, Kh = h.forces(x, t, dt)
-            f += fh
-            K += Kh
-        return f, K
+    def _offset(self, bars: np.ndarray) -> np.ndarray:
+        return self.heights[self.ply[bars]]
 
-    def commit(self) -> None:
-        """Commit every ply's friction bars."""
-        for h in self.holders:
-            h.commit()
-
-    def revert(self) -> None:
-        """Revert every ply's friction bars."""
-        for h in self.holders:
-            h.revert()
+    def _shares(self) -> tuple[np.ndarray, np.ndarray]:
+        """Half the part's force on each outer ply, over that ply's n_s; none on the rest."""
+        plies = len(self.heights)
+        mine = self.under & self.owned
+        local = np.bincount(self.ply[mine], self.w[mine], minlength=plies)
+        n_s = self.comm.allreduce(local) if self.comm is not None else local
+        self.n_s = float(n_s[0])  # eq. 1's n_s of the punch-side ply
+        force = np.zeros(plies)
+        force[[0, -1]] = 0.5 * self.part_force_N
+        k = self.ply[self.bars]
+        return force[k] * self.w[self.bars], np.maximum(n_s[k], 1e-300)
