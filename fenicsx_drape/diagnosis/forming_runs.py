@@ -324,9 +324,19 @@ def executor() -> tuple[str, Executor | None]:
         from concurrent.futures import ProcessPoolExecutor
 
         _shutdown()
-        # Fresh processes (not forks of one where MPI is initialised).
-        _pools[name] = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+        # Fresh processes (not forks of one where MPI is initialised); this process is the
+        # last worker (it is warm: DOLFINx imported, forms compiled).
+        pool = ProcessPoolExecutor(workers - 1, mp_context=multiprocessing.get_context("spawn"))
+        with _fresh_workers():  # every process starts now and imports while this one works
+            for _ in range(workers - 1):
+                pool.submit(_warm)
+        _pools[name] = pool
     return "processes", _pools[name]
+
+
+def _warm() -> None:
+    """A new worker's first job: import what forming needs (DOLFINx, the package)."""
+    import fenicsx_drape.forming.running.run  # noqa: F401
 
 
 def _executor_kind() -> tuple[str, int]:
@@ -391,6 +401,8 @@ def _form_all(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
             except Exception as error:  # raised after the others
                 results.append(("error", error))
         return results
+    if name == "processes":
+        return _share(jobs, pool, _executor_kind()[1] - 1)
     from concurrent.futures import BrokenExecutor
 
     options = _solver_options()
@@ -410,6 +422,65 @@ def _form_all(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
             broken |= isinstance(error, BrokenExecutor)
             results.append(("error", RuntimeError(f"forming worker failed: {error!r}")))
     if broken:  # the next batch starts a new pool
+        _shutdown()
+    return results
+
+
+def _share(jobs: list[tuple[Any, Model]], pool: Executor, workers: int
+           ) -> list[tuple[str, Any]]:
+    """The jobs formed by this process and the pool's ``workers`` together, in the order asked.
+
+    Each next job goes to whichever is free first (a feeding thread per worker waits on
+    it). A run is the same wherever it is formed, so the results do not depend on who formed
+    what. A job the pool refuses (a worker died since the last batch) is formed here; one
+    whose worker died comes back as its error, and the next batch starts a new pool.
+    """
+    import threading
+    from concurrent.futures import BrokenExecutor
+
+    from mpi4py import MPI
+
+    options = _solver_options()
+    results: list[tuple[str, Any] | None] = [None] * len(jobs)
+    queue = list(range(len(jobs)))[::-1]  # popped from the end: in the order asked
+    lock = threading.Lock()
+    died = []
+
+    def take() -> int | None:
+        with lock:
+            return queue.pop() if queue else None
+
+    def feed() -> None:  # a thread: the pool's worker forms job after job
+        while (k := take()) is not None:
+            try:
+                future = pool.submit(_run, *jobs[k], trusted(), options)
+            except BrokenExecutor:  # refused: this process forms it
+                with lock:
+                    queue.append(k)
+                died.append(True)
+                return
+            try:
+                results[k] = future.result()
+            except Exception as error:  # a worker that died, a job that did not pickle
+                died.append(isinstance(error, BrokenExecutor))
+                results[k] = ("error", RuntimeError(f"forming worker failed: {error!r}"))
+
+    feeders = [threading.Thread(target=feed, daemon=True) for _ in range(workers)]
+    for thread in feeders:
+        thread.start()
+    while True:  # this process forms too
+        k = take()
+        if k is None:
+            alive = [t for t in feeders if t.is_alive()]
+            if not alive:
+                break
+            alive[0].join(0.05)  # a refused job may still come back to the queue
+            continue
+        try:
+            results[k] = ("ok", _form(*jobs[k], MPI.COMM_SELF))
+        except Exception as error:  # raised after the others
+            results[k] = ("error", error)
+    if any(died):  # the next batch starts a new pool
         _shutdown()
     return results
 
