@@ -327,16 +327,24 @@ def executor() -> tuple[str, Executor | None]:
         # Fresh processes (not forks of one where MPI is initialised); this process is the
         # last worker (it is warm: DOLFINx imported, forms compiled).
         pool = ProcessPoolExecutor(workers - 1, mp_context=multiprocessing.get_context("spawn"))
-        with _fresh_workers():  # every process starts now and imports while this one works
-            for _ in range(workers - 1):
-                pool.submit(_warm)
+        with _fresh_workers():  # every process starts now and warms while this one works
+            _warming[:] = [pool.submit(_warm) for _ in range(workers - 1)]
         _pools[name] = pool
     return "processes", _pools[name]
 
 
+_warming: list = []  # the pool's warm-up jobs: a worker takes runs once its own is done
+
+
 def _warm() -> None:
-    """A new worker's first job: import what forming needs (DOLFINx, the package)."""
-    import fenicsx_drape.forming.running.run  # noqa: F401
+    """A new worker's first job: import DOLFINx and load the compiled forms (a tiny run)."""
+    from fenicsx_drape.forming.case.format import load_case
+    from fenicsx_drape.forming.running.run import run_case
+
+    try:
+        run_case(load_case("hemisphere", cell_mm=40.0, step_mm=10.0))
+    except Exception:  # only a warm-up: the runs will say what is wrong
+        pass
 
 
 def _executor_kind() -> tuple[str, int]:
@@ -436,7 +444,7 @@ def _share(jobs: list[tuple[Any, Model]], pool: Executor, workers: int
     whose worker died comes back as its error, and the next batch starts a new pool.
     """
     import threading
-    from concurrent.futures import BrokenExecutor
+    from concurrent.futures import BrokenExecutor, wait
 
     from mpi4py import MPI
 
@@ -450,7 +458,9 @@ def _share(jobs: list[tuple[Any, Model]], pool: Executor, workers: int
         with lock:
             return queue.pop() if queue else None
 
-    def feed() -> None:  # a thread: the pool's worker forms job after job
+    def feed(warm) -> None:  # a thread: the pool's worker forms job after job ...
+        if warm is not None:  # ... once warm (until then this process takes the jobs)
+            wait([warm])
         while (k := take()) is not None:
             try:
                 future = pool.submit(_run, *jobs[k], trusted(), options)
@@ -465,7 +475,8 @@ def _share(jobs: list[tuple[Any, Model]], pool: Executor, workers: int
                 died.append(isinstance(error, BrokenExecutor))
                 results[k] = ("error", RuntimeError(f"forming worker failed: {error!r}"))
 
-    feeders = [threading.Thread(target=feed, daemon=True) for _ in range(workers)]
+    warm = (_warming + [None] * workers)[:workers]
+    feeders = [threading.Thread(target=feed, args=(w,), daemon=True) for w in warm]
     for thread in feeders:
         thread.start()
     while True:  # this process forms too
