@@ -454,10 +454,11 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         say(f"  the net explains the residual of {', '.join(sorted(resolved))}")
     # 6. Effects: every candidate refitted, judged on held-out rows.
     tried, untestable = [], []
-    for name in candidate_names(model):
-        if candidates is None or name in candidates:
-            entry = _try_effect(name, model, base, stage, resolved, say)
-            (untestable if "reason" in entry else tried).append(entry)
+    names = [n for n in candidate_names(model) if candidates is None or n in candidates]
+    _first_runs_at_once(model, base, names)
+    for name in names:
+        entry = _try_effect(name, model, base, stage, resolved, say)
+        (untestable if "reason" in entry else tried).append(entry)
     # 7. The report (the confirmation on a finer net is drape diagnose's --confirm-cell-mm).
     report = _report(bundle, base, tried, untestable, stage, checked, resolved, say)
     apply_data_check(report, suspects)
@@ -525,6 +526,26 @@ def _with_heldout(base: _Base, say: Progress) -> _Base:
     heldout = base.data.compare(_heldout(base.data, base.model, say))
     say(f"  held-out normalised error {normalised_error(heldout):.3g}")
     return dataclasses.replace(base, heldout=heldout)
+
+
+def _first_runs_at_once(model: Model, base: _Base, names: list[str]) -> None:
+    """Each candidate's first runs (its sensitivity, :func:`_sensitivity`) in one batch.
+
+    Asked one candidate after the other they were batches of a run or two: the workers
+    waited.
+    """
+    from fenicsx_drape.diagnosis.forming_runs import prefetch
+    from fenicsx_drape.effects import describe_effect
+
+    models = []
+    for name in names:
+        added = (*(p for p in describe_effect(name).prerequisites if p not in model.effects),
+                 name)
+        try:
+            models.append(base.model.with_effects(*added))
+        except DrapeInputError:  # its entry says why
+            continue
+    prefetch(lambda t=t, m=m: simulate([t], m) for m in models for t in base.data.tests)
 
 
 def _try_effect(name: str, model: Model, base: _Base, stage: dict[str, Any] | None,

@@ -29,7 +29,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -524,6 +524,35 @@ def _form_in_groups(jobs: list[tuple[Any, Model]], groups: int) -> list[tuple[st
     return results
 
 
+class _Collected(BaseException):  # not an Exception: it passes the kinds' handlers
+    """Raised by :func:`form_many` while :func:`prefetch` collects the jobs it is asked."""
+
+
+_collecting: list[list] = []
+
+
+def prefetch(calls: Iterable[Callable[[], Any]]) -> None:
+    """Form at once, into memory, the runs that ``calls`` would each ask for in turn.
+
+    Each call is run until it asks :func:`form_many` for its first runs, which are noted
+    instead of formed; then all of them go to the workers together, and the calls made
+    afterwards find their runs in memory. A run that fails is left for its call to report.
+    """
+    jobs: list[tuple[Any, Model]] = []
+    _collecting.append(jobs)
+    try:
+        for call in calls:
+            try:
+                call()
+            except (_Collected, Exception):  # a call that fails fails again when made
+                pass
+    finally:
+        _collecting.pop()
+    if jobs:
+        with contextlib.suppress(Exception):
+            form_many(jobs)
+
+
 def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     """Formed sheets (modelled parts) of ``(case, model)`` jobs: remembered, new ones at once.
 
@@ -531,6 +560,9 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     formed by :func:`executor`'s processes and stored. A run that fails is raised (its
     message naming the case and model) once the others are formed and kept.
     """
+    if _collecting:
+        _collecting[-1].extend(jobs)
+        raise _Collected
     keys = [_key(case, model) for case, model in jobs]
     for k in dict.fromkeys(keys):  # the batch's runs in memory are the newest: kept
         if k in _cache:
