@@ -8,8 +8,9 @@ run is known by the case's content (its tables and the bytes of its geometry fil
 path it was read from), the model and the solver options; it is kept in memory (the
 :data:`_CACHE_SIZE` latest) and, inside :func:`execution` with a cache folder, on disk
 (:mod:`~fenicsx_drape.diagnosis.run_store`, across commands). The new runs of one call go
-through :mod:`concurrent.futures`, chosen by :func:`executor`: a pool of local processes (as
-many as the machine has cores, or ``DRAPE_WORKERS``, or :func:`execution`'s), the shared pool
+through :mod:`concurrent.futures`, chosen by :func:`executor`: local processes (as many as
+the machine has cores, or ``DRAPE_WORKERS``, or :func:`execution`'s: this process and a pool
+of the others, warmed up as soon as it starts), the shared pool
 of ``mpi4py.futures`` when run as ``mpiexec -n N python3 -m mpi4py.futures -m fenicsx_drape
 ...``, and, under plain ``mpirun``, one run after the other on all ranks (or, with
 ``ranks_per_run``, runs at once on groups of ranks: runs × ranks). The results are
