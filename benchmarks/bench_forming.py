@@ -5,6 +5,7 @@
     ./drape --np 2 exec python3 benchmarks/bench_forming.py --full    # the same on two ranks
     ./drape exec python3 benchmarks/bench_forming.py --before         # the first solver
     ./drape exec python3 benchmarks/bench_forming.py --single-factor  # factor in single precision
+    ./drape exec python3 benchmarks/bench_forming.py --bending-jacobian preconditioner
     ./drape exec python3 benchmarks/bench_forming.py --petsc-option "-snes_type newtontr"
     ./drape exec python3 benchmarks/bench_forming.py --save-nodes ref           # nodes to ref/
     ./drape exec python3 benchmarks/bench_forming.py --reference ref --petsc-option ...
@@ -50,6 +51,8 @@ parser.add_argument("--node-atol-N", type=float, default=None,
 parser.add_argument("--line-search", default=None, help="line search (fe/newton.py)")
 parser.add_argument("--single-factor", action="store_true",
                     help="MUMPS factor in single precision, GMRES to 1e-3 on it (fe/solver.py)")
+parser.add_argument("--bending-jacobian", choices=("full", "diagonal", "preconditioner"),
+                    default=None, help="SolverOptions.bending_jacobian (default: full)")
 parser.add_argument("--max-wall-s", type=float, default=None,
                     help="stop each run after the load step that ends past this wall time (s)")
 args = parser.parse_args()
@@ -76,6 +79,8 @@ if args.single_factor:
     options["petsc_options"].update(SINGLE_PRECISION_FACTOR)
 if args.node_atol_N is not None:
     options["node_atol_N"] = args.node_atol_N
+if args.bending_jacobian is not None:
+    options["bending_jacobian"] = args.bending_jacobian
 if args.before:
     from fenicsx_drape.forming.terms.contact import PenaltyContact
 

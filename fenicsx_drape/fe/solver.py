@@ -87,8 +87,14 @@ MUMPS) and solve to 10⁻³ with GMRES on that factor: 7-15 % faster on the hemi
 about 10⁻¹."""
 
 
-BENDING_JACOBIANS = ("full", "diagonal", "preconditioner")
+BENDING_JACOBIANS = ("auto", "full", "diagonal", "preconditioner")
 """``SolverOptions.bending_jacobian``: how the tow bending's stencils enter Newton's solve."""
+
+SPLIT_FROM_NODES = 500
+"""``bending_jacobian = "auto"``: a sheet of more nodes than this, or a stack of plies, solves
+with ``"preconditioner"``, a smaller one with ``"full"``. On the hemisphere, idle machine:
+1.8 s either way at 169 nodes, 5.7 → 4.5 s at 625, 23.8 → 18.9 s at 2401, 111.1 → 85.3 s at
+9409; two and four plies of the double dome 10 and 26 % faster (docs/solver-notes.md)."""
 
 BENDING_PRECONDITIONER = {
     "ksp_type": "gmres", "ksp_pc_side": "right", "ksp_norm_type": "unpreconditioned",
@@ -129,8 +135,9 @@ class SolverOptions:
     # term): "full" (its stencils, factored), "diagonal" (K's diagonal only: a plain net's
     # pattern), or "preconditioner" (the full Jacobian as GMRES's operator, preconditioned by
     # the factor of the plain net's matrix with K's neighbour couplings, the couplings two
-    # nodes apart lumped on the diagonal: BENDING_PRECONDITIONER).
-    bending_jacobian: str = "full"
+    # nodes apart lumped on the diagonal: BENDING_PRECONDITIONER); "auto" chooses between the
+    # last and "full" by the sheet's size (SPLIT_FROM_NODES).
+    bending_jacobian: str = "auto"
     # Extra SNES/KSP/PC options (those of the command line, fe.newton.set_petsc_options, win).
     petsc_options: dict = dataclasses.field(default_factory=dict)
 
@@ -242,6 +249,10 @@ class TrussProblem:
             self._setup_couplings()
         self._bending = None
         self._bending_in_A: tuple[PETSc.Mat, PETSc.Mat | PETSc.Vec] | None = None
+        self.bending_jacobian = options.bending_jacobian  # "auto" resolved
+        if self.bending_jacobian == "auto":
+            large = self.comm.allreduce(self.num_owned) > SPLIT_FROM_NODES or bool(sheet.plies)
+            self.bending_jacobian = "preconditioner" if large else "full"
         if options.tow_bending_EI_Nmm2 > 0 and (sheet.grid is not None or sheet.plies):
             self._setup_bending()
         self._setup_newton()
@@ -358,7 +369,7 @@ class TrussProblem:
 
     def _setup_newton(self) -> None:
         opts = self.options
-        split = self._bending is not None and opts.bending_jacobian == "preconditioner"
+        split = self._bending is not None and self.bending_jacobian == "preconditioner"
         options = {"pc_factor_mat_solver_type": opts.linear_solver,
                    **(BENDING_PRECONDITIONER if split else {}), **opts.petsc_options}
         operator = self._operator() if split else self._A
@@ -404,7 +415,7 @@ class TrussProblem:
         the Jacobian gets the union of both patterns, allocated once.
         """
         self._bending = TowBending(self, self.options.tow_bending_EI_Nmm2)
-        if self.options.bending_jacobian != "full":  # the form's pattern is enough
+        if self.bending_jacobian != "full":  # the form's pattern is enough
             return
         fem_petsc.assemble_matrix(self._A, self.jacobian_form)
         self._A.assemble()
@@ -422,12 +433,12 @@ class TrussProblem:
         is a plain pass over the values: ten times faster than adding it on its own pattern.
         """
         source = self._bending.constrained_matrix
-        if self.options.bending_jacobian == "diagonal":
+        if self.bending_jacobian == "diagonal":
             if self._bending_in_A is None or self._bending_in_A[0] is not source:
                 self._bending_in_A = (source, source.getDiagonal())
             A.setDiagonal(self._bending_in_A[1], addv=PETSc.InsertMode.ADD_VALUES)
             return
-        if self.options.bending_jacobian == "preconditioner":
+        if self.bending_jacobian == "preconditioner":
             A.axpy(1.0, self._bending_split()[0], PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             return
         if self._bending_in_A is None or self._bending_in_A[0] is not source:
