@@ -14,10 +14,12 @@
 A JIT warm-up run (30 mm cells) comes first. ``--before`` runs the first solver
 (backtracking line search, exact geometric stiffness, penetrating nodes projected onto the
 tool surface; CHANGELOG.md, the solver study). Every line: nodes, unknowns, ranks, wall
-time, accepted steps, cut-backs, SNES iterations (per step), Jacobians, Krylov iterations, residual
-evaluations, maximum shear, the travel reached if the run stopped short; the machine's load
-average before the run; with ``--reference`` the largest and mean node distance to the nodes
-that ``--save-nodes`` wrote there. ``--petsc-option`` (repeatable) passes options to SNES as
+time, accepted steps, cut-backs, SNES iterations (per step), Jacobians, Krylov iterations,
+residual evaluations, maximum shear, the travel reached if the run stopped short, then where
+its time went (the solver's timings: laws, nodal terms, residual and Jacobian assembly, and
+the rest of Newton's solves: the linear solves); the machine's load average before the run;
+with ``--reference`` the largest and mean node distance to the nodes that ``--save-nodes``
+wrote there. ``--petsc-option`` (repeatable) passes options to SNES as
 ``drape form --petsc-option`` does (``docs/solver.md`` has the table these lines make).
 ``--max-wall-s`` stops a run after the first load step that ends past that wall time and prints
 its line so far (the travel reached, its iterations and cut-backs) instead of letting it crawl.
@@ -129,6 +131,11 @@ for case in cases:
               f"{np.abs(run.grid.shear_deg()).max():.2f}°{distance}"
               + (f"; stopped at {run.travel_mm:.1f} mm: {run.stopped}" if run.stopped else ""),
               flush=True)
+        spent = dict(run.problem.timings)
+        newton = spent.pop("solve")  # Newton's solves, with the parts below inside
+        parts = ", ".join(f"{k} {v:.1f} s" for k, v in spent.items())
+        print(f"    where the time went (rank 0): Newton {newton:.1f} s, of it {parts}, "
+              f"linear solves and SNES {newton - sum(spent.values()):.1f} s", flush=True)
 if comm.rank == 0 and len(rows) > 1:
     n, t = np.array(rows, dtype=float).T
     slope = np.polyfit(np.log(n), np.log(t), 1)[0]
