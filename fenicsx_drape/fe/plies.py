@@ -268,9 +268,16 @@ class PlyContact:
             r, c = np.divmod(union, n)
             self.pattern = (np.searchsorted(r, np.arange(n + 1)).astype(np.int32),
                             c.astype(np.int32))
-            self.values = np.zeros((len(union), 3, 3))
             self.pattern_version += 1
-        self._slot = np.searchsorted(self._keys, keys)
+        # Each live block (pair, node i, node j) and the slot of the pattern it adds to, as a
+        # sparse sum: the blocks of all pairs go to their slots in one product.
+        from scipy.sparse import csr_matrix
+
+        self._live_at = np.nonzero(self._live)
+        slot = np.searchsorted(self._keys, keys)
+        self._gather = csr_matrix((np.ones(len(slot)), (slot, np.arange(len(slot)))),
+                                  shape=(len(self._keys), len(slot)))
+        self._c, self._G = np.zeros((len(self.a), 5)), np.zeros((len(self.a), 3, 3))
 
     def follow(self, x: np.ndarray) -> None:
         """Re-pair every node with the point of the ply below that lies under it now.
@@ -346,13 +353,19 @@ class PlyContact:
         forces = np.concatenate([f_a, (-self.w[:, :, None] * f_a[:, None, :]).reshape(-1, 3)])
         for i in range(3):  # a scatter-add (bincount is much faster than ufunc.at)
             f[:, i] = np.bincount(nodes, forces[:, i], minlength=nn)
-        blocks = np.einsum("pi,pj,pkl->pijkl", c, c, G)[self._live]
-        m = len(self._keys)
-        self.values = np.stack([np.bincount(self._slot, blocks[:, i, j], minlength=m)
-                                for i in range(3) for j in range(3)], axis=1).reshape(m, 3, 3)
+        self._c, self._G = c, G  # the blocks are made when the Jacobian asks (values)
         self._trial = (x.copy(), out.state, p, s)
         self.f = f  # the forces of the last evaluation (N), also on constrained nodes
         return f, np.zeros((nn, 3, 3))
+
+    @property
+    def values(self) -> np.ndarray:
+        """The 3 × 3 blocks (N/mm) on :attr:`pattern` at the last :meth:`forces` call."""
+        p, i, j = self._live_at
+        if not len(p):
+            return np.zeros((len(self._keys), 3, 3))
+        blocks = (self._c[p, i] * self._c[p, j])[:, None] * self._G[p].reshape(-1, 9)
+        return (self._gather @ blocks).reshape(-1, 3, 3)
 
     def commit(self) -> None:
         """Keep the pairs' slip; the normals follow the converged plies."""
