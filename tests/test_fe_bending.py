@@ -29,9 +29,22 @@ class Linear(MaterialLaw):
 LAWS = {"tow": Linear(3000.0), "shear": Linear(1.0)}
 
 
-def _problem(quarter, EI=EI, sheet=None):
+def _problem(quarter, EI=EI, sheet=None, mode="full"):
     sheet = sheet or truss_sheet(80.0, 10.0, quarter=quarter)
-    return TrussProblem(sheet, LAWS, options=SolverOptions(tow_bending_EI_Nmm2=EI))
+    return TrussProblem(sheet, LAWS, options=SolverOptions(tow_bending_EI_Nmm2=EI,
+                                                           bending_jacobian=mode))
+
+
+def _jacobians_at_a_curved_state(*problems):
+    """Each problem's Jacobian at one curved displacement of a quarter; that displacement."""
+    x = None
+    for problem in problems:
+        problem.symmetry()
+        problem.u.interpolate(lambda X: np.vstack([1e-4 * X[0] * X[1], 2e-4 * X[0] * X[1],
+                                                   1e-3 * (X[0] ** 2 + X[1] ** 2)]))
+        x = problem.u.x.petsc_vec.copy() if x is None else x
+        problem._jacobian(x)
+    return x
 
 
 @pytest.mark.parallel
@@ -96,16 +109,9 @@ def test_a_diagonal_bending_jacobian_keeps_a_plain_nets_pattern_and_the_full_res
     """``bending_jacobian = "diagonal"``: K's diagonal alone, in the pattern of a net without
     bending (Newton's matrix factors as a plain net's); the residual keeps the whole term."""
     full = _problem(quarter=True)
-    options = SolverOptions(tow_bending_EI_Nmm2=EI, bending_jacobian="diagonal")
-    diagonal = TrussProblem(full.sheet, LAWS, options=options)
+    diagonal = _problem(True, sheet=full.sheet, mode="diagonal")
     plain = _problem(True, EI=0.0, sheet=full.sheet)
-    x = None
-    for problem in (full, diagonal, plain):
-        problem.symmetry()
-        problem.u.interpolate(lambda X: np.vstack([1e-4 * X[0] * X[1], 2e-4 * X[0] * X[1],
-                                                   1e-3 * (X[0] ** 2 + X[1] ** 2)]))
-        x = problem.u.x.petsc_vec.copy() if x is None else x
-        problem._jacobian(x)
+    x = _jacobians_at_a_curved_state(full, diagonal, plain)
     nonzeros = {name: p._A.getInfo()["nz_used"]
                 for name, p in (("full", full), ("diagonal", diagonal), ("plain", plain))}
     assert nonzeros["diagonal"] == nonzeros["plain"] < nonzeros["full"]
@@ -127,16 +133,9 @@ def test_the_bending_as_preconditioner_applies_the_full_jacobian_and_factors_a_p
     and, the couplings two nodes apart being lumped on the diagonal, acts on a rigid motion
     as the full Jacobian does."""
     full = _problem(quarter=True)
-    split, diagonal = (TrussProblem(full.sheet, LAWS, options=SolverOptions(
-        tow_bending_EI_Nmm2=EI, bending_jacobian=mode)) for mode in ("preconditioner",
-                                                                      "diagonal"))
-    x = None
-    for problem in (full, split, diagonal):
-        problem.symmetry()
-        problem.u.interpolate(lambda X: np.vstack([1e-4 * X[0] * X[1], 2e-4 * X[0] * X[1],
-                                                   1e-3 * (X[0] ** 2 + X[1] ** 2)]))
-        x = problem.u.x.petsc_vec.copy() if x is None else x
-        problem._jacobian(x)
+    split, diagonal = (_problem(True, sheet=full.sheet, mode=mode)
+                       for mode in ("preconditioner", "diagonal"))
+    x = _jacobians_at_a_curved_state(full, split, diagonal)
     operator, P = split.newton.snes.getKSP().getOperators()
     assert P.handle == split._A.handle and operator.getType() == "python"
     rng = np.random.default_rng(1)
@@ -159,6 +158,21 @@ def test_the_bending_as_preconditioner_applies_the_full_jacobian_and_factors_a_p
     P.mult(lift, Ad)
     Ad.axpy(-1.0, Jd)
     assert Ad.norm() <= 1e-12 * off.norm()
+
+
+@pytest.mark.parallel
+def test_the_default_splits_the_solve_of_a_large_sheet_and_factors_a_small_one_whole():
+    """``bending_jacobian = "auto"``: the split solve above SPLIT_FROM_NODES nodes (counted
+    over all ranks), the stencils factored whole below."""
+    from fenicsx_drape.fe.solver import SPLIT_FROM_NODES
+
+    small, large = (TrussProblem(truss_sheet(80.0 * k, 10.0), LAWS,
+                                 options=SolverOptions(tow_bending_EI_Nmm2=EI)) for k in (1, 3))
+    sizes = [p.comm.allreduce(p.num_owned) for p in (small, large)]
+    assert sizes[0] <= SPLIT_FROM_NODES < sizes[1]
+    assert (small.bending_jacobian, large.bending_jacobian) == ("full", "preconditioner")
+    assert large.newton.snes.getKSP().getType() == "gmres"
+    assert small.newton.snes.getKSP().getType() == "preonly"
 
 
 def test_forming_with_the_bending_as_preconditioner_gives_the_same_part():

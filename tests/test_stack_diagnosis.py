@@ -114,8 +114,8 @@ def test_a_bonded_model_against_plies_that_slid_names_interply_friction(tmp_path
     """The data: the stack formed with its plies sliding under the case's [interply] law,
     measured on both plies. The model: the paper's effects, its plies bonded.
 
-    Only interply_friction is tried (each other candidate would form the stack again; the
-    default path of the candidates is tested on forming bundles in test_forming_diagnosis.py).
+    Only interply_friction is tried, to keep the suite fast (each other candidate would form
+    the stack again); the default path on the same data is the bench test below.
     """
     write(tmp_path, SLIDING, stack_case(), plies=(1, 2))
     report = diagnose(load(tmp_path), BONDED, candidates=["interply_friction"])
@@ -124,6 +124,21 @@ def test_a_bonded_model_against_plies_that_slid_names_interply_friction(tmp_path
     assert candidate["effect"] == "interply_friction" and candidate["significant"]
     assert candidate["error_after"]["normalised"] == pytest.approx(1.0, abs=0.2)
     assert report["missing_effect"] == "interply_friction"
+
+
+@pytest.mark.bench
+def test_the_default_diagnosis_of_a_stack_names_interply_friction_and_no_set_up_error(
+        tmp_path):
+    """The test above on the path a user takes: every candidate of the catalogue and the
+    set-up stage with its default parameters (the stack's angle, each ply's, the holder's μ,
+    ...). Marked bench: every candidate and set-up scan forms the stack again (minutes)."""
+    write(tmp_path, SLIDING, stack_case(), plies=(1, 2))
+    report = diagnose(load(tmp_path), BONDED)
+    assert report["missing_effect"] == "interply_friction"
+    assert report.get("setup_error") is None
+    best = max(report["candidates"], key=lambda c: c.get("evidence", -np.inf))
+    assert best["effect"] == "interply_friction" and best["significant"]
+    assert best["error_after"]["normalised"] == pytest.approx(1.0, abs=0.3)
 
 
 @pytest.mark.slow
