@@ -102,14 +102,15 @@ def test_contact_jacobian_with_a_meshed_tool_is_consistent(ball, friction, rotat
 
 class ZOffsetContact(PenaltyContact):
     """The contact term as it was before ``tool.displacement``: the slip corrected by the
-    tool's z offset (the friction method of main at 4c390df, verbatim)."""
+    tool's z offset (the friction method of main at 4c390df, verbatim but for the nodes'
+    last positions ``x_n``, now an argument: the contact evaluates only the nodes near it)."""
 
-    def _friction(self, x, t, g, f_N, dp, active):
+    def _friction(self, x, x_n, t, g, f_N, dp, active):
         def _outer(a, b):
             return np.einsum("ni,nj->nij", a, b)
 
         n, H = g.normal, g.hessian
-        d = x - self._x_n
+        d = x - x_n
         d[:, 2] -= self.tool.z_offset(t) - self.tool.z_offset(self._t_n)
         dn = np.einsum("ni,ni->n", d, n)
         s = d - dn[:, None] * n

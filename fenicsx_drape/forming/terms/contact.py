@@ -89,6 +89,8 @@ class PenaltyContact:
         self._x_n: np.ndarray | None = None  # positions at the last converged step
         self._t_n = 0.0
         self._trial: tuple[np.ndarray, float] | None = None
+        # Where each node's gap was last evaluated (x, t, φ): a bound on the gap now.
+        self._seen: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
         """Remember the reference positions (the slip of the first step starts there)."""
@@ -105,22 +107,43 @@ class PenaltyContact:
 
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Contact force (N) and stiffness −∂f/∂x (N/mm) at the positions ``x`` at time ``t``."""
-        g = self.tool.gap(x, t)
+        f, K = np.zeros((len(x), 3)), np.zeros((len(x), 3, 3))
+        self._trial = (np.array(x, dtype=float), t)
+        near = self._near(x, t)
+        if not len(near):
+            return f, K
+        xs = x[near]
+        g = self.tool.gap(xs, t)
+        self._seen[0][near], self._seen[1][near], self._seen[2][near] = xs, t, g.phi
         p, dp = self.penalty(g.phi)
         n = g.normal
-        f = p[:, None] * n
-        K = -dp[:, None, None] * _outer(n, n) - p[:, None, None] * g.hessian
-        self._trial = (np.array(x, dtype=float), t)
+        f[near] = p[:, None] * n
+        K[near] = -dp[:, None, None] * _outer(n, n) - p[:, None, None] * g.hessian
         active = g.phi < 0.0
         if self.μ > 0.0 and active.any():
-            f_t, K_t = self._friction(x, t, g, p, dp, active)
-            f += f_t
-            K += K_t
+            f_t, K_t = self._friction(xs, self._x_n[near], t, g, p, dp, active)
+            f[near] += f_t
+            K[near] += K_t
         return f, K
 
-    def _friction(self, x, t, g, f_N, dp, active):
+    def _near(self, x: np.ndarray, t: float) -> np.ndarray:
+        """The nodes that may touch the tool at ``x``, ``t`` (all unless it bounds its motion).
+
+        A node whose gap was φ' at x', t' has φ ≥ φ' − |x − x'| − (the tool's motion from t'
+        to t); a node with φ > 0 feels no force (nor stiffness, nor friction).
+        """
+        moved = getattr(self.tool, "moved_mm", None)
+        if self._seen is None or len(self._seen[0]) != len(x):
+            self._seen = (np.array(x, dtype=float), np.full(len(x), t), np.full(len(x), -1.0))
+        if moved is None:
+            return np.arange(len(x))
+        x_s, t_s, φ_s = self._seen
+        bound = φ_s - np.linalg.norm(x - x_s, axis=1) - moved(t_s, t)
+        return np.flatnonzero(~(bound > 0.0))
+
+    def _friction(self, x, x_n, t, g, f_N, dp, active):
         n, H = g.normal, g.hessian
-        d = x - self._x_n - self.tool.displacement(x, self._t_n, t)
+        d = x - x_n - self.tool.displacement(x, self._t_n, t)
         dn = np.einsum("ni,ni->n", d, n)
         s = d - dn[:, None] * n
         w = np.sqrt(np.einsum("ni,ni->n", s, s) + self.s_ε**2)

@@ -147,6 +147,14 @@ class RevolvedTool:
         d[:, 2] = self.z_offset(t1) - self.z_offset(t0)
         return d
 
+    def moved_mm(self, t0, t1):
+        """The farthest any point of the tool moves from ``t0`` to ``t1`` (arrays allowed).
+
+        ``gap`` is the exact signed distance, so at a point x' within r of x, and from t0 to
+        t1, φ differs by at most r + this: the contact skips the nodes that cannot reach it.
+        """
+        return np.abs(self.speed_mm_per_s * (np.asarray(t1) - np.asarray(t0)))
+
     def gap(self, x: np.ndarray, t: float) -> Gap:
         """Signed gap, normal and curvature at the positions ``x`` (n, 3) in mm at time ``t``."""
         x = np.asarray(x, dtype=float).reshape(-1, 3) - [*self.axis_mm, 0.0]
