@@ -7,7 +7,8 @@ The case at its own net (quarter model), one rank: the single ply, then stacks o
 plies, all at 0° (a turned ply breaks the quarter symmetry), the die's gap the stack's. Every
 line: plies, nodes, wall time, steps, cut-backs, Newton iterations (per step), time per
 iteration, the ratio of the wall time to the single ply's, the process's CPU time and its
-ratio (steadier than the wall time on a shared machine), and each ply's maximum shear. The
+ratio (steadier than the wall time on a shared machine), the factorisation's flops (MUMPS's
+estimate, RINFOG(3)) and which bending Jacobian the size chose, and each ply's maximum shear. The
 machine's load average comes first. Every case's tools are built before its clock starts
 (a stack's die sits at the stack's gap, another tool than the single ply's): the times are
 the forming's.
@@ -49,8 +50,11 @@ for angles in ((0.0,), (0.0, 0.0), (0.0, 0.0, 0.0, 0.0)):
     grids = run.plies or [run.grid]
     shear = ", ".join(f"{np.nanmax(np.abs(g.shear_deg())):.1f}" for g in grids)
     nodes = run.problem.num_owned
+    factor = run.problem.newton.snes.getKSP().getPC().getFactorMatrix()
+    flops = factor.getMumpsRinfog(3) if factor.getType() == "mumps" else float("nan")
     print(f"{len(angles)} plies: {nodes} nodes, {wall:.1f} s, {run.steps} steps, "
           f"{run.cutbacks} cut-backs, {run.iterations} Newton ({run.iterations / run.steps:.2f} "
           f"per step), {1e3 * wall / run.iterations:.1f} ms per iteration, "
           f"{wall / single:.2f}x the single ply; CPU {cpu:.1f} s, {cpu / cpu_single:.2f}x; "
+          f"{flops / 1e6:.1f} Mflop a factorisation ({run.problem.bending_jacobian}); "
           f"max shear per ply {shear} deg")
