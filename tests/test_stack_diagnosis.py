@@ -114,11 +114,16 @@ def test_a_bonded_model_against_plies_that_slid_names_interply_friction(tmp_path
     """The data: the stack formed with its plies sliding under the case's [interply] law,
     measured on both plies. The model: the paper's effects, its plies bonded.
 
-    Only interply_friction is tried, to keep the suite fast (each other candidate would form
-    the stack again); the default path on the same data is the bench test below.
+    Only interply_friction is tried, and shear_tension_coupling, which a stack cannot take
+    (its coupling needs one structured net): it is untestable, not a crash. The others would
+    each form the stack again; the default path on the same data is the bench test below.
     """
     write(tmp_path, SLIDING, stack_case(), plies=(1, 2))
-    report = diagnose(load(tmp_path), BONDED, candidates=["interply_friction"])
+    report = diagnose(load(tmp_path), BONDED,
+                      candidates=["interply_friction", "shear_tension_coupling"])
+    (refused,) = report["untestable"]
+    assert refused["effect"] == "shear_tension_coupling"
+    assert "cannot be formed" in refused["reason"] and "structured" in refused["reason"]
     assert report["baseline"]["error"]["normalised"] > 5.0
     (candidate,) = report["candidates"]
     assert candidate["effect"] == "interply_friction" and candidate["significant"]

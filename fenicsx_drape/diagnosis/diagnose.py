@@ -563,7 +563,12 @@ def _try_effect(name: str, model: Model, base: _Base, stage: dict[str, Any] | No
         start_model = baseline.with_effects(*added)
     except DrapeInputError as err:
         return {"effect": label, "reason": f"cannot be added: {err}"}
-    change, per_test = _sensitivity(data, reference, start_model)
+    try:
+        change, per_test = _sensitivity(data, reference, start_model)
+    except DrapeInputError as err:  # e.g. an effect a stack of plies cannot take
+        say(f"candidate {label}: untestable (its runs cannot be formed)")
+        return {"effect": label, "effects": list(added),
+                "reason": f"its runs cannot be formed on these tests' parts: {err}"}
     if change < UNTESTABLE_BELOW:
         say(f"candidate {label}: untestable (change {change:.2g} × noise)")
         return {"effect": label, "effects": list(added),
