@@ -202,15 +202,34 @@ class PlyContact:
         self.follows = bool(follow)
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
-        """Pair every node of ply k + 1 with its partner point on ply k (reference stack)."""
+        """Pair every node of ply k + 1 with its partner point on ply k (reference stack).
+
+        Pairs are made over the whole stack, by global node index (the same on every rank);
+        a rank keeps the pairs that touch a node it owns (module docstring, MPI).
+        """
         from scipy.spatial import cKDTree
 
-        if comm is not None and comm.size > 1:
-            raise DrapeInputError("a stack of plies runs on one rank (its inter-ply pairs "
-                                  "cross the partition)")
-        self.X = np.asarray(X, dtype=float)
+        self.comm = comm if comm is not None and comm.size > 1 else None
+        X = np.asarray(X, dtype=float)
+        if self.comm is None:
+            self.n_owned, first, self._local_global = len(X), 0, None
+        else:
+            if self.follows:
+                raise DrapeInputError("PlyContact(follow=True) runs on one rank (re-made "
+                                      "pairs would cross the partition); run without "
+                                      "mpirun or without follow")
+            self.n_owned = int(np.count_nonzero(owned))
+            first = self.comm.exscan(self.n_owned) or 0
+            self._counts = np.array(self.comm.allgather(3 * self.n_owned))
+        self.X = X if self.comm is None else self._gather(X)  # every node, global order
+        n = len(self.X)
+        self.owned_range = (first, first + self.n_owned)
         tree = cKDTree(self.X)
-        local = []  # each ply's nodes (grid order) → local node index
+        if self.comm is not None:  # the global index of each local node (ghosts by place)
+            dist, self._local_global = tree.query(X)
+            if (dist > 1e-6 * self.plies[0].grid.cell_mm).any():
+                raise DrapeInputError("PlyContact: the mesh is not the stack of these plies")
+        local = []  # each ply's nodes (grid order) → global node index
         for ply in self.plies:
             xyz = ply.grid.nodes.copy()
             xyz[:, 2] = ply.z_mm
@@ -239,15 +258,32 @@ class PlyContact:
         self.h = np.concatenate(h) if h else np.zeros(0)
         # The interface of each pair: 0 between plies 1 and 2, ...
         self.interface = np.concatenate(face) if face else np.zeros(0, int)
+        self.pair_id = np.arange(len(self.a))  # the pair's place in the whole stack's list
+        if self.comm is not None:  # the pairs that touch an owned node, in the stack's order
+            mine = ((self.J >= first) & (self.J < first + self.n_owned)).any(axis=1)
+            mine |= (self.a >= first) & (self.a < first + self.n_owned)
+            for name in ("a", "J", "w", "cell", "area", "h", "interface", "pair_id"):
+                setattr(self, name, getattr(self, name)[mine])
+        self.pairs_global = int(sum(len(i) for i in a))
         self.d0 = self.X[self.a] - np.einsum("pj,pji->pi", self.w, self.X[self.J])
         self.state = self.law.initial_state(len(self.a), 3)
         self._trial = None
         self._keys = np.zeros(0, dtype=np.int64)
+        self._n = n
         self.pattern_version = 0  # grows by one when the pattern grows (pairs followed)
         self._build_pattern()
         self._normals(self.X)
         self.pressure_MPa = np.zeros(len(self.a))
         self.slip_mm = np.zeros((len(self.a), 3))
+        if self.comm is not None:  # the last commit's pairs over all ranks (summary)
+            self._x_committed = self.X
+            self._gathered = self._gather_pairs()
+
+    def _gather(self, x: np.ndarray) -> np.ndarray:
+        """The owned rows of ``x`` (n, 3) of every rank, in global node order (collective)."""
+        out = np.empty((int(self._counts.sum()) // 3, 3))
+        self.comm.Allgatherv(np.ascontiguousarray(x[: self.n_owned]), [out, self._counts])
+        return out
 
     def _build_pattern(self) -> None:
         """The blocks the pairs couple, added to the pattern (which only grows).
@@ -255,18 +291,19 @@ class PlyContact:
         A pair couples its node and the partner's corners of nonzero weight with each other
         (for identical nets, at first only the node under it: less fill).
         """
-        n = len(self.X)
+        n, (first, end) = self._n, self.owned_range
         nodes = np.column_stack([self.a, self.J])  # (p, 5)
         live = np.column_stack([np.ones(len(self.a), bool), self.w > 1e-12])
-        self._live = live[:, :, None] & live[:, None, :]  # (p, 5, 5)
-        rows = np.broadcast_to(nodes[:, :, None], self._live.shape)[self._live]
+        rows_live = live & (nodes >= first) & (nodes < end)  # a rank fills its own rows
+        self._live = rows_live[:, :, None] & live[:, None, :]  # (p, 5, 5)
+        rows = np.broadcast_to(nodes[:, :, None] - first, self._live.shape)[self._live]
         cols = np.broadcast_to(nodes[:, None, :], self._live.shape)[self._live]
         keys = rows.astype(np.int64) * n + cols
         union = np.union1d(self._keys, keys)
         if len(union) != len(self._keys) or not self.pattern_version:
             self._keys = union
             r, c = np.divmod(union, n)
-            self.pattern = (np.searchsorted(r, np.arange(n + 1)).astype(np.int32),
+            self.pattern = (np.searchsorted(r, np.arange(end - first + 1)).astype(np.int32),
                             c.astype(np.int32))
             self.values = np.zeros((len(union), 3, 3))
             self.pattern_version += 1
@@ -314,11 +351,14 @@ class PlyContact:
 
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Forces (n, 3) in N; the stiffness goes to :attr:`values` (the diagonal is zero)."""
+        local = len(x)
+        x = x if self.comm is None else self._gather(x)
         nn = len(x)
         f = np.zeros((nn, 3))
         p_count = len(self.a)
         if not p_count:
-            return f, np.zeros((nn, 3, 3))
+            self.f = f if self.comm is None else f[self._local_global]
+            return self.f, np.zeros((local, 3, 3))
         n = self.n
         d = x[self.a] - np.einsum("pj,pji->pi", self.w, x[self.J])
         g = np.einsum("pi,pi->p", n, d) - self.h
@@ -351,19 +391,36 @@ class PlyContact:
         self.values = np.stack([np.bincount(self._slot, blocks[:, i, j], minlength=m)
                                 for i in range(3) for j in range(3)], axis=1).reshape(m, 3, 3)
         self._trial = (x.copy(), out.state, p, s)
-        self.f = f  # the forces of the last evaluation (N), also on constrained nodes
-        return f, np.zeros((nn, 3, 3))
+        # The forces of the last evaluation (N), also on constrained nodes; on the local
+        # nodes, whole on the owned ones (a ghost's may lack pairs other ranks hold).
+        self.f = f if self.comm is None else f[self._local_global]
+        return self.f, np.zeros((local, 3, 3))
 
     def commit(self) -> None:
         """Keep the pairs' slip; the normals follow the converged plies."""
-        if self._trial is None:
-            return
-        x, self.state, self.pressure_MPa, self.slip_mm = self._trial
-        self._trial = None
-        if self.follows and len(self.a):
-            self.follow(x)
-        if len(self.a):
-            self._normals(x)
+        if self._trial is not None:
+            x, self.state, self.pressure_MPa, self.slip_mm = self._trial
+            self._trial = None
+            if self.follows and len(self.a):
+                self.follow(x)
+            if len(self.a):
+                self._normals(x)
+            if self.comm is not None:
+                self._x_committed = x
+        if self.comm is not None:  # every rank commits (a rank may hold no pair)
+            self._gathered = self._gather_pairs()
+
+    def _gather_pairs(self) -> tuple:
+        """Interface, pressure, sliding and place (x, y) of every pair, from the rank owning
+        its node a, in the stack's order (collective)."""
+        first, end = self.owned_range
+        mine = (self.a >= first) & (self.a < end)
+        parts = self.comm.allgather((self.pair_id[mine], self.interface[mine],
+                                     self.pressure_MPa[mine], self.sliding_mm[mine],
+                                     self._x_committed[self.a[mine], :2]))
+        pid, *data = (np.concatenate(c) for c in zip(*parts))
+        order = np.argsort(pid)
+        return tuple(d[order] for d in data)
 
     def revert(self) -> None:
         """Forget the trial slip of a step that is cut back."""
@@ -375,10 +432,15 @@ class PlyContact:
         ``x`` are the converged positions (for the pairs' places, ``xy``).
         """
         out = []
-        sliding = np.linalg.norm(self.sliding_mm, axis=1)
+        if self.comm is None:
+            face, pressure, sliding, xy = (self.interface, self.pressure_MPa, self.sliding_mm,
+                                           x[self.a, :2])
+        else:  # every pair once, at the last commit (x, local, lacks other ranks' nodes)
+            face, pressure, sliding, xy = self._gathered
+        sliding = np.linalg.norm(sliding, axis=1)
         for k in range(len(self.plies) - 1):
-            on = self.interface == k
-            p, s = self.pressure_MPa[on], sliding[on]
+            on = face == k
+            p, s = pressure[on], sliding[on]
             pressed = p > 0
             out.append({"interface": f"ply{k + 1}/ply{k + 2}", "pairs": int(on.sum()),
                         "pressed_pairs": int(pressed.sum()),
@@ -387,7 +449,7 @@ class PlyContact:
                         "max_sliding_mm": float(s.max(initial=0.0)),
                         "mean_sliding_mm": float(s.mean()) if len(s) else 0.0,
                         "sliding_fraction": float((s > 1e-9).mean()) if len(s) else 0.0,
-                        "xy": x[self.a[on], :2], "sliding_mm": s, "pressure_MPa": p})
+                        "xy": xy[on], "sliding_mm": s, "pressure_MPa": p})
         return out
 
     @property
