@@ -18,9 +18,15 @@ from mpi4py import MPI
 import numpy as np
 
 from fenicsx_drape.cli import main
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.fe.grid import TrussGrid
+from fenicsx_drape.fe.plies import PlyContact, stack_plies, stack_sheet
+from fenicsx_drape.fe.solver import TrussProblem
 from fenicsx_drape.forming.case.format import load_case
 from fenicsx_drape.forming.running.outputs import case_summary, interply_maps
 from fenicsx_drape.forming.running.run import run_case
+from fenicsx_drape.materials.interply import InterplyLaw
+from fenicsx_drape.model import default_model
 
 CASE = Path(__file__).resolve().parents[1] / "meshes" / "hemisphere" / "stack_0_45.toml"
 COARSE = {"cell_mm": 30.0, "duration_s": 8.0}
@@ -80,3 +86,17 @@ def test_drape_form_writes_the_summary_of_one_rank(reference, tmp_path):
             assert ply[key] == pytest.approx(ref[key], abs=TOL), key
     for face, ref in zip(summary["interply"], expected["interply"], strict=True):
         assert face == pytest.approx(ref, abs=TOL)
+
+
+@pytest.mark.parallel
+def test_pairs_that_follow_the_plies_stay_on_one_rank():
+    """``follow=True`` re-makes pairs across the partition: refused on several ranks, by name."""
+    plies = stack_plies([TrussGrid(4, 2, 10.0, (0.0, 0.0), False)] * 2, [0.2, 0.2])
+    contact = PlyContact(plies, InterplyLaw(), 2000.0, follow=True)
+    sheet = stack_sheet(plies, MPI.COMM_WORLD)
+    if MPI.COMM_WORLD.size == 1:
+        TrussProblem(sheet, default_model(), [contact])
+        assert len(contact.a) == 15  # every node of ply 2 paired
+    else:
+        with pytest.raises(DrapeInputError, match=r"follow=True\) runs on one rank"):
+            TrussProblem(sheet, default_model(), [contact])

@@ -25,7 +25,15 @@ gap, so it is not symmetric). A pair keeps its partner point: the pairing holds 
 plies slide by less than a cell (the pull-out test, the first millimetres of forming); with
 ``follow`` the pairs are re-made after every step with the point now under each node.
 Bonded plies (the law without ``interply_friction``) are also held together across the gap
-(a two-sided normal penalty). One rank only: the pairs cross the partition.
+(a two-sided normal penalty).
+
+**MPI.** The pairs cross the mesh partition (the plies are apart in the mesh, so a partition
+may put a ply on each rank). They are made once over the whole stack, by global node index, on
+every rank alike; a rank keeps the pairs that touch a node it owns (a pair across two ranks is
+evaluated on both) and gathers every rank's owned positions at each evaluation, so its owned
+nodes get whole forces and it fills its own rows of the Jacobian (columns anywhere), with no
+force sent back. On one rank this is the plain path (no gathering). Following the plies
+(``follow``) stays on one rank: the re-made pairs would leave the ranks that hold their state.
 """
 
 from __future__ import annotations
@@ -177,8 +185,10 @@ class PlyContact:
 
     A coupling term of :class:`~fenicsx_drape.fe.solver.TrussProblem` (module docstring): like
     a nodal term it gives forces, and its stiffness couples nodes of two plies, given as
-    3 × 3 blocks (``values``) on the pattern ``pattern`` (CSR over the local nodes), which
-    grows (``pattern_version``) when the pairs follow the sliding plies.
+    3 × 3 blocks (``values``) on the pattern ``pattern`` (CSR over the owned nodes, columns
+    global node indices), which grows (``pattern_version``) when the pairs follow the plies.
+    Under MPI its pair arrays (``a``, ``J``, ``state``, ...) hold the rank's pairs, in global
+    node indices; :meth:`summary` gives every pair.
 
     Args:
         plies: The stack (:func:`stack_plies`), as meshed by :func:`stack_sheet`.
@@ -189,6 +199,7 @@ class PlyContact:
             (following, on the hemisphere's 30 mm net, let two frictionless plies at 0° form
             unalike, 26° and 34° of shear where each forms as one ply, 31°: a node sliding
             on the coarse facets of the ply below).
+            One rank only (a :class:`~fenicsx_drape.errors.DrapeInputError` on more).
     """
 
     def __init__(self, plies: list[Ply], law: InterplyLaw,
@@ -411,8 +422,10 @@ class PlyContact:
             self._gathered = self._gather_pairs()
 
     def _gather_pairs(self) -> tuple:
-        """Interface, pressure, sliding and place (x, y) of every pair, from the rank owning
-        its node a, in the stack's order (collective)."""
+        """Interface, pressure, sliding and place (x, y) of every pair (collective).
+
+        Each pair comes from the rank that owns its node a, in the stack's order.
+        """
         first, end = self.owned_range
         mine = (self.a >= first) & (self.a < end)
         parts = self.comm.allgather((self.pair_id[mine], self.interface[mine],
