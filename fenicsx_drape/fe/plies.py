@@ -100,7 +100,7 @@ def stack_sheet(plies: list[Ply], comm=None):
 
     comm = comm or MPI.COMM_WORLD
     data = stack_nodes(plies) if comm.rank == 0 else None
-    mesh, bar_tags, node_tags = _distribute(data, comm)
+    mesh, bar_tags, node_tags = _distribute(data, comm, columns=True)
     cell = plies[0].grid.cell_mm
     if any(abs(p.grid.cell_mm - cell) > 1e-9 * cell for p in plies):
         raise DrapeInputError("the plies of a stack need the same unit-cell size")
