@@ -76,8 +76,10 @@ def truss_mesh(nodes: np.ndarray, bars: np.ndarray, kinds: np.ndarray, cell_mm: 
 
 def _bisect(points: np.ndarray, cells: np.ndarray, first: int, parts: int,
             dest: np.ndarray) -> None:
-    """Ranks ``first`` … ``first + parts - 1`` to ``cells`` by recursive bisection of their
-    ``points`` (n, 2) along the longer side, equal counts."""
+    """Ranks ``first`` … ``first + parts - 1`` to ``cells`` (into ``dest``), equal counts.
+
+    Recursive bisection of the cells' ``points`` (n, 2) across the longer side.
+    """
     if parts == 1 or not len(cells):
         dest[cells] = first
         return
