@@ -20,7 +20,7 @@ import numpy as np
 from fenicsx_drape.cli import main
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.fe.grid import TrussGrid
-from fenicsx_drape.fe.plies import PlyContact, stack_plies, stack_sheet
+from fenicsx_drape.fe.plies import PlyContact, ply_of, stack_plies, stack_sheet
 from fenicsx_drape.fe.solver import TrussProblem
 from fenicsx_drape.forming.case.format import load_case
 from fenicsx_drape.forming.running.outputs import case_summary, interply_maps
@@ -100,3 +100,26 @@ def test_pairs_that_follow_the_plies_stay_on_one_rank():
     else:
         with pytest.raises(DrapeInputError, match=r"follow=True\) runs on one rank"):
             TrussProblem(sheet, default_model(), [contact])
+
+
+@pytest.mark.parallel
+def test_a_stack_is_split_by_columns():
+    """Each rank holds a column of the stack (every ply), so few pairs cross the ranks.
+
+    A graph partitioner gave a ply to a rank: on two ranks, 541 and 521 of the 541 pairs of
+    the hemisphere's 10 mm [0/90, ±45] stack. Bisecting the plane: 582 held in all on two
+    ranks (289 and 293), 613 on three (the pairs along the cuts are held twice).
+    """
+    comm = MPI.COMM_WORLD
+    case = load_case(CASE)
+    plies = stack_plies([b.grid() for b in case.ply_blanks()],
+                        [p.thickness_mm for p in case.plies])
+    contact = PlyContact(plies, InterplyLaw(), 2000.0)
+    problem = TrussProblem(stack_sheet(plies, comm), default_model(), [contact])
+    held = comm.allreduce(len(contact.a))
+    assert contact.pairs_global == 541
+    assert contact.pairs_global <= held <= 1.2 * contact.pairs_global
+    owned = np.bincount(ply_of(plies, problem.X[: problem.num_owned]), minlength=2)
+    every = np.array(comm.allgather(owned))  # (ranks, plies)
+    assert (every.sum(axis=0) == [625, 541]).all()
+    assert (every >= 0.8 * every.sum(axis=0) / comm.size).all()  # each rank its share of each
