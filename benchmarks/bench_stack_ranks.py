@@ -49,7 +49,9 @@ if comm.rank == 0:
           f"{case.blank.cell_mm:g} mm, {comm.size} rank(s), {nodes} nodes")
     print(f"{wall:.1f} s, {run.steps} steps, {run.cutbacks} cut-backs, {run.iterations} Newton, "
           f"{1e3 * wall / run.iterations:.1f} ms per iteration; slowest rank: "
-          + ", ".join(f"{k} {v:.1f} s" for k, v in parts.items()))
+          + ", ".join(f"{k} {v:.1f} s" for k, v in parts.items())
+          + f" (the factorisations and the rest of Newton: "
+          f"{parts['solve'] - sum(v for k, v in parts.items() if k != 'solve'):.1f} s)")
     print(f"max shear per ply {shear} deg; " + "; ".join(
         f"{f['interface']}: sliding up to {f['max_sliding_mm']:.6f} mm, pressure up to "
         f"{f['max_pressure_MPa']:.6f} MPa" for f in faces))
