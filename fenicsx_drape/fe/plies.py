@@ -27,9 +27,9 @@ plies slide by less than a cell (the pull-out test, the first millimetres of for
 Bonded plies (the law without ``interply_friction``) are also held together across the gap
 (a two-sided normal penalty).
 
-**MPI.** The pairs cross the mesh partition (the plies are apart in the mesh, so a partition
-may put a ply on each rank). They are made once over the whole stack, by global node index, on
-every rank alike; a rank keeps the pairs that touch a node it owns (a pair across two ranks is
+**MPI.** :func:`stack_sheet` gives each rank columns of the stack (every ply), so most pairs
+are local, but those along the cuts cross the partition. The pairs are made once over the
+whole stack, by global node index, on every rank alike; a rank keeps the pairs that touch a node it owns (a pair across two ranks is
 evaluated on both) and gathers every rank's owned positions at each evaluation, so its owned
 nodes get whole forces and it fills its own rows of the Jacobian (columns anywhere), with no
 force sent back. On one rank this is the plain path (no gathering). Following the plies
@@ -92,7 +92,8 @@ def stack_sheet(plies: list[Ply], comm=None):
     """The plies' nets in one DOLFINx mesh (a :class:`~fenicsx_drape.fe.mesh.Sheet`).
 
     The sheet has no single structured grid (``grid`` is None); its ``plies`` hold the
-    plies, and :func:`ply_of` tells a node's ply from its height.
+    plies, and :func:`ply_of` tells a node's ply from its height. On several ranks the bars
+    go to the ranks by their place in the plane (a column of the stack on one rank).
     """
     from mpi4py import MPI
 
