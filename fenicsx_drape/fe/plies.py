@@ -29,11 +29,12 @@ Bonded plies (the law without ``interply_friction``) are also held together acro
 
 **MPI.** :func:`stack_sheet` gives each rank columns of the stack (every ply), so most pairs
 are local, but those along the cuts cross the partition. The pairs are made once over the
-whole stack, by global node index, on every rank alike; a rank keeps the pairs that touch a node it owns (a pair across two ranks is
-evaluated on both) and gathers every rank's owned positions at each evaluation, so its owned
-nodes get whole forces and it fills its own rows of the Jacobian (columns anywhere), with no
-force sent back. On one rank this is the plain path (no gathering). Following the plies
-(``follow``) stays on one rank: the re-made pairs would leave the ranks that hold their state.
+whole stack, by global node index, on every rank alike; a rank keeps the pairs that touch a
+node it owns (a pair across two ranks is evaluated on both) and gathers every rank's owned
+positions at each evaluation, so its owned nodes get whole forces and it fills its own rows
+of the Jacobian (columns anywhere), with no force sent back. On one rank this is the plain
+path (no gathering). Following the plies (``follow``) stays on one rank: the re-made pairs
+would leave the ranks that hold their state.
 """
 
 from __future__ import annotations
