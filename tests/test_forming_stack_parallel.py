@@ -67,13 +67,25 @@ def test_a_stack_forms_alike_on_any_number_of_ranks(reference):
 
 @pytest.mark.parallel
 def test_drape_form_writes_the_summary_of_one_rank(reference, tmp_path):
-    """``drape form`` of the stack under mpirun: the summary.json of a run on one process."""
+    """``drape form`` of the stack under mpirun: the summary.json of a run on one process, and
+    the inter-ply pressure and sliding of its XDMF fields at every pair's node."""
+    h5py = pytest.importorskip("h5py")
     comm = MPI.COMM_WORLD
     out = Path(comm.bcast(str(tmp_path / "out"), root=0))
     assert main(["form", str(CASE), "--out", str(out), "--cell-mm", "30", "--duration-s", "8",
-                 "--no-fields", "--quiet"]) == 0
+                 "--quiet"]) == 0
     if comm.rank != 0:
         return
+    c = reference.interply
+    with h5py.File(out / "fields.h5") as fields:
+        X = fields["Mesh/mesh/geometry"][:]
+        node = {tuple(np.round(x, 6)): i for i, x in enumerate(X)}
+        at = [node[tuple(np.round(x, 6))] for x in c.X[c.a]]  # each pair's node a
+        for name, expected in (("interply_pressure_MPa", c.pressure_MPa),
+                               ("interply_sliding_mm", np.linalg.norm(c.sliding_mm, axis=1))):
+            steps = fields[f"Function/{name}"]
+            last = max(steps, key=lambda t: float(t.replace("_", ".")))
+            np.testing.assert_allclose(steps[last][:, 0][at], expected, rtol=0, atol=TOL)
     summary = json.loads((out / "summary.json").read_text())
     expected = case_summary(reference)
     assert summary["ranks"] == comm.size

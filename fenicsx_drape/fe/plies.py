@@ -423,13 +423,22 @@ class PlyContact:
         if self.comm is not None:  # every rank commits (a rank may hold no pair)
             self._gathered = self._gather_pairs()
 
+    def owned_pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs whose node a this rank owns: a's local node index, and the pairs' mask.
+
+        (Owned nodes come first in the local order, in the global order from the rank's
+        first node; on one rank every pair, a itself.)
+        """
+        first, end = self.owned_range
+        mine = (self.a >= first) & (self.a < end)
+        return self.a[mine] - first, mine
+
     def _gather_pairs(self) -> tuple:
         """Interface, pressure, sliding and place (x, y) of every pair (collective).
 
         Each pair comes from the rank that owns its node a, in the stack's order.
         """
-        first, end = self.owned_range
-        mine = (self.a >= first) & (self.a < end)
+        _, mine = self.owned_pairs()
         parts = self.comm.allgather((self.pair_id[mine], self.interface[mine],
                                      self.pressure_MPa[mine], self.sliding_mm[mine],
                                      self._x_committed[self.a[mine], :2]))
