@@ -18,7 +18,7 @@ from fenicsx_drape.forming.case.format import PlySpec, load_case
 from fenicsx_drape.forming.running.run import case_model, forming_options, run_case
 from fenicsx_drape.model import load_model
 
-pytestmark = pytest.mark.skip_in_parallel  # a stack runs on one rank
+pytestmark = pytest.mark.skip_in_parallel  # serial runs (on ranks: test_forming_stack_parallel)
 COARSE = {"cell_mm": 30.0, "duration_s": 8.0}
 
 

@@ -15,7 +15,7 @@ from fenicsx_drape.fe.solver import SolverOptions, TrussProblem
 from fenicsx_drape.materials.interply import InterplyLaw
 from fenicsx_drape.model import default_model
 
-pytestmark = pytest.mark.skip_in_parallel  # the pairs of a stack live on one rank
+pytestmark = pytest.mark.skip_in_parallel  # one process (on ranks: test_forming_stack_parallel)
 
 K_N = 2000.0  # N/mm, the gap penalty
 TAU0, MU, ETA = 0.005, 0.2, 0.004  # MPa, -, MPa·s/mm

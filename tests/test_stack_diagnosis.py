@@ -25,7 +25,7 @@ from fenicsx_drape.forming.case.format import PlySpec, case_for_test, load_case
 from fenicsx_drape.measurements.bundle import Bundle, BundleError, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
 
-pytestmark = pytest.mark.skip_in_parallel  # a stack runs on one rank
+pytestmark = pytest.mark.skip_in_parallel  # serial runs (on ranks: test_forming_stack_parallel)
 STACK = Path(__file__).parents[1] / "meshes" / "hemisphere" / "stack_0_45.toml"
 SLIDING = default_model().with_effects("interply_friction")
 BONDED = default_model()  # a model of the paper's effects: its plies move together

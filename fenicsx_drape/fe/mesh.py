@@ -74,8 +74,45 @@ def truss_mesh(nodes: np.ndarray, bars: np.ndarray, kinds: np.ndarray, cell_mm: 
     return Sheet(mesh, bar_tags, None, None, float(cell_mm))
 
 
-def _distribute(data, comm: MPI.Comm):
-    """Gmsh model of ``data = (nodes, bars, kinds, flags)`` on rank 0 → DOLFINx mesh, tags."""
+def _bisect(points: np.ndarray, cells: np.ndarray, first: int, parts: int,
+            dest: np.ndarray) -> None:
+    """Ranks ``first`` … ``first + parts - 1`` to ``cells`` (into ``dest``), equal counts.
+
+    Recursive bisection of the cells' ``points`` (n, 2) across the longer side.
+    """
+    if parts == 1 or not len(cells):
+        dest[cells] = first
+        return
+    left = parts // 2
+    axis = int(np.ptp(points[cells], axis=0).argmax())
+    order = cells[np.argsort(points[cells, axis], kind="stable")]
+    cut = len(order) * left // parts
+    _bisect(points, order[:cut], first, left, dest)
+    _bisect(points, order[cut:], first + left, parts - left, dest)
+
+
+def _column_partitioner(xy: np.ndarray):
+    """Bars to ranks by their place in the plane, whatever their height (a stack's plies).
+
+    A graph partitioner splits the plies of a stack, which no bar joins, a ply to a rank;
+    bisecting the bars' midpoints in (x, y) keeps each column of the stack on one rank, so
+    the inter-ply pairs (fe/plies.py) are local but along the cuts.
+    """
+
+    def partition(comm, parts, cell_types, cells):
+        bars = np.asarray(cells[0]).reshape(-1, 2)
+        dest = np.zeros(len(bars), dtype=np.int32)
+        _bisect(xy[bars].mean(axis=1), np.arange(len(bars)), 0, parts, dest)
+        return dolfinx.graph.adjacencylist(dest[:, None])._cpp_object
+
+    return partition
+
+
+def _distribute(data, comm: MPI.Comm, columns: bool = False):
+    """Gmsh model of ``data = (nodes, bars, kinds, flags)`` on rank 0 → DOLFINx mesh, tags.
+
+    ``columns``: partition by place in the plane (:func:`_column_partitioner`, a stack).
+    """
     import gmsh
 
     model = None
@@ -86,7 +123,11 @@ def _distribute(data, comm: MPI.Comm):
         gmsh.option.setNumber("General.Terminal", 0)
         model = gmsh_model(*data)
     try:
-        data = gmshio.model_to_mesh(model, comm, 0, gdim=3, partitioner=_partitioner(),
+        partitioner = _partitioner()
+        if columns and comm.size > 1:
+            xy = data[0][:, :2] if comm.rank == 0 else np.zeros((0, 2))
+            partitioner = _column_partitioner(xy)
+        data = gmshio.model_to_mesh(model, comm, 0, gdim=3, partitioner=partitioner,
                                     max_facet_to_cell_links=MAX_BARS_AT_NODE)
     finally:
         if comm.rank == 0:

@@ -275,9 +275,11 @@ class FieldWriter:
             pressure, sliding = self._nodal.values()
             pressure.x.array[:] = 0.0
             sliding.x.array[:] = 0.0
-            pressure.x.array[c.a] = c.pressure_MPa
-            sliding.x.array[c.a] = np.linalg.norm(c.sliding_mm, axis=1)
+            nodes, mine = c.owned_pairs()
+            pressure.x.array[nodes] = c.pressure_MPa[mine]
+            sliding.x.array[nodes] = np.linalg.norm(c.sliding_mm[mine], axis=1)
             for f in self._nodal.values():
+                f.x.scatter_forward()
                 self.file.write_function(f, p.t)
 
     def close(self) -> None:

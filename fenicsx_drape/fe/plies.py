@@ -25,7 +25,16 @@ gap, so it is not symmetric). A pair keeps its partner point: the pairing holds 
 plies slide by less than a cell (the pull-out test, the first millimetres of forming); with
 ``follow`` the pairs are re-made after every step with the point now under each node.
 Bonded plies (the law without ``interply_friction``) are also held together across the gap
-(a two-sided normal penalty). One rank only: the pairs cross the partition.
+(a two-sided normal penalty).
+
+**MPI.** :func:`stack_sheet` gives each rank columns of the stack (every ply), so most pairs
+are local, but those along the cuts cross the partition. The pairs are made once over the
+whole stack, by global node index, on every rank alike; a rank keeps the pairs that touch a
+node it owns (a pair across two ranks is evaluated on both) and gathers every rank's owned
+positions at each evaluation, so its owned nodes get whole forces and it fills its own rows
+of the Jacobian (columns anywhere), with no force sent back. On one rank this is the plain
+path (no gathering). Following the plies (``follow``) stays on one rank: the re-made pairs
+would leave the ranks that hold their state.
 """
 
 from __future__ import annotations
@@ -84,7 +93,8 @@ def stack_sheet(plies: list[Ply], comm=None):
     """The plies' nets in one DOLFINx mesh (a :class:`~fenicsx_drape.fe.mesh.Sheet`).
 
     The sheet has no single structured grid (``grid`` is None); its ``plies`` hold the
-    plies, and :func:`ply_of` tells a node's ply from its height.
+    plies, and :func:`ply_of` tells a node's ply from its height. On several ranks the bars
+    go to the ranks by their place in the plane (a column of the stack on one rank).
     """
     from mpi4py import MPI
 
@@ -92,7 +102,7 @@ def stack_sheet(plies: list[Ply], comm=None):
 
     comm = comm or MPI.COMM_WORLD
     data = stack_nodes(plies) if comm.rank == 0 else None
-    mesh, bar_tags, node_tags = _distribute(data, comm)
+    mesh, bar_tags, node_tags = _distribute(data, comm, columns=True)
     cell = plies[0].grid.cell_mm
     if any(abs(p.grid.cell_mm - cell) > 1e-9 * cell for p in plies):
         raise DrapeInputError("the plies of a stack need the same unit-cell size")
@@ -177,8 +187,10 @@ class PlyContact:
 
     A coupling term of :class:`~fenicsx_drape.fe.solver.TrussProblem` (module docstring): like
     a nodal term it gives forces, and its stiffness couples nodes of two plies, given as
-    3 × 3 blocks (``values``) on the pattern ``pattern`` (CSR over the local nodes), which
-    grows (``pattern_version``) when the pairs follow the sliding plies.
+    3 × 3 blocks (``values``) on the pattern ``pattern`` (CSR over the owned nodes, columns
+    global node indices), which grows (``pattern_version``) when the pairs follow the plies.
+    Under MPI its pair arrays (``a``, ``J``, ``state``, ...) hold the rank's pairs, in global
+    node indices; :meth:`summary` gives every pair.
 
     Args:
         plies: The stack (:func:`stack_plies`), as meshed by :func:`stack_sheet`.
@@ -189,6 +201,7 @@ class PlyContact:
             (following, on the hemisphere's 30 mm net, let two frictionless plies at 0° form
             unalike, 26° and 34° of shear where each forms as one ply, 31°: a node sliding
             on the coarse facets of the ply below).
+            One rank only (a :class:`~fenicsx_drape.errors.DrapeInputError` on more).
     """
 
     def __init__(self, plies: list[Ply], law: InterplyLaw,
@@ -202,15 +215,34 @@ class PlyContact:
         self.follows = bool(follow)
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
-        """Pair every node of ply k + 1 with its partner point on ply k (reference stack)."""
+        """Pair every node of ply k + 1 with its partner point on ply k (reference stack).
+
+        Pairs are made over the whole stack, by global node index (the same on every rank);
+        a rank keeps the pairs that touch a node it owns (module docstring, MPI).
+        """
         from scipy.spatial import cKDTree
 
-        if comm is not None and comm.size > 1:
-            raise DrapeInputError("a stack of plies runs on one rank (its inter-ply pairs "
-                                  "cross the partition)")
-        self.X = np.asarray(X, dtype=float)
+        self.comm = comm if comm is not None and comm.size > 1 else None
+        X = np.asarray(X, dtype=float)
+        if self.comm is None:
+            self.n_owned, first, self._local_global = len(X), 0, None
+        else:
+            if self.follows:
+                raise DrapeInputError("PlyContact(follow=True) runs on one rank (re-made "
+                                      "pairs would cross the partition); run without "
+                                      "mpirun or without follow")
+            self.n_owned = int(np.count_nonzero(owned))
+            first = self.comm.exscan(self.n_owned) or 0
+            self._counts = np.array(self.comm.allgather(3 * self.n_owned))
+        self.X = X if self.comm is None else self._gather(X)  # every node, global order
+        n = len(self.X)
+        self.owned_range = (first, first + self.n_owned)
         tree = cKDTree(self.X)
-        local = []  # each ply's nodes (grid order) → local node index
+        if self.comm is not None:  # the global index of each local node (ghosts by place)
+            dist, self._local_global = tree.query(X)
+            if (dist > 1e-6 * self.plies[0].grid.cell_mm).any():
+                raise DrapeInputError("PlyContact: the mesh is not the stack of these plies")
+        local = []  # each ply's nodes (grid order) → global node index
         for ply in self.plies:
             xyz = ply.grid.nodes.copy()
             xyz[:, 2] = ply.z_mm
@@ -239,15 +271,32 @@ class PlyContact:
         self.h = np.concatenate(h) if h else np.zeros(0)
         # The interface of each pair: 0 between plies 1 and 2, ...
         self.interface = np.concatenate(face) if face else np.zeros(0, int)
+        self.pair_id = np.arange(len(self.a))  # the pair's place in the whole stack's list
+        if self.comm is not None:  # the pairs that touch an owned node, in the stack's order
+            mine = ((self.J >= first) & (self.J < first + self.n_owned)).any(axis=1)
+            mine |= (self.a >= first) & (self.a < first + self.n_owned)
+            for name in ("a", "J", "w", "cell", "area", "h", "interface", "pair_id"):
+                setattr(self, name, getattr(self, name)[mine])
+        self.pairs_global = int(sum(len(i) for i in a))
         self.d0 = self.X[self.a] - np.einsum("pj,pji->pi", self.w, self.X[self.J])
         self.state = self.law.initial_state(len(self.a), 3)
         self._trial = None
         self._keys = np.zeros(0, dtype=np.int64)
+        self._n = n
         self.pattern_version = 0  # grows by one when the pattern grows (pairs followed)
         self._build_pattern()
         self._normals(self.X)
         self.pressure_MPa = np.zeros(len(self.a))
         self.slip_mm = np.zeros((len(self.a), 3))
+        if self.comm is not None:  # the last commit's pairs over all ranks (summary)
+            self._x_committed = self.X
+            self._gathered = self._gather_pairs()
+
+    def _gather(self, x: np.ndarray) -> np.ndarray:
+        """The owned rows of ``x`` (n, 3) of every rank, in global node order (collective)."""
+        out = np.empty((int(self._counts.sum()) // 3, 3))
+        self.comm.Allgatherv(np.ascontiguousarray(x[: self.n_owned]), [out, self._counts])
+        return out
 
     def _build_pattern(self) -> None:
         """The blocks the pairs couple, added to the pattern (which only grows).
@@ -255,18 +304,19 @@ class PlyContact:
         A pair couples its node and the partner's corners of nonzero weight with each other
         (for identical nets, at first only the node under it: less fill).
         """
-        n = len(self.X)
+        n, (first, end) = self._n, self.owned_range
         nodes = np.column_stack([self.a, self.J])  # (p, 5)
         live = np.column_stack([np.ones(len(self.a), bool), self.w > 1e-12])
-        self._live = live[:, :, None] & live[:, None, :]  # (p, 5, 5)
-        rows = np.broadcast_to(nodes[:, :, None], self._live.shape)[self._live]
+        rows_live = live & (nodes >= first) & (nodes < end)  # a rank fills its own rows
+        self._live = rows_live[:, :, None] & live[:, None, :]  # (p, 5, 5)
+        rows = np.broadcast_to(nodes[:, :, None] - first, self._live.shape)[self._live]
         cols = np.broadcast_to(nodes[:, None, :], self._live.shape)[self._live]
         keys = rows.astype(np.int64) * n + cols
         union = np.union1d(self._keys, keys)
         if len(union) != len(self._keys) or not self.pattern_version:
             self._keys = union
             r, c = np.divmod(union, n)
-            self.pattern = (np.searchsorted(r, np.arange(n + 1)).astype(np.int32),
+            self.pattern = (np.searchsorted(r, np.arange(end - first + 1)).astype(np.int32),
                             c.astype(np.int32))
             self.pattern_version += 1
         # Each live block (pair, node i, node j) and the slot of the pattern it adds to, as a
@@ -321,11 +371,14 @@ class PlyContact:
 
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Forces (n, 3) in N; the stiffness goes to :attr:`values` (the diagonal is zero)."""
+        local = len(x)
+        x = x if self.comm is None else self._gather(x)
         nn = len(x)
         f = np.zeros((nn, 3))
         p_count = len(self.a)
         if not p_count:
-            return f, np.zeros((nn, 3, 3))
+            self.f = f if self.comm is None else f[self._local_global]
+            return self.f, np.zeros((local, 3, 3))
         n = self.n
         d = x[self.a] - np.einsum("pj,pji->pi", self.w, x[self.J])
         g = np.einsum("pi,pi->p", n, d) - self.h
@@ -355,8 +408,10 @@ class PlyContact:
             f[:, i] = np.bincount(nodes, forces[:, i], minlength=nn)
         self._c, self._G = c, G  # the blocks are made when the Jacobian asks (values)
         self._trial = (x.copy(), out.state, p, s)
-        self.f = f  # the forces of the last evaluation (N), also on constrained nodes
-        return f, np.zeros((nn, 3, 3))
+        # The forces of the last evaluation (N), also on constrained nodes; on the local
+        # nodes, whole on the owned ones (a ghost's may lack pairs other ranks hold).
+        self.f = f if self.comm is None else f[self._local_global]
+        return self.f, np.zeros((local, 3, 3))
 
     @property
     def values(self) -> np.ndarray:
@@ -369,14 +424,40 @@ class PlyContact:
 
     def commit(self) -> None:
         """Keep the pairs' slip; the normals follow the converged plies."""
-        if self._trial is None:
-            return
-        x, self.state, self.pressure_MPa, self.slip_mm = self._trial
-        self._trial = None
-        if self.follows and len(self.a):
-            self.follow(x)
-        if len(self.a):
-            self._normals(x)
+        if self._trial is not None:
+            x, self.state, self.pressure_MPa, self.slip_mm = self._trial
+            self._trial = None
+            if self.follows and len(self.a):
+                self.follow(x)
+            if len(self.a):
+                self._normals(x)
+            if self.comm is not None:
+                self._x_committed = x
+        if self.comm is not None:  # every rank commits (a rank may hold no pair)
+            self._gathered = self._gather_pairs()
+
+    def owned_pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs whose node a this rank owns: a's local node index, and the pairs' mask.
+
+        (Owned nodes come first in the local order, in the global order from the rank's
+        first node; on one rank every pair, a itself.)
+        """
+        first, end = self.owned_range
+        mine = (self.a >= first) & (self.a < end)
+        return self.a[mine] - first, mine
+
+    def _gather_pairs(self) -> tuple:
+        """Interface, pressure, sliding and place (x, y) of every pair (collective).
+
+        Each pair comes from the rank that owns its node a, in the stack's order.
+        """
+        _, mine = self.owned_pairs()
+        parts = self.comm.allgather((self.pair_id[mine], self.interface[mine],
+                                     self.pressure_MPa[mine], self.sliding_mm[mine],
+                                     self._x_committed[self.a[mine], :2]))
+        pid, *data = (np.concatenate(c) for c in zip(*parts))
+        order = np.argsort(pid)
+        return tuple(d[order] for d in data)
 
     def revert(self) -> None:
         """Forget the trial slip of a step that is cut back."""
@@ -388,10 +469,15 @@ class PlyContact:
         ``x`` are the converged positions (for the pairs' places, ``xy``).
         """
         out = []
-        sliding = np.linalg.norm(self.sliding_mm, axis=1)
+        if self.comm is None:
+            face, pressure, sliding, xy = (self.interface, self.pressure_MPa, self.sliding_mm,
+                                           x[self.a, :2])
+        else:  # every pair once, at the last commit (x, local, lacks other ranks' nodes)
+            face, pressure, sliding, xy = self._gathered
+        sliding = np.linalg.norm(sliding, axis=1)
         for k in range(len(self.plies) - 1):
-            on = self.interface == k
-            p, s = self.pressure_MPa[on], sliding[on]
+            on = face == k
+            p, s = pressure[on], sliding[on]
             pressed = p > 0
             out.append({"interface": f"ply{k + 1}/ply{k + 2}", "pairs": int(on.sum()),
                         "pressed_pairs": int(pressed.sum()),
@@ -400,7 +486,7 @@ class PlyContact:
                         "max_sliding_mm": float(s.max(initial=0.0)),
                         "mean_sliding_mm": float(s.mean()) if len(s) else 0.0,
                         "sliding_fraction": float((s > 1e-9).mean()) if len(s) else 0.0,
-                        "xy": x[self.a[on], :2], "sliding_mm": s, "pressure_MPa": p})
+                        "xy": xy[on], "sliding_mm": s, "pressure_MPa": p})
         return out
 
     @property

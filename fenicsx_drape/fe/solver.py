@@ -21,8 +21,9 @@ Two choices make the Newton iteration of forming robust without changing its sol
   (contact keeps pressed nodes on their gap, :mod:`~fenicsx_drape.forming.terms.contact`).
 
 A nodal term with a ``pattern`` (the ply contact of a stack, :mod:`~fenicsx_drape.fe.plies`)
-couples nodes: its 3 × 3 blocks (``values``) go to the Jacobian on that pattern, added to the
-matrix's once.
+couples nodes: its 3 × 3 blocks (``values``) go to the Jacobian on that pattern (rows the owned
+nodes, columns global node indices, so partners on other ranks too), added to the matrix's
+once.
 
 Nodes are the blocks of the vector P1 space in its local order (owned nodes first, then
 ghosts); that is the order of every nodal array this module hands out or takes.
@@ -385,15 +386,21 @@ class TrussProblem:
             self.monitor(self, iterate)
 
     def _setup_couplings(self) -> None:
-        """Add the coupling terms' patterns to the Jacobian's, once (zeros kept as entries)."""
+        """Add the coupling terms' patterns to the Jacobian's, once (zeros kept as entries).
+
+        A coupling's ``pattern`` is CSR over the owned nodes, its columns global node
+        indices (partners may live on any rank).
+        """
+        first = self.V.dofmap.index_map.local_range[0]
+        self._owned_global = np.arange(first, first + self.num_owned, dtype=PETSc.IntType)
         A = self._A
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         fem_petsc.assemble_matrix(A, self.jacobian_form)
         A.assemble()
         for term in self._couplings:
             indptr, indices = term.pattern
-            A.setValuesBlockedLocalCSR(indptr, indices, np.zeros((len(indices), 3, 3)),
-                                       PETSc.InsertMode.ADD_VALUES)
+            A.setValuesBlockedIJV(indptr, indices, np.zeros((len(indices), 3, 3)),
+                                  PETSc.InsertMode.ADD_VALUES, rowmap=self._owned_global)
         A.assemble()
         A.zeroEntries()
         self._coupling_versions = [t.pattern_version for t in self._couplings]
@@ -401,12 +408,14 @@ class TrussProblem:
 
     def _add_couplings(self, A: PETSc.Mat) -> None:
         """Add the coupling terms' blocks, without the rows and columns of constrained dofs."""
-        free = ~self.constrained
+        free = ~self.constrained[: self.num_owned]
+        free_all = free if self.comm.size == 1 else np.concatenate(self.comm.allgather(free))
         for term in self._couplings:
             indptr, indices = term.pattern
             rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-            values = term.values * (free[rows][:, :, None] & free[indices][:, None, :])
-            A.setValuesBlockedLocalCSR(indptr, indices, values, PETSc.InsertMode.ADD_VALUES)
+            values = term.values * (free[rows][:, :, None] & free_all[indices][:, None, :])
+            A.setValuesBlockedIJV(indptr, indices, values, PETSc.InsertMode.ADD_VALUES,
+                                  rowmap=self._owned_global)
 
     def _setup_bending(self) -> None:
         """The tow bending term, and a Jacobian whose pattern also holds its stencils.

@@ -1,0 +1,137 @@
+"""A stack of plies formed on several ranks: the same part as on one.
+
+The [0/90, ±45] stack on the paper's hemisphere (``meshes/hemisphere/stack_0_45.toml``, the
+whole blank) at Δ = 30 mm in 8 s, formed on ``COMM_WORLD`` and, as the reference, on
+``COMM_SELF`` in the same test. The inter-ply pairs cross the partition (each rank evaluates
+the pairs touching its nodes, fe/plies.py), so only round-off may differ: measured 4e-14 mm on
+the nodes on 2 and 3 ranks; the tolerance, 1e-8, is far below anything a part shows.
+"""
+
+import json
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("dolfinx")
+from mpi4py import MPI
+
+import numpy as np
+
+from fenicsx_drape.cli import main
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.fe.grid import TrussGrid
+from fenicsx_drape.fe.plies import PlyContact, ply_of, stack_plies, stack_sheet
+from fenicsx_drape.fe.solver import TrussProblem
+from fenicsx_drape.forming.case.format import load_case
+from fenicsx_drape.forming.running.outputs import case_summary, interply_maps
+from fenicsx_drape.forming.running.run import run_case
+from fenicsx_drape.materials.interply import InterplyLaw
+from fenicsx_drape.model import default_model
+
+CASE = Path(__file__).resolve().parents[1] / "meshes" / "hemisphere" / "stack_0_45.toml"
+COARSE = {"cell_mm": 30.0, "duration_s": 8.0}
+TOL = 1e-8  # mm, degrees, MPa
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """The stack formed on one process (every rank forms it)."""
+    return run_case(load_case(CASE, **COARSE), comm=MPI.COMM_SELF)
+
+
+def _numbers(faces):
+    return [{k: v for k, v in face.items() if k not in ("xy", "sliding_mm", "pressure_MPa")}
+            for face in faces]
+
+
+@pytest.mark.parallel
+def test_a_stack_forms_alike_on_any_number_of_ranks(reference):
+    run = run_case(load_case(CASE, **COARSE), comm=MPI.COMM_WORLD)
+    assert run.stopped is None and reference.stopped is None
+    assert [s.iterations for s in run.problem.steps] == [
+        s.iterations for s in reference.problem.steps]
+    assert len(run.plies) == len(reference.plies) == 2
+    for ply, ref in zip(run.plies, reference.plies):
+        np.testing.assert_allclose(ply.x, ref.x, rtol=0, atol=TOL)  # every node (mm)
+        assert np.nanmax(np.abs(ply.shear_deg())) == pytest.approx(
+            np.nanmax(np.abs(ref.shear_deg())), abs=TOL)
+    faces, ref_faces = interply_maps(run), interply_maps(reference)
+    assert ref_faces[0]["max_sliding_mm"] > 1.0  # the plies slid: the pairs mattered
+    assert ref_faces[0]["max_pressure_MPa"] > 0.0
+    for face, ref in zip(faces, ref_faces):
+        for key in ("xy", "sliding_mm", "pressure_MPa"):  # every pair, in the same order
+            np.testing.assert_allclose(face[key], ref[key], rtol=0, atol=TOL)
+        for key, value in _numbers([ref])[0].items():
+            assert face[key] == pytest.approx(value, abs=TOL), key
+
+
+@pytest.mark.parallel
+def test_drape_form_writes_the_summary_of_one_rank(reference, tmp_path):
+    """``drape form`` of the stack under mpirun: the summary.json of a run on one process, and
+    the inter-ply pressure and sliding of its XDMF fields at every pair's node."""
+    h5py = pytest.importorskip("h5py")
+    comm = MPI.COMM_WORLD
+    out = Path(comm.bcast(str(tmp_path / "out"), root=0))
+    assert main(["form", str(CASE), "--out", str(out), "--cell-mm", "30", "--duration-s", "8",
+                 "--quiet"]) == 0
+    if comm.rank != 0:
+        return
+    c = reference.interply
+    with h5py.File(out / "fields.h5") as fields:
+        X = fields["Mesh/mesh/geometry"][:]
+        node = {tuple(np.round(x, 6)): i for i, x in enumerate(X)}
+        at = [node[tuple(np.round(x, 6))] for x in c.X[c.a]]  # each pair's node a
+        for name, expected in (("interply_pressure_MPa", c.pressure_MPa),
+                               ("interply_sliding_mm", np.linalg.norm(c.sliding_mm, axis=1))):
+            steps = fields[f"Function/{name}"]
+            last = max(steps, key=lambda t: float(t.replace("_", ".")))
+            np.testing.assert_allclose(steps[last][:, 0][at], expected, rtol=0, atol=TOL)
+    summary = json.loads((out / "summary.json").read_text())
+    expected = case_summary(reference)
+    assert summary["ranks"] == comm.size
+    for key in ("nodes", "steps", "snes_iterations", "cutbacks"):
+        assert summary[key] == expected[key], key
+    for key in ("max_shear_deg", "total_wrinkling_strain", "travel_mm"):
+        assert summary[key] == pytest.approx(expected[key], abs=TOL), key
+    for ply, ref in zip(summary["plies"], expected["plies"], strict=True):
+        for key in ("max_shear_deg", "total_wrinkling_strain", "min_wrinkling_strain"):
+            assert ply[key] == pytest.approx(ref[key], abs=TOL), key
+    for face, ref in zip(summary["interply"], expected["interply"], strict=True):
+        assert face == pytest.approx(ref, abs=TOL)
+
+
+@pytest.mark.parallel
+def test_pairs_that_follow_the_plies_stay_on_one_rank():
+    """``follow=True`` re-makes pairs across the partition: refused on several ranks, by name."""
+    plies = stack_plies([TrussGrid(4, 2, 10.0, (0.0, 0.0), False)] * 2, [0.2, 0.2])
+    contact = PlyContact(plies, InterplyLaw(), 2000.0, follow=True)
+    sheet = stack_sheet(plies, MPI.COMM_WORLD)
+    if MPI.COMM_WORLD.size == 1:
+        TrussProblem(sheet, default_model(), [contact])
+        assert len(contact.a) == 15  # every node of ply 2 paired
+    else:
+        with pytest.raises(DrapeInputError, match=r"follow=True\) runs on one rank"):
+            TrussProblem(sheet, default_model(), [contact])
+
+
+@pytest.mark.parallel
+def test_a_stack_is_split_by_columns():
+    """Each rank holds a column of the stack (every ply), so few pairs cross the ranks.
+
+    A graph partitioner gave a ply to a rank: on two ranks, 541 and 521 of the 541 pairs of
+    the hemisphere's 10 mm [0/90, ±45] stack. Bisecting the plane: 582 held in all on two
+    ranks (289 and 293), 613 on three (the pairs along the cuts are held twice).
+    """
+    comm = MPI.COMM_WORLD
+    case = load_case(CASE)
+    plies = stack_plies([b.grid() for b in case.ply_blanks()],
+                        [p.thickness_mm for p in case.plies])
+    contact = PlyContact(plies, InterplyLaw(), 2000.0)
+    problem = TrussProblem(stack_sheet(plies, comm), default_model(), [contact])
+    held = comm.allreduce(len(contact.a))
+    assert contact.pairs_global == 541
+    assert contact.pairs_global <= held <= 1.2 * contact.pairs_global
+    owned = np.bincount(ply_of(plies, problem.X[: problem.num_owned]), minlength=2)
+    every = np.array(comm.allgather(owned))  # (ranks, plies)
+    assert (every.sum(axis=0) == [625, 541]).all()
+    assert (every >= 0.8 * every.sum(axis=0) / comm.size).all()  # each rank its share of each
