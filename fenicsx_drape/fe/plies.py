@@ -325,8 +325,8 @@ class PlyContact:
 
         self._live_at = np.nonzero(self._live)
         slot = np.searchsorted(self._keys, keys)
-        self._gather = csr_matrix((np.ones(len(slot)), (slot, np.arange(len(slot)))),
-                                  shape=(len(self._keys), len(slot)))
+        self._to_slots = csr_matrix((np.ones(len(slot)), (slot, np.arange(len(slot)))),
+                                    shape=(len(self._keys), len(slot)))
         self._c, self._G = np.zeros((len(self.a), 5)), np.zeros((len(self.a), 3, 3))
 
     def follow(self, x: np.ndarray) -> None:
@@ -420,7 +420,7 @@ class PlyContact:
         if not len(p):
             return np.zeros((len(self._keys), 3, 3))
         blocks = (self._c[p, i] * self._c[p, j])[:, None] * self._G[p].reshape(-1, 9)
-        return (self._gather @ blocks).reshape(-1, 3, 3)
+        return (self._to_slots @ blocks).reshape(-1, 3, 3)
 
     def commit(self) -> None:
         """Keep the pairs' slip; the normals follow the converged plies."""
