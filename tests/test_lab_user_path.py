@@ -102,7 +102,7 @@ def test_each_kind_alone_from_the_model_that_formed_it_names_nothing(tmp_path, k
     """Every kind alone through the default path (set-up stage, every candidate): null.
 
     In ``make test`` the truth is formed on the bundle's own case (closed-form tools, its 20 mm
-    cells and 2 mm steps), so the residual is the noise: 10 to 80 s a kind. The lab's copy (STL
+    cells and 2 mm steps), so the residual is the noise: 25 to 60 s a kind. The lab's copy (STL
     tools, the truth on 10 mm cells and 1 mm steps), where the net's error and the resolution
     stage come in, is the README's command above on all kinds together, and each kind alone
     under ``make bench`` (``lab_copy``: 1 to 5 min a kind on a loaded two-core machine).
