@@ -13,8 +13,17 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.slow
+@pytest.mark.bench  # make bench: three coupon diagnoses of every candidate, minutes
 @pytest.mark.skip_in_parallel
 def test_demo_diagnosis(tmp_path):
+    """The walkthrough as a script: compare, diagnose, add, compare again, history.
+
+    Marked ``bench``: its steps stay in the suite on lighter bundles, each on its own:
+    a hidden catalogued effect named (``test_diagnose_hidden.py``, decrimping among them),
+    the same shear-thinning user law null without its plugin and named with it
+    (``test_diagnose_unknown.py``), the command's report and pictures
+    (``test_diagnose.py``), the history of versions (``test_history.py``).
+    """
     out = tmp_path / "demo"
     env = os.environ | {"MPLBACKEND": "Agg",
                         "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH",

@@ -6,7 +6,8 @@ The test asserts that the baseline's error is well above the noise floor (normal
 above the 1.5 at which a model counts as adequate),
 that ``diagnose`` names exactly the hidden effect, and that with it added the refit is within
 1.5 times the noise floor. The cases vary the material (three parameter sets) and the noise
-seed; one case per effect runs in the normal suite, the others are marked ``slow``.
+seed; one case per effect runs in ``make test``, the other material and seed of each effect
+is marked ``bench`` (``make bench``): the same path on other numbers, 20 to 40 s each.
 """
 
 import pytest
@@ -37,7 +38,7 @@ def coupon_tests(*, temperatures=None):
 
 
 CASES = [
-    # (hidden effect, material, seed, slow)
+    # (hidden effect, material, seed, bench)
     ("rate_dependence", "soft", 3, False),
     ("rate_dependence", "stiff", 4, True),
     ("strain_dependent_viscosity", "stiff", 5, False),
@@ -51,8 +52,8 @@ CASES = [
 
 @pytest.mark.parametrize(
     ("effect", "material", "seed"),
-    [pytest.param(e, m, s, marks=[pytest.mark.slow] if slow else [], id=f"{e}-{m}-{s}")
-     for e, m, s, slow in CASES])
+    [pytest.param(e, m, s, marks=[pytest.mark.bench] if bench else [], id=f"{e}-{m}-{s}")
+     for e, m, s, bench in CASES])
 @pytest.mark.slow
 def test_diagnose_names_the_hidden_effect(effect, material, seed):
     parameters = default_parameters() | MATERIALS[material]
