@@ -13,7 +13,8 @@
 # **Not run on this site**: it takes about 2 minutes on two cores, so this page shows the
 # code without its output and two of its pictures from a run (at the end);
 # `./drape exec python3 demos/demo_diagnosis.py OUT` writes them all
-# (`tests/test_demos_diagnosis.py` runs it).
+# (`tests/test_demos_diagnosis.py` runs it under `make bench`; its steps are tested alone in
+# `make test`).
 #
 # A model of a woven prepreg is only as good as the physics it includes. This walkthrough
 # follows a user who calibrates the truss model of Skordos, Monroy Aceves & Sutcliffe on
