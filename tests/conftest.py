@@ -40,6 +40,11 @@ def pytest_configure(config):
     Make Hypothesis draw the same examples on every rank, and share no database file.
     """
     os.environ["DRAPE_CACHE"] = "off"  # the commands' default cache is the user's, not tests'
+    # Under pytest-xdist every core already runs a test: a pool of forming workers per test
+    # would put two processes on each core (measured 16 % slower on the lab diagnosis tests).
+    # The pools themselves are tested with their workers named (test_forming_runs_scale.py).
+    if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+        os.environ.setdefault("DRAPE_WORKERS", "1")
     if COMM_SIZE == 1:
         return
     try:
