@@ -24,8 +24,23 @@ except ImportError:  # a host without MPI: one process
 COMM_SIZE = MPI.COMM_WORLD.size if MPI is not None else 1
 
 
+# The longest tests, started first: pytest-xdist hands out the tests in this order and a
+# free worker steals from the end of another's queue, so the suite does not end waiting on one.
+FIRST = ("tests/test_lab_user_path.py::test_the_readme_lab_command",
+         "tests/test_lab_user_path.py::test_shear_read_off_a_finer_net",
+         "tests/test_demo_laminates.py::")
+
+
 def pytest_collection_modifyitems(config, items):
-    """Skip the tests marked ``skip_in_parallel`` when running on more than one process."""
+    """Start the longest tests first (:data:`FIRST`, then the ones marked ``slow``); skip the
+    tests marked ``skip_in_parallel`` when running on more than one process."""
+    def rank(item) -> int:
+        first = [k for k, prefix in enumerate(FIRST) if item.nodeid.startswith(prefix)]
+        if first:
+            return first[0]
+        return len(FIRST) + ("slow" not in item.keywords)
+
+    items.sort(key=rank)  # stable: file order within each rank
     if COMM_SIZE == 1:
         return
     skip = pytest.mark.skip(reason=f"runs on one process only (here {COMM_SIZE})")
