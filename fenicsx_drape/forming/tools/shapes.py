@@ -23,6 +23,7 @@ in :mod:`fenicsx_drape.forming.terms.holder`.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -30,6 +31,7 @@ import numpy as np
 from fenicsx_drape.errors import ParameterError
 
 _TINY = 1e-12
+_EYE_XY = np.eye(3) - np.outer([0.0, 0.0, 1.0], [0.0, 0.0, 1.0])  # I − e_z⊗e_z
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,6 +56,14 @@ class Arc:
         """The profile point at ``angle`` (rad)."""
         return np.asarray(self.centre) + self.radius * np.array([math.cos(angle), math.sin(angle)])
 
+    @functools.cached_property
+    def _ends(self):
+        """Centre, end points and their outward normals, made once (the search is hot)."""
+        sign = 1.0 if self.material_inside else -1.0
+        c = np.asarray(self.centre)
+        a, b = self.point(self.start), self.point(self.end)
+        return c, sign, a, b, (sign / self.radius) * (a - c), (sign / self.radius) * (b - c)
+
     def closest(self, p: np.ndarray):
         """Distance, signed distance, outward normal and curvature for points ``p`` (n, 2).
 
@@ -62,10 +72,9 @@ class Arc:
         (n,) in 1/mm: the Hessian of φ in the meridian plane is ``c t⊗t`` with ``t`` the
         tangent.
         """
-        c = np.asarray(self.centre)
+        c, sign, a, b, n_a, n_b = self._ends
         d = p - c
         ρ = np.maximum(np.hypot(d[:, 0], d[:, 1]), _TINY)
-        sign = 1.0 if self.material_inside else -1.0
         n = (sign / ρ)[:, None] * d
         φ = sign * (ρ - self.radius)
         δ = np.mod(np.arctan2(d[:, 1], d[:, 0]) - self.start + math.pi, 2 * math.pi) - math.pi
@@ -75,13 +84,12 @@ class Arc:
         if inside.all():
             return np.abs(φ), φ, n, curv
         # Beyond the ends: the distance to the nearer end point, with the normal there.
-        a, b = self.point(self.start), self.point(self.end)
-        da, db = np.hypot(*(p - a).T), np.hypot(*(p - b).T)
-        use_a = da <= db
-        end = np.where(use_a[:, None], a, b)
-        n_end = (sign / self.radius) * (end - c)
-        d_end = np.where(use_a, da, db)
-        φ_end = np.copysign(d_end, np.einsum("ij,ij->i", p - end, n_end))
+        pa, pb = p - a, p - b
+        da, db = np.hypot(pa[:, 0], pa[:, 1]), np.hypot(pb[:, 0], pb[:, 1])
+        use_a = (da <= db)[:, None]
+        n_end = np.where(use_a, n_a, n_b)
+        d_end = np.minimum(da, db)
+        φ_end = np.copysign(d_end, np.einsum("ij,ij->i", np.where(use_a, pa, pb), n_end))
         out = ~inside
         n[out] = n_end[out]
         return np.where(inside, np.abs(φ), d_end), np.where(inside, φ, φ_end), n, curv
@@ -94,19 +102,62 @@ class Segment:
     a: tuple[float, float]
     b: tuple[float, float]
 
-    def closest(self, p: np.ndarray):
-        """See :meth:`Arc.closest`; a segment has no curvature."""
+    @functools.cached_property
+    def _frame(self):
+        """Start, direction, its squared length and the outward normal, made once."""
         a, b = np.asarray(self.a), np.asarray(self.b)
         τ = b - a
-        n = np.array([-τ[1], τ[0]]) / np.linalg.norm(τ)
-        s = np.clip((p - a) @ τ / (τ @ τ), 0.0, 1.0)
-        e = p - a - s[:, None] * τ
+        return a, τ, τ @ τ, np.array([-τ[1], τ[0]]) / np.linalg.norm(τ)
+
+    def closest(self, p: np.ndarray):
+        """See :meth:`Arc.closest`; a segment has no curvature."""
+        a, τ, ττ, n = self._frame
+        pa = p - a
+        s = np.clip(pa @ τ / ττ, 0.0, 1.0)
+        e = pa - s[:, None] * τ
         d = np.hypot(e[:, 0], e[:, 1])
         φ = np.copysign(d, e @ n)
         return d, φ, np.broadcast_to(n, p.shape), np.zeros(len(p))
 
 
 Piece = Arc | Segment
+
+
+class _Arcs:
+    """Several arcs as arrays: :meth:`Arc.closest` for all of them in one pass of NumPy.
+
+    The same arithmetic element by element (the same numbers to the last bit): at the few
+    dozen nodes of a call, NumPy's cost is per operation, not per node.
+    """
+
+    def __init__(self, arcs: list[Arc]) -> None:
+        ends = [a._ends for a in arcs]
+        column = lambda v: np.array(v, dtype=float)[:, None]  # noqa: E731  (A, 1)
+        pair = lambda v: np.array(v, dtype=float)[:, None, :]  # noqa: E731  (A, 1, 2)
+        self.centre, self.sign = pair([e[0] for e in ends]), column([e[1] for e in ends])
+        self.a, self.b = pair([e[2] for e in ends]), pair([e[3] for e in ends])
+        self.n_a, self.n_b = pair([e[4] for e in ends]), pair([e[5] for e in ends])
+        self.radius, self.start = column([a.radius for a in arcs]), column([a.start for a in arcs])
+        self.span = column([a.end - a.start for a in arcs])
+
+    def closest(self, p: np.ndarray):
+        """:meth:`Arc.closest` of every arc: ``d``, ``φ``, ``c`` (A, n) and ``n`` (A, n, 2)."""
+        d = p - self.centre
+        ρ = np.maximum(np.hypot(d[..., 0], d[..., 1]), _TINY)
+        n = (self.sign / ρ)[..., None] * d
+        φ = self.sign * (ρ - self.radius)
+        δ = np.mod(np.arctan2(d[..., 1], d[..., 0]) - self.start + math.pi, 2 * math.pi) - math.pi
+        s = δ / self.span
+        inside = (s >= 0.0) & (s <= 1.0)
+        curv = np.where(inside, self.sign / ρ, 0.0)
+        pa, pb = p - self.a, p - self.b
+        da, db = np.hypot(pa[..., 0], pa[..., 1]), np.hypot(pb[..., 0], pb[..., 1])
+        use_a = (da <= db)[..., None]
+        n_end = np.where(use_a, self.n_a, self.n_b)
+        d_end = np.minimum(da, db)
+        φ_end = np.copysign(d_end, np.einsum("aij,aij->ai", np.where(use_a, pa, pb), n_end))
+        n = np.where(inside[..., None], n, n_end)
+        return np.where(inside, np.abs(φ), d_end), np.where(inside, φ, φ_end), n, curv
 
 
 @dataclasses.dataclass(frozen=True)
@@ -160,20 +211,19 @@ class RevolvedTool:
         x = np.asarray(x, dtype=float).reshape(-1, 3) - [*self.axis_mm, 0.0]
         r = np.hypot(x[:, 0], x[:, 1])
         p = np.column_stack([r, x[:, 2] - self.z_offset(t)])
-        D, PHI, N, C, HOOP = [], [], [], [], []
-        for piece in self.profile:
-            d, φ, n, c = piece.closest(p)
-            D.append(d)
-            PHI.append(φ)
-            N.append(n)
-            C.append(c)
-            # φ_r / r: for arcs centred on the axis this is c itself (finite on the axis).
-            on_axis = isinstance(piece, Arc) and abs(piece.centre[0]) < _TINY
-            HOOP.append(c if on_axis else n[:, 0] / np.maximum(r, _TINY))
-        k = np.argmin(np.stack(D), axis=0)
+        D, PHI = np.empty((len(self.profile), len(x))), np.empty((len(self.profile), len(x)))
+        N, C = np.empty((*D.shape, 2)), np.empty(D.shape)
+        arcs, rows = self._arcs
+        if len(rows):
+            D[rows], PHI[rows], N[rows], C[rows] = arcs.closest(p)
+        for row, piece in enumerate(self.profile):
+            if isinstance(piece, Segment):
+                D[row], PHI[row], N[row], C[row] = piece.closest(p)
+        k = np.argmin(D, axis=0)  # the first piece of a tie, in the profile's order
         i = np.arange(len(x))
-        phi, n = np.stack(PHI)[k, i], np.stack(N)[k, i]
-        c, hoop = np.stack(C)[k, i], np.stack(HOOP)[k, i]
+        phi, n, c = PHI[k, i], N[k, i], C[k, i]
+        # φ_r / r: for arcs centred on the axis this is c itself (finite on the axis).
+        hoop = np.where(self._on_axis[k], c, n[:, 0] / np.maximum(r, _TINY))
         # The meridian-plane basis: e_r (radial, any unit vector on the axis) and e_z.
         e_r = np.zeros_like(x)
         e_r[:, 0] = 1.0
@@ -182,10 +232,22 @@ class RevolvedTool:
         e_z = np.array([0.0, 0.0, 1.0])
         normal = n[:, :1] * e_r + n[:, 1:] * e_z
         tangent = n[:, 1:] * e_r - n[:, :1] * e_z
-        hessian = c[:, None, None] * np.einsum("ni,nj->nij", tangent, tangent)
-        hoop_proj = np.eye(3) - np.einsum("ni,nj->nij", e_r, e_r) - np.outer(e_z, e_z)
+        hessian = c[:, None, None] * (tangent[:, :, None] * tangent[:, None, :])
+        hoop_proj = _EYE_XY - e_r[:, :, None] * e_r[:, None, :]
         hessian += hoop[:, None, None] * hoop_proj
         return Gap(phi, normal, hessian)
+
+    @functools.cached_property
+    def _arcs(self) -> tuple[_Arcs | None, list[int]]:
+        """The profile's arcs in one :class:`_Arcs`, and their places in the profile."""
+        rows = [k for k, q in enumerate(self.profile) if isinstance(q, Arc)]
+        return (_Arcs([self.profile[k] for k in rows]) if rows else None), rows
+
+    @functools.cached_property
+    def _on_axis(self) -> np.ndarray:
+        """Which pieces are arcs centred on the axis (their hoop curvature is their own)."""
+        return np.array([isinstance(q, Arc) and abs(q.centre[0]) < _TINY
+                         for q in self.profile])
 
 
 @dataclasses.dataclass(frozen=True)
