@@ -160,6 +160,27 @@ class _Arcs:
         return np.where(inside, np.abs(φ), d_end), np.where(inside, φ, φ_end), n, curv
 
 
+class _Segments:
+    """Several segments as arrays: :meth:`Segment.closest` of all of them in one pass."""
+
+    def __init__(self, segments: list[Segment]) -> None:
+        frames = [q._frame for q in segments]
+        self.a = np.array([f[0] for f in frames], dtype=float)[:, None, :]  # (S, 1, 2)
+        self.τ = np.array([f[1] for f in frames], dtype=float)  # (S, 2)
+        self.ττ = np.array([f[2] for f in frames], dtype=float)[:, None]  # (S, 1)
+        self.n = np.array([f[3] for f in frames], dtype=float)  # (S, 2)
+
+    def closest(self, p: np.ndarray):
+        """``d``, ``φ``, ``c`` (S, n) and ``n`` (S, n, 2) of every segment."""
+        pa = p - self.a
+        s = np.clip(np.matmul(pa, self.τ[:, :, None])[..., 0] / self.ττ, 0.0, 1.0)
+        e = pa - s[..., None] * self.τ[:, None, :]
+        d = np.hypot(e[..., 0], e[..., 1])
+        φ = np.copysign(d, np.matmul(e, self.n[:, :, None])[..., 0])
+        n = np.broadcast_to(self.n[:, None, :], pa.shape)
+        return d, φ, n, np.zeros(d.shape)
+
+
 @dataclasses.dataclass(frozen=True)
 class Gap:
     """Signed gap of nodes to a tool, its gradient and its Hessian.
@@ -213,12 +234,8 @@ class RevolvedTool:
         p = np.column_stack([r, x[:, 2] - self.z_offset(t)])
         D, PHI = np.empty((len(self.profile), len(x))), np.empty((len(self.profile), len(x)))
         N, C = np.empty((*D.shape, 2)), np.empty(D.shape)
-        arcs, rows = self._arcs
-        if len(rows):
-            D[rows], PHI[rows], N[rows], C[rows] = arcs.closest(p)
-        for row, piece in enumerate(self.profile):
-            if isinstance(piece, Segment):
-                D[row], PHI[row], N[row], C[row] = piece.closest(p)
+        for batch, rows in self._batches:
+            D[rows], PHI[rows], N[rows], C[rows] = batch.closest(p)
         k = np.argmin(D, axis=0)  # the first piece of a tie, in the profile's order
         i = np.arange(len(x))
         phi, n, c = PHI[k, i], N[k, i], C[k, i]
@@ -238,10 +255,14 @@ class RevolvedTool:
         return Gap(phi, normal, hessian)
 
     @functools.cached_property
-    def _arcs(self) -> tuple[_Arcs | None, list[int]]:
-        """The profile's arcs in one :class:`_Arcs`, and their places in the profile."""
-        rows = [k for k, q in enumerate(self.profile) if isinstance(q, Arc)]
-        return (_Arcs([self.profile[k] for k in rows]) if rows else None), rows
+    def _batches(self) -> list:
+        """The profile's arcs in one batch and its segments in another, with their places."""
+        out = []
+        for kind, batch in ((Arc, _Arcs), (Segment, _Segments)):
+            rows = [k for k, q in enumerate(self.profile) if isinstance(q, kind)]
+            if rows:
+                out.append((batch([self.profile[k] for k in rows]), rows))
+        return out
 
     @functools.cached_property
     def _on_axis(self) -> np.ndarray:
