@@ -121,7 +121,11 @@ def _tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     e[use_y, 1] = 1.0
     t1 = e - np.einsum("ni,ni->n", e, n)[:, None] * n
     t1 /= np.linalg.norm(t1, axis=1)[:, None]
-    return t1, np.cross(n, t1)
+    t2 = np.empty_like(t1)  # n × t₁, written out: np.cross costs more than the product here
+    t2[:, 0] = n[:, 1] * t1[:, 2] - n[:, 2] * t1[:, 1]
+    t2[:, 1] = n[:, 2] * t1[:, 0] - n[:, 0] * t1[:, 2]
+    t2[:, 2] = n[:, 0] * t1[:, 1] - n[:, 1] * t1[:, 0]
+    return t1, t2
 
 
 class BlankHolder:
@@ -226,7 +230,8 @@ class BlankHolder:
         g = self.surface.gap(xb, t)
         φ, nrm, H = g.phi - self._offset(b), g.normal, g.hessian
         f[b] = -self.k_z * φ[:, None] * nrm
-        K[b] = self.k_z * (np.einsum("ni,nj->nij", nrm, nrm) + φ[:, None, None] * H)
+        nn = nrm[:, :, None] * nrm[:, None, :]
+        K[b] = self.k_z * (nn + φ[:, None, None] * H)
         # Friction bars along the total tangential displacement (eq. 1), in the tangent
         # basis (t₁, t₂) of the surface: e_x, e_y on the plane z = 0.
         u = xb - self.X[b]
@@ -242,12 +247,15 @@ class BlankHolder:
         N_e = np.where(small, dN, N / np.where(small, 1.0, e))
         s = u1[:, None] * t1 + u2[:, None] * t2  # P u
         ŝ = s / np.where(small, 1.0, e)[:, None]
-        ss = np.einsum("ni,nj->nij", ŝ, ŝ)
-        P = np.eye(3) - np.einsum("ni,nj->nij", nrm, nrm)
+        ss = ŝ[:, :, None] * ŝ[:, None, :]
+        P = np.eye(3) - nn
         f[b] += -N_e[:, None] * s
         K_s = N_e[:, None, None] * (P - ss) + dN[:, None, None] * ss  # ∂(−f)/∂s
-        ds = P - np.einsum("n,nij->nij", np.einsum("ni,ni->n", nrm, u), H) \
-            - np.einsum("ni,nj->nij", nrm, np.einsum("nij,nj->ni", H, u))
+        if H.any():  # a curved surface: the tangent plane turns with the node
+            ds = P - np.einsum("ni,ni->n", nrm, u)[:, None, None] * H \
+                - nrm[:, :, None] * np.einsum("nij,nj->ni", H, u)[:, None, :]
+        else:
+            ds = P
         K[b] += np.einsum("nik,nkj->nij", K_s, ds)
         new = self.state.copy()
         new[b] = state
