@@ -56,14 +56,6 @@ class Arc:
         """The profile point at ``angle`` (rad)."""
         return np.asarray(self.centre) + self.radius * np.array([math.cos(angle), math.sin(angle)])
 
-    @functools.cached_property
-    def _ends(self):
-        """Centre, end points and their outward normals, made once (the search is hot)."""
-        sign = 1.0 if self.material_inside else -1.0
-        c = np.asarray(self.centre)
-        a, b = self.point(self.start), self.point(self.end)
-        return c, sign, a, b, (sign / self.radius) * (a - c), (sign / self.radius) * (b - c)
-
     def closest(self, p: np.ndarray):
         """Distance, signed distance, outward normal and curvature for points ``p`` (n, 2).
 
@@ -72,27 +64,8 @@ class Arc:
         (n,) in 1/mm: the Hessian of φ in the meridian plane is ``c t⊗t`` with ``t`` the
         tangent.
         """
-        c, sign, a, b, n_a, n_b = self._ends
-        d = p - c
-        ρ = np.maximum(np.hypot(d[:, 0], d[:, 1]), _TINY)
-        n = (sign / ρ)[:, None] * d
-        φ = sign * (ρ - self.radius)
-        δ = np.mod(np.arctan2(d[:, 1], d[:, 0]) - self.start + math.pi, 2 * math.pi) - math.pi
-        s = δ / (self.end - self.start)
-        inside = (s >= 0.0) & (s <= 1.0)
-        curv = np.where(inside, sign / ρ, 0.0)
-        if inside.all():
-            return np.abs(φ), φ, n, curv
-        # Beyond the ends: the distance to the nearer end point, with the normal there.
-        pa, pb = p - a, p - b
-        da, db = np.hypot(pa[:, 0], pa[:, 1]), np.hypot(pb[:, 0], pb[:, 1])
-        use_a = (da <= db)[:, None]
-        n_end = np.where(use_a, n_a, n_b)
-        d_end = np.minimum(da, db)
-        φ_end = np.copysign(d_end, np.einsum("ij,ij->i", np.where(use_a, pa, pb), n_end))
-        out = ~inside
-        n[out] = n_end[out]
-        return np.where(inside, np.abs(φ), d_end), np.where(inside, φ, φ_end), n, curv
+        d, φ, n, c = _Arcs([self]).closest(p)
+        return d[0], φ[0], n[0], c[0]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,22 +75,10 @@ class Segment:
     a: tuple[float, float]
     b: tuple[float, float]
 
-    @functools.cached_property
-    def _frame(self):
-        """Start, direction, its squared length and the outward normal, made once."""
-        a, b = np.asarray(self.a), np.asarray(self.b)
-        τ = b - a
-        return a, τ, τ @ τ, np.array([-τ[1], τ[0]]) / np.linalg.norm(τ)
-
     def closest(self, p: np.ndarray):
         """See :meth:`Arc.closest`; a segment has no curvature."""
-        a, τ, ττ, n = self._frame
-        pa = p - a
-        s = np.clip(pa @ τ / ττ, 0.0, 1.0)
-        e = pa - s[:, None] * τ
-        d = np.hypot(e[:, 0], e[:, 1])
-        φ = np.copysign(d, e @ n)
-        return d, φ, np.broadcast_to(n, p.shape), np.zeros(len(p))
+        d, φ, n, c = _Segments([self]).closest(p)
+        return d[0], φ[0], n[0], c[0]
 
 
 Piece = Arc | Segment
@@ -131,14 +92,17 @@ class _Arcs:
     """
 
     def __init__(self, arcs: list[Arc]) -> None:
-        ends = [a._ends for a in arcs]
         column = lambda v: np.array(v, dtype=float)[:, None]  # noqa: E731  (A, 1)
         pair = lambda v: np.array(v, dtype=float)[:, None, :]  # noqa: E731  (A, 1, 2)
-        self.centre, self.sign = pair([e[0] for e in ends]), column([e[1] for e in ends])
-        self.a, self.b = pair([e[2] for e in ends]), pair([e[3] for e in ends])
-        self.n_a, self.n_b = pair([e[4] for e in ends]), pair([e[5] for e in ends])
-        self.radius, self.start = column([a.radius for a in arcs]), column([a.start for a in arcs])
-        self.span = column([a.end - a.start for a in arcs])
+        self.sign = column([1.0 if q.material_inside else -1.0 for q in arcs])
+        self.radius, self.start = column([q.radius for q in arcs]), column([q.start for q in arcs])
+        self.span = column([q.end - q.start for q in arcs])
+        self.centre = pair([q.centre for q in arcs])
+        # The end points and the outward normals there (beyond the ends the closest point).
+        self.a = pair([q.point(q.start) for q in arcs])
+        self.b = pair([q.point(q.end) for q in arcs])
+        self.n_a = self.sign[:, :, None] / self.radius[:, :, None] * (self.a - self.centre)
+        self.n_b = self.sign[:, :, None] / self.radius[:, :, None] * (self.b - self.centre)
 
     def closest(self, p: np.ndarray):
         """:meth:`Arc.closest` of every arc: ``d``, ``φ``, ``c`` (A, n) and ``n`` (A, n, 2)."""
@@ -164,11 +128,11 @@ class _Segments:
     """Several segments as arrays: :meth:`Segment.closest` of all of them in one pass."""
 
     def __init__(self, segments: list[Segment]) -> None:
-        frames = [q._frame for q in segments]
-        self.a = np.array([f[0] for f in frames], dtype=float)[:, None, :]  # (S, 1, 2)
-        self.τ = np.array([f[1] for f in frames], dtype=float)  # (S, 2)
-        self.ττ = np.array([f[2] for f in frames], dtype=float)[:, None]  # (S, 1)
-        self.n = np.array([f[3] for f in frames], dtype=float)  # (S, 2)
+        a = np.array([q.a for q in segments], dtype=float)
+        self.τ = np.array([q.b for q in segments], dtype=float) - a  # (S, 2)
+        self.a = a[:, None, :]  # (S, 1, 2)
+        self.ττ = np.array([τ @ τ for τ in self.τ])[:, None]  # (S, 1)
+        self.n = np.array([np.array([-τ[1], τ[0]]) / np.linalg.norm(τ) for τ in self.τ])
 
     def closest(self, p: np.ndarray):
         """``d``, ``φ``, ``c`` (S, n) and ``n`` (S, n, 2) of every segment."""
