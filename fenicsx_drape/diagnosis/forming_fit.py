@@ -29,6 +29,7 @@ from fenicsx_drape.diagnosis.forming_kind import (
     XTOL,
     holder_mu_free,
 )
+from fenicsx_drape.diagnosis.forming_runs import runs_at_once
 from fenicsx_drape.diagnosis.kinds import Kind
 
 if TYPE_CHECKING:
@@ -209,25 +210,38 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     p = np.array([float(model.parameters[n]) for n in names])
     k = len(names)
     h = FD_STEP * np.eye(k)
-    cost = {}
+    # With several runs at once, a point's finite differences are formed with it (a batch
+    # costs one run's time); with one, only at a point the fit takes (a rejected step's
+    # would be wasted: a fifth of a diagnosis's runs). The same numbers either way.
+    eager = runs_at_once() > 1
 
-    def evaluate(p: np.ndarray, *others: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        R = _residuals(chosen, model, names, np.vstack([p, p + h, *others]))
-        for q, r in zip(others, R[k + 1:]):
-            cost[tuple(q)] = float(r @ r)
-        return R[0], (R[1:k + 1] - R[0]).T / FD_STEP
+    def residuals(*points: np.ndarray) -> np.ndarray:
+        return _residuals(chosen, model, names, np.vstack(points))
+
+    def slopes(p: np.ndarray, r: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
+        R = residuals(*(p + h)) if R is None else R
+        return (R - r).T / FD_STEP
+
+    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The residuals at ``p`` and, when formed with them, their Jacobian."""
+        if not eager:
+            return residuals(p)[0], None
+        R = residuals(p, *(p + h))
+        return R[0], slopes(p, R[0], R[1:])
 
     # Two starts, judged in the first batch of runs: the model's values and the parameters'
     # defaults (a warm start from a model without the right physics can sit far off).
     default = np.clip([parameter_info(n).default for n in names], *MU_BOUNDS)
-    r, J = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
-    if cost.get(tuple(default), math.inf) < r @ r:
+    starts = [p] + ([default] if np.abs(default - p).max() > XTOL else [])
+    R = residuals(*starts, *(p + h)) if eager else residuals(*starts)
+    r, J = R[0], (slopes(p, R[0], R[len(starts):]) if eager else None)
+    if len(starts) > 1 and R[1] @ R[1] < r @ r:
         say(f"  forming fit: starting from the defaults "
             f"{ {n: round(float(v), 4) for n, v in zip(names, default)} } "
-            f"(cost {cost[tuple(default)]:.4g}, was {r @ r:.4g})")
-        p = default
-        r, J = evaluate(p)
+            f"(cost {R[1] @ R[1]:.4g}, was {r @ r:.4g})")
+        p, r, J = default, R[1], None
     for iteration in range(min(max_iterations, MAX_ITERATIONS)):
+        J = slopes(p, r) if J is None else J
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
         step /= max(1.0, float(np.abs(step).max()) / MAX_STEP)
         for attempt in range(2):  # the Gauss-Newton step, then half of it

@@ -363,6 +363,11 @@ def _executor_kind() -> tuple[str, int]:
     return ("this process", 1) if workers == 1 else ("processes", workers)
 
 
+def runs_at_once() -> int:
+    """How many runs :func:`form_many` forms at once (its executor's workers or rank groups)."""
+    return _executor_kind()[1]
+
+
 def _shutdown() -> None:
     for name, pool in _pools.items():
         if name != "mpi":  # the shared pool of mpi4py.futures ends with the job
@@ -627,6 +632,11 @@ def _keep(key: tuple, run: tuple[FormedGrid, float | None, dict]) -> None:
 def cached(case, model: Model) -> bool:
     """Whether a run of ``(case, model)`` is in memory (:func:`form_many` will not form it)."""
     return _key(case, model) in _cache
+
+
+def new_runs(jobs: Iterable[tuple[Any, Model]]) -> int:
+    """How many distinct runs of ``jobs`` are not in memory (:func:`form_many` forms each once)."""
+    return len({k for k in (_key(case, model) for case, model in jobs) if k not in _cache})
 
 
 def tool_forces(case, model: Model) -> dict[str, np.ndarray]:

@@ -96,7 +96,7 @@ from fenicsx_drape.diagnosis.forming_fit import (
     value_sd,
     widened,
 )
-from fenicsx_drape.diagnosis.forming_runs import cached, form_many
+from fenicsx_drape.diagnosis.forming_runs import form_many, new_runs
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained
 from fenicsx_drape.errors import DrapeInputError, SolverError
 from fenicsx_drape.forming.case.format import FormingCase, broken_planes, with_overrides
@@ -361,7 +361,7 @@ class _Runs:
                     t, _ = applied(test, self.name, np.array(source), self.model)
                 jobs.append((fk.case_of(t), self.model))
                 reads.append((test, shift, plane))
-        self.formed += sum(not cached(c, m) for c, m in jobs)
+        self.formed += new_runs(jobs)  # the tests of one part share its run
         sheets = form_many(jobs)
         out: list[dict[str, np.ndarray]] = [{} for _ in points]
         for k, (sheet, (test, shift, plane), (case, _)) in enumerate(zip(sheets, reads, jobs)):
