@@ -130,3 +130,25 @@ def test_a_blank_within_the_holders_opening_is_named():
                                         r"surface covers none of the blank's nodes at the "
                                         r"start \(the blank lies within its opening\)"):
         run_case(case)
+
+
+def test_the_check_is_made_once_per_case_content_and_again_for_a_changed_one(tmp_path,
+                                                                              monkeypatch):
+    # A diagnosis forms the same part for many models: its geometry is checked once. A case
+    # whose content changed (the holder moved 15 mm up) is checked again, and fails.
+    from fenicsx_drape.forming.running import run
+
+    calls = []
+    monkeypatch.setattr(run, "geometry_problems",
+                        lambda *a: calls.append(1) or geometry_problems(*a))
+    monkeypatch.setattr(run, "_GEOMETRY", {})
+    path = write_case(tmp_path, die_z=19.5)
+    first = run_case(load_case(path))
+    again = run_case(load_case(path))
+    assert len(calls) == 1
+    assert np.array_equal(first.grid.x, again.grid.x, equal_nan=True)
+    path.write_text(CASE.format(centre=[0.0, 0.0], die_z=19.5, holder_z=15.0))
+    for _ in range(2):
+        with pytest.raises(CaseError, match="the holder 'holder' does not reach the blank"):
+            run_case(load_case(path))
+    assert len(calls) == 2

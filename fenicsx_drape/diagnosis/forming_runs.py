@@ -28,7 +28,6 @@ This module knows forming cases and models, not tests: the forming kind
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
@@ -37,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case.format import case_dict
+from fenicsx_drape.forming.case.format import case_key
 from fenicsx_drape.provenance import file_digest
 from fenicsx_drape.trust import set_trusted, trusted
 
@@ -173,24 +172,6 @@ def execution_record() -> dict[str, Any] | None:
     return {"executor": name, "workers": workers,
             "ranks": MPI.COMM_WORLD.size // workers if name == "all ranks" else 1,
             "cache": _executions[0]["cache"], "runs": runs}
-
-
-def case_key(case) -> str:
-    """What a forming run of ``case`` depends on, as text.
-
-    A :class:`~fenicsx_drape.forming.case.format.FormingCase` by content: its tables (paths relative
-    to its folder, the model file left out: the run's model is given) and the digests of the
-    geometry files it reads, so that the same case read from two copies (a bundle's and the
-    mesh folder's) shares its runs.
-    """
-    tables = case_dict(case, case.folder)
-    tables["case"].pop("model", None)
-    files = [t.path for t in case.tools if t.path is not None]
-    if case.blank.path is not None:
-        files.append(case.blank.path)
-    files += [p.model for p in case.plies if p.model is not None]  # a ply's own model
-    digests = [file_digest(Path(p)) if Path(p).is_file() else f"missing {p}" for p in files]
-    return json.dumps([tables, digests], sort_keys=True, default=str)
 
 
 def _key(case, model: Model) -> tuple:

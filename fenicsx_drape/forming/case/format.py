@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import math
 import os
 import tomllib
@@ -36,6 +37,7 @@ from fenicsx_drape.forming.tools.motion import RigidMotion
 from fenicsx_drape.forming.tools.surfaces import sample_curve_loop
 from fenicsx_drape.materials.base import fields_of
 from fenicsx_drape.materials.interply import InterplyLaw
+from fenicsx_drape.provenance import file_digest
 
 ROLES = ("punch", "die", "holder", "surface")
 BUILTIN = "builtin:hemisphere"
@@ -1389,6 +1391,24 @@ def _meshed_tool(case: FormingCase, spec: ToolSpec):
 
 # --------------------------------------------------------------------------------------------
 # Writing
+
+
+def case_key(case) -> str:
+    """What a forming run of ``case`` depends on, as text.
+
+    A :class:`FormingCase` by content: its tables (paths relative to its folder, the model file
+    left out: the run's model is given) and the digests of the geometry files it reads, so
+    that the same case read from two copies (a bundle's and the mesh folder's) shares its
+    runs (:mod:`~fenicsx_drape.diagnosis.forming_runs`) and its geometry check.
+    """
+    tables = case_dict(case, case.folder)
+    tables["case"].pop("model", None)
+    files = [t.path for t in case.tools if t.path is not None]
+    if case.blank.path is not None:
+        files.append(case.blank.path)
+    files += [p.model for p in case.plies if p.model is not None]  # a ply's own model
+    digests = [file_digest(Path(p)) if Path(p).is_file() else f"missing {p}" for p in files]
+    return json.dumps([tables, digests], sort_keys=True, default=str)
 
 
 def case_dict(case: FormingCase, relative_to: str | os.PathLike | None = None) -> dict:

@@ -46,6 +46,7 @@ from fenicsx_drape.forming.case.format import (
     CaseError,
     FormingCase,
     build_tools,
+    case_key,
     check_run_size,
 )
 from fenicsx_drape.forming.running.geometry import geometry_problems
@@ -56,6 +57,10 @@ from fenicsx_drape.forming.terms.stabilisation import ExtrapolationSpring
 from fenicsx_drape.forming.terms.stick import ApexStick
 
 CONTACT_ROLES = ("punch", "die", "surface")
+# The geometry checks of the cases formed in this process, by content (the latest few): a
+# diagnosis forms the same part for many models, and the check took a sixth of a small run.
+_GEOMETRY: dict[str, tuple[list[str], list[str]]] = {}
+_GEOMETRY_SIZE = 64
 
 NODE_ATOL_N = 1e-3
 """A step has converged when no node carries an out-of-balance force above this (N).
@@ -170,6 +175,23 @@ def forming_options(model, *, flat_holder: bool = True, stack: bool = False, **c
     return SolverOptions(snes_atol=1e-6, node_atol_N=NODE_ATOL_N, petsc_options=petsc, **changes)
 
 
+def _checked_geometry(case: FormingCase, built: dict, known: bool
+                      ) -> tuple[list[str], list[str]]:
+    """:func:`geometry_problems` of the case, remembered by content when ``known``.
+
+    Tools given in Python (``known`` False) are not in the case's content: checked each time.
+    """
+    key = case_key(case) if known else None
+    if key not in _GEOMETRY:
+        found = geometry_problems(case, built, case.blank.grid().nodes)
+        if key is None:
+            return found
+        if len(_GEOMETRY) >= _GEOMETRY_SIZE:
+            del _GEOMETRY[next(iter(_GEOMETRY))]
+        _GEOMETRY[key] = found
+    return _GEOMETRY[key]
+
+
 def run_case(case: FormingCase, model=None, options=None, *,
              tools: Mapping[str, object] | None = None,
              progress: Callable[[str], None] | None = None,
@@ -213,7 +235,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
             raise CaseError([f"run_case: tool {name!r} is not a tool of case {case.name!r}"])
     built = {**build_tools(case, skip=tuple(given)), **given}
     built = {t.name: built[t.name] for t in case.tools}  # in the case's order
-    errors, warns = geometry_problems(case, built, case.blank.grid().nodes)
+    errors, warns = _checked_geometry(case, built, known=not given)
     if errors:  # before the first step, in the user's terms
         raise CaseError([f"case {case.path or case.name}: {e}" for e in errors])
     for text in warns:
