@@ -99,7 +99,7 @@ from fenicsx_drape.diagnosis.data_check import (
 )
 from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM
 from fenicsx_drape.diagnosis.kinds import Comparison, sd_column_of
-from fenicsx_drape.diagnosis.resolution import check_resolution, explained
+from fenicsx_drape.diagnosis.resolution import check_resolution, explained, finer_net
 from fenicsx_drape.diagnosis.resolution import sentence as resolution_sentence
 from fenicsx_drape.diagnosis.setup import DISTINCT_SD as SETUP_DISTINCT_SD
 from fenicsx_drape.errors import DrapeInputError
@@ -974,9 +974,8 @@ def _conclusion(missing, best, base: list[Comparison], pattern: str,
         nets = [e for e in missing.get("resolution_after", ())
                 if e["explains"] or e["within_net_error"]]
         rest = (f" What it leaves on {', '.join(e['measurement'] for e in nets)} is its "
-                f"{nets[0]['cell_mm']:g} mm net's own error (resolution_after): compare on "
-                f"{min(e['suggested_cell_mm'] for e in nets):g} mm cells to resolve it."
-                if nets else "")
+                f"{nets[0]['cell_mm']:g} mm net's own error (resolution_after): "
+                f"{finer_net(nets)}." if nets else "")
         return (f"Missing effect: {missing['effect']} ({missing['summary'].rstrip('.')}); adding "
                 f"it brings the normalised error from {normalised:.3g} to "
                 f"{missing['error_after']['normalised']:.3g}.{rest}")

@@ -126,7 +126,27 @@ def sentence(entries: Sequence[dict[str, Any]]) -> str:
     parts = [f"{e['measurement']} (residual {e['residual']:.3g} {e['unit']}, the "
              f"{e['cell_mm']:g} mm net's own error {e['discretisation_error']:.3g} {e['unit']})"
              for e in hits]
-    cell = min(e["suggested_cell_mm"] for e in hits)
+    advice = finer_net(hits)
     return (f"Resolution: the model's net explains the residual of {', '.join(parts)}; no "
-            f"effect is named on that evidence. Compare again on {cell:g} mm cells "
-            f"(--forming-cell-mm {cell:g}) to resolve it. ")
+            f"effect is named on that evidence. {advice[0].upper()}{advice[1:]}. ")
+
+
+def finer_net(entries: Sequence[dict[str, Any]]) -> str:
+    """Which net to compare on again, with its cost, and what it would still leave.
+
+    The finest ``suggested_cell_mm`` of the entries and its nodes against the net they ran
+    on; when even that cell (:data:`MAX_HALVINGS` halvings) leaves an estimated error above
+    the noise, the words say so, with the measurement, rather than promise it resolves it.
+    """
+    cell = min(e["suggested_cell_mm"] for e in entries)
+    nodes = (max(e["cell_mm"] for e in entries) / cell) ** 2
+    cost = f"about {nodes:.0f} times the nodes" if nodes >= 1.5 else "the same net"
+    left = [(e, e["discretisation_error"] * (cell / e["cell_mm"]) ** ORDER) for e in entries]
+    left = [(e, v) for e, v in left if v > e["noise"]]
+    if not left:
+        return f"compare again on {cell:g} mm cells (--forming-cell-mm {cell:g}, {cost}) " \
+               "to resolve it"
+    still = ", ".join(f"{v:.2g} {e['unit']} on {e['measurement']} (noise {e['noise']:.2g} "
+                      f"{e['unit']})" for e, v in left)
+    return (f"compare again on finer cells (--forming-cell-mm): by the net's first-order "
+            f"estimate, even {cell:g} mm cells ({cost}) would still leave {still}")
