@@ -210,10 +210,11 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     p = np.array([float(model.parameters[n]) for n in names])
     k = len(names)
     h = FD_STEP * np.eye(k)
-    # With several runs at once, a point's finite differences are formed with it (a batch
-    # costs one run's time); with one, only at a point the fit takes (a rejected step's
-    # would be wasted: a fifth of a diagnosis's runs). The same numbers either way.
-    eager = runs_at_once() > 1
+    # A point's k finite differences are formed with it when it fits in their last batch of
+    # runs at once for no extra time (k not a multiple of the workers: one parameter on two
+    # workers); else only at a point the fit takes (a rejected step's would be wasted: a
+    # fifth of a diagnosis's runs on one worker). The same numbers either way.
+    eager = k % runs_at_once() != 0
 
     def residuals(*points: np.ndarray) -> np.ndarray:
         return _residuals(chosen, model, names, np.vstack(points))

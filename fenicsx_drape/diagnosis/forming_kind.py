@@ -43,10 +43,12 @@ the parameters' defaults, judged in the first batch of runs: a warm start from a
 lacking the right physics can sit far off, e.g. a holder μ driven up by a model whose tows
 carry compression), steps of at most :data:`MAX_STEP` within :data:`MU_BOUNDS` and halved
 once when they do not lower the cost; every forming run is cached by its case and
-parameters. With several workers the runs of one iteration (the point and its perturbations)
-go to them at once (:mod:`~fenicsx_drape.diagnosis.forming_runs`); with one, a point's
+parameters. The runs of one iteration (the point and its perturbations) go to the workers
+at once (:mod:`~fenicsx_drape.diagnosis.forming_runs`) when the point fits in the
+perturbations' last batch for no extra time (one parameter on two workers); else a point's
 perturbations are formed only once the fit takes the point (a rejected step's are not
-needed: a fifth of the lab README diagnosis's runs). The fit is the same either way.
+needed: on one worker, a fifth of the lab README diagnosis's runs). The fit is the same
+either way.
 
 The holder's μ is fitted only where a test's holder does not fix it (a case's
 ``[holder] mu``).
