@@ -223,20 +223,18 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
         R = residuals(*(p + h)) if R is None else R
         return (R - r).T / FD_STEP
 
-    def evaluate(p: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """The residuals at ``p`` and, when formed with them, their Jacobian."""
-        if not eager:
-            return residuals(p)[0], None
-        R = residuals(p, *(p + h))
-        return R[0], slopes(p, R[0], R[1:])
+    def evaluate(*points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The residuals at ``points`` and, when formed with them, the first one's Jacobian."""
+        R = residuals(*points, *((points[0] + h) if eager else ()))
+        m = len(points)
+        return R[:m], (slopes(points[0], R[0], R[m:]) if eager else None)
 
     # Two starts, judged in the first batch of runs: the model's values and the parameters'
     # defaults (a warm start from a model without the right physics can sit far off).
     default = np.clip([parameter_info(n).default for n in names], *MU_BOUNDS)
-    starts = [p] + ([default] if np.abs(default - p).max() > XTOL else [])
-    R = residuals(*starts, *(p + h)) if eager else residuals(*starts)
-    r, J = R[0], (slopes(p, R[0], R[len(starts):]) if eager else None)
-    if len(starts) > 1 and R[1] @ R[1] < r @ r:
+    R, J = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
+    r = R[0]
+    if len(R) > 1 and R[1] @ R[1] < r @ r:
         say(f"  forming fit: starting from the defaults "
             f"{ {n: round(float(v), 4) for n, v in zip(names, default)} } "
             f"(cost {R[1] @ R[1]:.4g}, was {r @ r:.4g})")
@@ -249,7 +247,7 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
             trial = np.clip(p + step / 2**attempt, *MU_BOUNDS)
             if np.abs(trial - p).max() < XTOL:
                 break
-            r_new, J_new = evaluate(trial)
+            (r_new,), J_new = evaluate(trial)
             say(f"  forming fit {iteration + 1}: "
                 f"{ {n: round(float(v), 4) for n, v in zip(names, trial)} }, "
                 f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
