@@ -306,6 +306,7 @@ def executor() -> tuple[str, Executor | None]:
         from concurrent.futures import ProcessPoolExecutor
 
         _shutdown()
+        _ignore_broken_pipes()
         # Fresh processes (not forks of one where MPI is initialised); this process is the
         # last worker (it is warm: DOLFINx imported, forms compiled).
         pool = ProcessPoolExecutor(workers - 1, mp_context=multiprocessing.get_context("spawn"))
@@ -313,6 +314,21 @@ def executor() -> tuple[str, Executor | None]:
             _warming[:] = [pool.submit(_warm) for _ in range(workers - 1)]
         _pools[name] = pool
     return "processes", _pools[name]
+
+
+def _ignore_broken_pipes() -> None:
+    """Give SIGPIPE back to Python (ignored: a write to a dead worker is BrokenPipeError).
+
+    PETSc's signal handler turns it into ``MPI_Abort`` (error 59): a worker that died while
+    a job was sent to it would stop the whole diagnosis instead of failing its own runs.
+    """
+    import signal
+    import threading
+
+    from petsc4py import PETSc  # noqa: F401 (its start installs the handler: after it)
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGPIPE, signal.SIG_IGN)
 
 
 _warming: list = []  # the pool's warm-up jobs: a worker takes runs once its own is done
