@@ -48,7 +48,8 @@ def main() -> None:
                                                           case_keys={}),))
     (sheet,) = runs.form_many([(truth, paper)])
     tables = lab_tables(sheet, runs.tool_forces(truth, paper), seed=2028)
-    folder = Path(tempfile.mkdtemp(prefix="bench-lab-"))
+    scratch = tempfile.TemporaryDirectory(prefix="bench-lab-")  # removed when it goes
+    folder = Path(scratch.name)
     write_lab_bundle(folder, stated, tables, measurements=["shear_points", "outline",
                                                            "punch_force"])
     with trusting():  # the bundle's case copy names the shipped double dome's .py geometry

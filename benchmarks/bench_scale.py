@@ -69,7 +69,8 @@ def main() -> None:
     args = parser.parse_args()
     paper = default_model()
     baseline = paper.without_effects("tow_buckling")
-    tmp = Path(tempfile.mkdtemp(prefix="bench_scale_"))
+    scratch = tempfile.TemporaryDirectory(prefix="bench_scale_")  # removed when it goes
+    tmp = Path(scratch.name)
     case = load_case(write_case(tmp / "part"))
     test = fc.synthetic_case_test(paper, case, sd_mm=0.3, seed=3, full=True)
     fc.write_case_bundle("octagon", [test], tmp / "bundle")

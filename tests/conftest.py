@@ -13,6 +13,8 @@ mpi4py is optional: the pure-NumPy tests also run on a host without MPI.
 
 import gc
 import os
+import shutil
+import tempfile
 
 import pytest
 
@@ -50,11 +52,21 @@ def pytest_collection_modifyitems(config, items):
 
 
 def pytest_configure(config):
-    """Keep no forming run on disk unless a test names a cache (``--cache``, ``execution``).
+    """The commands' default run cache is the session's own, never the user's.
+
+    On one process the tests share one cache folder, made here and removed at the end (the
+    xdist workers inherit it): a run one test formed is read back by another, as a user's
+    second command reads it (runs are known by their content; ``test_forming_runs_scale.py``
+    checks a stored run comes back whole). Under ``mpirun`` there is none: every rank must
+    form the same runs. A test of the cache names its own folder.
 
     Make Hypothesis draw the same examples on every rank, and share no database file.
     """
-    os.environ["DRAPE_CACHE"] = "off"  # the commands' default cache is the user's, not tests'
+    if COMM_SIZE > 1:
+        os.environ["DRAPE_CACHE"] = "off"
+    elif not hasattr(config, "workerinput"):  # this process starts the session
+        os.environ["DRAPE_CACHE"] = config._drape_runs = tempfile.mkdtemp(
+            prefix="fenicsx-drape-test-runs-")
     # Under pytest-xdist every core already runs a test: a pool of forming workers per test
     # would put two processes on each core (measured 16 % slower on the lab diagnosis tests).
     # The pools themselves are tested with their workers named (test_forming_runs_scale.py).
@@ -68,6 +80,13 @@ def pytest_configure(config):
         return
     settings.register_profile("mpi", derandomize=True, database=None)
     settings.load_profile("mpi")
+
+
+def pytest_unconfigure(config):
+    """Remove the session's run cache (:func:`pytest_configure`)."""
+    folder = getattr(config, "_drape_runs", None)
+    if folder:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(autouse=True)

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -165,8 +166,10 @@ def test_diagnose_command_writes_the_report(tmp_path, capsys):
     assert "temperature_dependence" in {u["effect"] for u in report["untestable"]}
     assert (out / "candidates.png").is_file() and (out / "where.png").is_file()
     assert (out / "residual_bias-40.png").is_file() and (out / "provenance.json").is_file()
-    # How forming runs were made: none here (coupons only), no cache (tests: DRAPE_CACHE=off).
+    # How forming runs were made: none here (coupons only), in the default cache folder (the
+    # session's, tests/conftest.py).
     made = json.loads((out / "provenance.json").read_text())["forming_runs"]
-    assert made["runs"]["asked"] == made["runs"]["formed"] == 0 and made["cache"] is None
+    assert made["runs"]["asked"] == made["runs"]["formed"] == 0
+    assert made["cache"] == os.environ["DRAPE_CACHE"]
     assert made["executor"] in ("processes", "this process") and made["workers"] >= 1
     assert "missing_effect: None" in capsys.readouterr().out

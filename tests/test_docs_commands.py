@@ -107,8 +107,13 @@ def check(line: str, where: str) -> str | None:
     words = [w.strip("[]") for w in shlex.split(line)]
     words = [w for w in words if w]
     if words[0] == "make":
-        targets = make_targets()
+        targets, text = make_targets(), (ROOT / "Makefile").read_text()
         for target in words[1:]:
+            if "=" in target:  # a variable of the Makefile set on the command line
+                name = target.split("=")[0]
+                assert re.search(rf"^{name}\s*:?=", text, flags=re.MULTILINE), \
+                    f"{where}: Makefile has no variable {name!r}"
+                continue
             assert target in targets, f"{where}: Makefile has no target {target!r}"
         return None
     if words[0] == "python3":
@@ -153,6 +158,9 @@ def test_a_wrong_command_is_caught():
         check("./drape fit demos/bundles/no-such-bundle --out results/fit", "x")
     with pytest.raises(AssertionError, match="no target"):
         check("make everything", "x")
+    with pytest.raises(AssertionError, match="no variable"):
+        check("make test-parallel RANKS=3", "x")
+    assert check("make test-parallel PARALLEL3=parallel", "x") is None
     assert check("./drape --np 2 exec python3 -m fenicsx_drape mesh --out DIR", "x") == "mesh"
     assert check("./drape --mount /tmp --np 2 form hemisphere --out out", "x") == "form"
 

@@ -66,6 +66,7 @@ def test_a_stack_forms_alike_on_any_number_of_ranks(reference):
 
 
 @pytest.mark.parallel
+@pytest.mark.slow  # 12 s on 3 ranks (two cores): make test runs it on 2 ranks only
 def test_drape_form_writes_the_summary_of_one_rank(reference, tmp_path):
     """``drape form`` of the stack under mpirun: the summary.json of a run on one process, and
     the inter-ply pressure and sliding of its XDMF fields at every pair's node."""
