@@ -2,7 +2,8 @@
 
 - ``@pytest.mark.skip_in_parallel``: the test runs on one process only.
 - ``@pytest.mark.parallel``: the test concerns parallel behaviour; ``make test`` runs these again
-  with ``mpirun -n 2`` and ``-n 3`` (``python3 -m mpi4py -m pytest -m parallel``).
+  with ``mpirun -n 2`` (``python3 -m mpi4py -m pytest -m parallel``), and those not also marked
+  ``slow`` with ``-n 3``.
 - After every test on several ranks, garbage is collected and the ranks meet, so that
   collective destructors of DOLFINx and PETSc objects run on all ranks together.
 - Forms are compiled by FFCx into its cache (``~/.cache/fenics``, or ``$XDG_CACHE_HOME/fenics``;
@@ -93,8 +94,8 @@ def pytest_unconfigure(config):
 def _collective_cleanup():
     """Under ``mpirun``, collect garbage, then wait for all ranks, after each test.
 
-    On one process nothing is collective (a collection costs 0.05-0.1 s with DOLFINx loaded,
-    a minute of the suite).
+    On one process nothing is collective (a collection costs 0.05-0.1 s with DOLFINx loaded:
+    about a minute of the suite's summed time).
     """
     yield
     if COMM_SIZE > 1:
