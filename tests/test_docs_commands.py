@@ -63,9 +63,8 @@ def is_placeholder(word: str) -> bool:
     return bool(PLACEHOLDER.match(word)) or word in ("...", "…")
 
 
-def make_targets() -> set[str]:
-    text = (ROOT / "Makefile").read_text()
-    return set(re.findall(r"^([A-Za-z][\w-]*):", text, flags=re.MULTILINE))
+MAKEFILE = (ROOT / "Makefile").read_text()
+MAKE_TARGETS = set(re.findall(r"^([A-Za-z][\w-]*):", MAKEFILE, flags=re.MULTILINE))
 
 
 def check_path(value: str, output: bool, where: str) -> None:
@@ -107,14 +106,13 @@ def check(line: str, where: str) -> str | None:
     words = [w.strip("[]") for w in shlex.split(line)]
     words = [w for w in words if w]
     if words[0] == "make":
-        targets, text = make_targets(), (ROOT / "Makefile").read_text()
         for target in words[1:]:
             if "=" in target:  # a variable of the Makefile set on the command line
                 name = target.split("=")[0]
-                assert re.search(rf"^{name}\s*:?=", text, flags=re.MULTILINE), \
+                assert re.search(rf"^{name}\s*:?=", MAKEFILE, flags=re.MULTILINE), \
                     f"{where}: Makefile has no variable {name!r}"
                 continue
-            assert target in targets, f"{where}: Makefile has no target {target!r}"
+            assert target in MAKE_TARGETS, f"{where}: Makefile has no target {target!r}"
         return None
     if words[0] == "python3":
         return check_cli(words[3:], where)
