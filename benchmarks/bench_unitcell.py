@@ -4,10 +4,13 @@
 
 Prints CPU milliseconds per test (best of 5) for a tensile and a bias-extension test of 300
 rows with Table 2, with 1 and with k parameter sets evaluated together (the fitting code's
-finite-difference Jacobians), and the cost of a fit-sized batch: tensile + three bias rates.
+finite-difference Jacobians), the cost of a fit-sized batch (tensile + three bias rates) one
+test at a time and with the bias tests side by side (``unitcell.curves``), and the wall time
+of ``drape fit`` (no analysis) on two bundles of ``demos/bundles``.
 """
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -46,7 +49,25 @@ def main():
             unitcell.bias_extension(model, u_b / (speed / 60.0), u_b, length_mm=210.0,
                                     width_mm=70.0)
 
-    print(f"tensile + three bias rates: {best_ms(batch, 3):.0f} ms")
+    def side_by_side():
+        unitcell.tensile(model, u_t * 30.0, u_t, gauge_length_mm=100.0)
+        unitcell.curves(model, "bias_extension", [
+            {"time_s": u_b / (speed / 60.0), "displacement_mm": u_b, "length_mm": 210.0,
+             "width_mm": 70.0} for speed in (10.0, 40.0, 160.0)])
+
+    print(f"tensile + three bias rates: {best_ms(batch, 3):.0f} ms one by one, "
+          f"{best_ms(side_by_side, 3):.0f} ms side by side")
+
+    from fenicsx_drape.calibration.fit import fit
+    from fenicsx_drape.measurements.bundle import load_bundle
+
+    bundles = Path(__file__).resolve().parents[1] / "demos" / "bundles"
+    for name in ("cao2008-plain-hkust", "twill-table2"):
+        bundle = load_bundle(bundles / name)
+        start = time.perf_counter()
+        fit(bundle, default_model(), analyse=False)
+        print(f"drape fit {name} ({len(bundle.tests)} tests, no analysis): "
+              f"{time.perf_counter() - start:.1f} s")
 
 
 if __name__ == "__main__":

@@ -58,13 +58,16 @@ corrected to first order in it, and the laws' states are committed (usually afte
 update). The two bars of a role are updated in one call (call overhead, not array size, is
 the cost). All of it is vectorised over parameter sets: a
 :class:`~fenicsx_drape.model.Model` whose parameters are arrays of shape (k,) gives curves
-shaped (n_rows, k) at about the cost of one.
+shaped (n_rows, k) at about the cost of one; and over tests of one kind (:func:`curves`:
+each test's own rows, geometry and conditions, stepped together), so that a fit's T tests
+cost little more than one.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -180,25 +183,26 @@ def _newton(residual: Callable, x: np.ndarray, lower: np.ndarray, what: str):
                       f"iterations (residual {np.max(np.abs(r)):.3g} N/tow)")
 
 
-def _predict(t: np.ndarray, i: int, xs: np.ndarray) -> np.ndarray:
-    """Cubic (Lagrange) extrapolation in time of the unknown of rows i-4..i-1 to row i.
+def _extrapolation(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cubic (Lagrange) extrapolation in time to each row from the unknown of the rows before.
 
-    Lower order where fewer rows, or rows at one time, are available.
+    Lower order where fewer rows, or rows at one time, are available; the last value where
+    the weights are not finite. Returns the weights of rows i-4..i-1 for each row i (n, 4),
+    and how many of them are used (n,).
     """
-    j = i
-    while j > max(i - 4, 0) and t[j - 1] < t[j]:
-        j -= 1
-    if i - j < 2:
-        return xs[i - 1] if i else xs[0]
-    ts, ti = t[j:i].tolist(), float(t[i])
-    weights = [math.prod((ti - tb) / (ta - tb) for b, tb in enumerate(ts) if b != a)
-               for a, ta in enumerate(ts)]
-    # Safeguard against ill-conditioned extrapolation (very uneven steps): move at most a
-    # few times the last changes from the last value.
-    last, reach = xs[i - 1], 4.0 * np.abs(np.diff(xs[j:i], axis=0)).max(axis=0) + 1e-4
-    if not all(map(math.isfinite, weights)):
-        return last
-    return np.clip(np.dot(weights, xs[j:i]), last - reach, last + reach)
+    n = len(t)
+    weights, used = np.zeros((n, 4)), np.zeros(n, dtype=int)
+    for i in range(1, n):
+        j = i
+        while j > max(i - 4, 0) and t[j - 1] < t[j]:
+            j -= 1
+        ts, ti = t[j:i].tolist(), float(t[i])
+        w = [math.prod((ti - tb) / (ta - tb) for b, tb in enumerate(ts) if b != a)
+             for a, ta in enumerate(ts)]
+        if i - j < 2 or not all(map(math.isfinite, w)):
+            w = [1.0]
+        weights[i, 4 - len(w):], used[i] = w, len(w)
+    return weights, used
 
 
 def _inside(guess: np.ndarray, lower: np.ndarray) -> np.ndarray:
@@ -206,23 +210,125 @@ def _inside(guess: np.ndarray, lower: np.ndarray) -> np.ndarray:
     return np.where(guess > lower, guess, np.where(lower < 0.0, 0.5 * lower, lower + 1e-3))
 
 
-def _stacked_laws(model: Model, conditions: Mapping[str, float] | None):
-    """The model's laws, with arrays of parameter sets repeated twice for stacked updates.
+def _built_in(model: Model) -> bool:
+    """Whether the model's coupon laws are the paper's (they take a step per lane)."""
+    from fenicsx_drape.materials import BUILT_IN_LAWS, get_law
 
+    classes = model.law_classes()
+    return all(classes[role] is get_law(BUILT_IN_LAWS[role]) for role in ("tow", "shear"))
+
+
+class _Lanes:
+    """T tests of one kind side by side, each with the model's m parameter sets.
+
+    Lane j·m + s is parameter set s on test j. A test's rows end with its last row repeated
+    (steps of 0 s: the laws' states do not move), so that all tests step row by row
+    together: the cost of a row is its calls (NumPy's per-call overhead), not its lanes.
     The unit cell updates two bars of one role in one call (the two diagonals in bias
-    extension, the two tow families in tension): call overhead, not array size, is the cost.
+    extension, the two tow families in tension): :attr:`stacked` holds those laws, with
+    every lane twice.
     """
-    if model.n_sets is not None:
-        model = Model(model.effects,
-                      {n: np.tile(v, 2) if np.ndim(v) else v for n, v in model.parameters.items()},
-                      model.plugins, model.fixed)
-    return model.laws(conditions)
+
+    def __init__(self, model: Model, times: Sequence[np.ndarray],
+                 conditions: Sequence[Mapping[str, float] | None]) -> None:
+        self.k, self.m, self.T = model.n_sets, model.n_sets or 1, len(times)
+        self.n_rows = [len(t) for t in times]
+        self.t = self.rows(times)
+        weights, used = zip(*(_extrapolation(self.t[:, j]) for j in range(self.T)))
+        self._weights = np.repeat(np.stack(weights, axis=2), self.m, axis=2)  # (n, 4, lanes)
+        # Which of the 3 changes between rows i-4..i-1 the safeguard of predict() looks at.
+        self._changes = np.repeat(np.stack(used, axis=1), self.m, axis=1)[:, None, :] > (
+            3 - np.arange(3))[None, :, None]
+        lanes = dict(conditions[0] or {})
+        if self.T > 1:  # the callers group tests by the names of their conditions
+            model = dataclasses.replace(model, parameters={
+                n: np.tile(v, self.T) if np.ndim(v) else v for n, v in model.parameters.items()})
+            lanes = {name: self.lanes([float(c[name]) for c in conditions]) for name in lanes}
+        self.laws = model.laws(lanes)
+        twice = {n: np.tile(v, 2) if np.ndim(v) else v for n, v in lanes.items()}
+        self.stacked = dataclasses.replace(model, parameters={
+            n: np.tile(v, 2) if np.ndim(v) else v
+            for n, v in model.parameters.items()}).laws(twice)
+        self.k_st = (model.parameters["k_st"] if "shear_tension_coupling" in model.effects
+                     else 0.0)
+
+    def rows(self, columns: Sequence[np.ndarray]) -> np.ndarray:
+        """One column per test (n, T), each padded with its last row."""
+        n = max(self.n_rows)
+        return np.column_stack([np.pad(c, (0, n - len(c)), mode="edge") for c in columns])
+
+    def lanes(self, per_test) -> np.ndarray:
+        """A value per test (T,) as a value per lane (T·m,)."""
+        return np.repeat(np.asarray(per_test, dtype=float), self.m)
+
+    def step(self, i: int):
+        """The step to row i (s): per lane and per stacked lane (one number for one test)."""
+        if self.T == 1:
+            dt = self.t[i, 0] - self.t[i - 1, 0] if i else 0.0
+            return dt, dt
+        dt = self.lanes(self.t[i] - self.t[i - 1] if i else np.zeros(self.T))
+        return dt, np.tile(dt, 2)
+
+    def predict(self, i: int, xs: np.ndarray) -> np.ndarray:
+        """The extrapolation (:func:`_extrapolation`) of the unknown ``xs`` to row i.
+
+        Safeguard against ill-conditioned extrapolation (very uneven steps): it moves at most
+        a few times the last changes from the last value.
+        """
+        rows = xs[max(i - 4, 0):i]
+        rows = np.concatenate([np.zeros((4 - len(rows), xs.shape[1])), rows]) if i < 4 else rows
+        last = rows[3]
+        changes = np.where(self._changes[i], np.abs(np.diff(rows, axis=0)), 0.0)
+        reach = 4.0 * changes.max(axis=0) + 1e-4
+        return np.clip(np.einsum("ql,ql->l", self._weights[i], rows), last - reach,
+                       last + reach)
+
+    def curves(self, histories: Sequence[tuple[np.ndarray, np.ndarray]],
+               **columns: np.ndarray) -> list[UnitCellCurve]:
+        """Each test's curve: its (time, displacement) and its rows and lanes of ``columns``."""
+        out = []
+        for j, (t, u) in enumerate(histories):
+            lanes = slice(j * self.m, (j + 1) * self.m)
+            test = {name: c[:len(t), lanes] for name, c in columns.items()}
+            if self.k is None:
+                test = {name: c[:, 0] for name, c in test.items()}
+            out.append(UnitCellCurve(time_s=t, displacement_mm=u, **test))
+        return out
 
 
-def _finish(k: int | None, **columns: np.ndarray) -> UnitCellCurve:
-    if k is None:
-        columns = {n: c[:, 0] if c.ndim == 2 else c for n, c in columns.items()}
-    return UnitCellCurve(**columns)
+def _batches(model: Model, runs: Sequence[Mapping]) -> list[list[int]]:
+    """Indices of the runs formed side by side: those whose conditions have the same names.
+
+    Every run alone when a law is a user's (its update may take one step for all points).
+    """
+    if not _built_in(model):
+        return [[i] for i in range(len(runs))]
+    groups: dict[tuple[str, ...], list[int]] = {}
+    for i, run in enumerate(runs):
+        groups.setdefault(tuple(sorted(run.get("conditions") or {})), []).append(i)
+    return list(groups.values())
+
+
+def curves(model: Model, kind: str, runs: Sequence[Mapping]) -> list[UnitCellCurve]:
+    """Curves of several coupon tests of one kind, solved side by side.
+
+    Args:
+        model: The model (scalar parameters, or arrays of k parameter sets).
+        kind: ``"tensile"``, ``"bias_extension"`` or ``"picture_frame"``.
+        runs: Per test, the keyword arguments of that kind's function (``time_s``,
+            ``displacement_mm``, the geometry and ``conditions``).
+
+    Returns:
+        Each run's curve, as the kind's function gives it; a row of T tests costs about
+        one test's (tests whose conditions have the same names are stepped together).
+    """
+    solve = {"tensile": _tensile, "bias_extension": _bias_extension,
+             "picture_frame": _picture_frame}[kind]
+    out: list[UnitCellCurve | None] = [None] * len(runs)
+    for batch in _batches(model, runs):
+        for i, curve in zip(batch, solve(model, [runs[i] for i in batch])):
+            out[i] = curve
+    return out
 
 
 def tensile(
@@ -245,23 +351,33 @@ def tensile(
     Returns:
         The curve; the test force in N is ``force_per_tow_N`` times the test's tows.
     """
-    t, u = _history(time_s, displacement_mm)
-    if not (np.isfinite(gauge_length_mm) and gauge_length_mm > 0.0):
-        raise DrapeInputError(f"tensile: gauge_length_mm = {gauge_length_mm} must be > 0")
-    k, m = model.n_sets, model.n_sets or 1
-    laws, tows = model.laws(conditions), _stacked_laws(model, conditions)["tow"]
-    shear = laws["shear"]
-    k_st = model.parameters["k_st"] if "shear_tension_coupling" in model.effects else 0.0
-    e = u / gauge_length_mm
-    ε1_rows = e + 0.5 * e**2
-    n = t.size
+    (curve,) = _tensile(model, [{"time_s": time_s, "displacement_mm": displacement_mm,
+                                 "gauge_length_mm": gauge_length_mm,
+                                 "conditions": conditions}])
+    return curve
+
+
+def _tensile(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve]:
+    histories, strains = [], []
+    for run in runs:
+        t, u = _history(run["time_s"], run["displacement_mm"])
+        L_g = run["gauge_length_mm"]
+        if not (np.isfinite(L_g) and L_g > 0.0):
+            raise DrapeInputError(f"tensile: gauge_length_mm = {L_g} must be > 0")
+        e = u / L_g
+        histories.append((t, u))
+        strains.append(e + 0.5 * e**2)
+    cell = _Lanes(model, [t for t, _ in histories], [r.get("conditions") for r in runs])
+    tows, shear, k_st = cell.stacked["tow"], cell.laws["shear"], cell.k_st
+    ε1_rows = cell.rows(strains)
+    n, m = ε1_rows.shape[0], cell.T * cell.m
     xs = np.zeros((n, m))
     out = {name: np.zeros((n, m)) for name in ("force", "sigma_1", "tau")}
     s_tows, s_d = tows.initial_state(2 * m), shear.initial_state(m)
     lower = np.full(m, -0.5)
     for i in range(n):
-        dt = t[i] - t[i - 1] if i else 0.0
-        ε1 = np.full(m, ε1_rows[i])
+        dt, _ = cell.step(i)
+        ε1 = cell.lanes(ε1_rows[i])
 
         def residual(ε2, ε1=ε1, dt=dt, s_tows=s_tows, s_d=s_d):
             σ, dσ, s_tows_new = tows._update(np.concatenate([ε1, ε2]), dt, s_tows)
@@ -280,16 +396,16 @@ def tensile(
             df = 2.0 * (dcτ * cos_φ - c * τ * cos_φ / q)
             return r, dr, (s_tows_new, s_d_new, σ1, f, df, c * τ, dcτ)
 
-        guess = _inside(_predict(t, i, xs), lower)
+        guess = _inside(cell.predict(i, xs), lower)
         x, δ, (s_tows, s_d, σ1, f, df, τ, dτ) = _newton(residual, guess, lower,
                                                         f"tensile balance at row {i}")
         xs[i], out["force"][i] = x + δ, f + df * δ
         out["sigma_1"][i], out["tau"][i] = σ1, τ + dτ * δ
-    return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=out["force"],
-                   tow_strain=np.repeat(ε1_rows[:, None], m, axis=1),
-                   diagonal_strain=0.5 * (ε1_rows[:, None] + xs), shear_deg=np.zeros((n, m)),
-                   transverse_strain=xs, tow_stress_N=out["sigma_1"],
-                   diagonal_stress_N=out["tau"])
+    lane = np.repeat(np.arange(cell.T), cell.m)
+    return cell.curves(histories, force_per_tow_N=out["force"], tow_strain=ε1_rows[:, lane],
+                       diagonal_strain=0.5 * (ε1_rows[:, lane] + xs),
+                       shear_deg=np.zeros((n, m)), transverse_strain=xs,
+                       tow_stress_N=out["sigma_1"], diagonal_stress_N=out["tau"])
 
 
 def bias_extension(
@@ -314,26 +430,37 @@ def bias_extension(
     Returns:
         The curve; the test force in N is ``force_per_tow_N`` times the test's tows.
     """
-    t, u = _history(time_s, displacement_mm)
-    εd1_rows = bias_diagonal_strain(u, length_mm, width_mm)
-    if np.any(εd1_rows <= -0.5):
-        raise DrapeInputError(f"bias extension: displacement {u.min()} mm closes the gauge "
-                              "region (diagonal strain <= -0.5)")
-    k, m = model.n_sets, model.n_sets or 1
-    tow, diagonals = model.laws(conditions)["tow"], _stacked_laws(model, conditions)["shear"]
-    k_st = model.parameters["k_st"] if "shear_tension_coupling" in model.effects else 0.0
-    n = t.size
+    (curve,) = _bias_extension(model, [{"time_s": time_s, "displacement_mm": displacement_mm,
+                                        "length_mm": length_mm, "width_mm": width_mm,
+                                        "conditions": conditions}])
+    return curve
+
+
+def _bias_extension(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve]:
+    histories, strains = [], []
+    for run in runs:
+        t, u = _history(run["time_s"], run["displacement_mm"])
+        εd1 = bias_diagonal_strain(u, run["length_mm"], run["width_mm"])
+        if np.any(εd1 <= -0.5):
+            raise DrapeInputError(f"bias extension: displacement {u.min()} mm closes the gauge "
+                                  "region (diagonal strain <= -0.5)")
+        histories.append((t, u))
+        strains.append(εd1)
+    cell = _Lanes(model, [t for t, _ in histories], [r.get("conditions") for r in runs])
+    tow, diagonals, k_st = cell.laws["tow"], cell.stacked["shear"], cell.k_st
+    εd1_rows = cell.rows(strains)
+    n, m = εd1_rows.shape[0], cell.T * cell.m
     xs = np.zeros((n, m))
     out = {name: np.zeros((n, m)) for name in ("force", "sigma", "tau_1")}
     s_t, s_d = tow.initial_state(m), diagonals.initial_state(2 * m)
     for i in range(n):
-        dt = t[i] - t[i - 1] if i else 0.0
-        εd1 = np.full(m, εd1_rows[i])
+        dt, dt2 = cell.step(i)
+        εd1 = cell.lanes(εd1_rows[i])
         lower = np.maximum(0.5 * (εd1 - 0.5), -0.5)  # both ε_d2 and ε_t above -0.5
 
-        def residual(εt, εd1=εd1, dt=dt, s_t=s_t, s_d=s_d):
+        def residual(εt, εd1=εd1, dt=dt, dt2=dt2, s_t=s_t, s_d=s_d):
             σ, dσ, s_t_new = tow._update(εt, dt, s_t)
-            τ, dτ, s_d_new = diagonals._update(np.concatenate([εd1, 2.0 * εt - εd1]), dt, s_d)
+            τ, dτ, s_d_new = diagonals._update(np.concatenate([εd1, 2.0 * εt - εd1]), dt2, s_d)
             τ1, τ2, dτ2 = τ[:m], τ[m:], dτ[m:]
             c, dc = shear_tension_factor(σ, k_st)
             q = 2.0 + 4.0 * εt
@@ -349,18 +476,18 @@ def bias_extension(
             df = 2.0 * (dc * dσ * (τ1 - τ2 * cot_θ) - c * cot_θ * (2.0 * dτ2 - 2.0 * τ2 / p))
             return r, dr, (s_t_new, s_d_new, f, df, σ, dσ, c * τ1, dc * dσ * τ1)
 
-        guess = _inside(_predict(t, i, xs), lower)
+        guess = _inside(cell.predict(i, xs), lower)
         x, δ, (s_t, s_d, f, df, σ, dσ, τ1, dτ1) = _newton(
             residual, guess, lower, f"bias-extension balance at row {i}")
         xs[i], out["force"][i] = x + δ, f + df * δ
         out["sigma"][i], out["tau_1"][i] = σ + dσ * δ, τ1 + dτ1 * δ
-    εd1 = εd1_rows[:, None]
+    lane = np.repeat(np.arange(cell.T), cell.m)
+    εd1 = εd1_rows[:, lane]
     εd2 = 2.0 * xs - εd1
     shear_deg = np.degrees(np.arcsin(np.clip((εd1 - εd2) / (1.0 + 2.0 * xs), -1.0, 1.0)))
-    return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=out["force"],
-                   tow_strain=xs, diagonal_strain=np.repeat(εd1, m, axis=1),
-                   shear_deg=shear_deg, transverse_strain=εd2, tow_stress_N=out["sigma"],
-                   diagonal_stress_N=out["tau_1"])
+    return cell.curves(histories, force_per_tow_N=out["force"], tow_strain=xs, diagonal_strain=εd1,
+                       shear_deg=shear_deg, transverse_strain=εd2, tow_stress_N=out["sigma"],
+                       diagonal_stress_N=out["tau_1"])
 
 
 def picture_frame_shear_angle(displacement_mm, frame_side_mm: float) -> np.ndarray:
@@ -515,38 +642,47 @@ def picture_frame(
         one family across the fabric side, l_t L_fabric), i.e. force_per_tow_N =
         (L_fabric/L_frame)(τ_1 − τ_2 cot θ).
     """
-    t, u = _history(time_s, displacement_mm)
-    if not (np.isfinite(frame_side_mm) and np.isfinite(fabric_side_mm)
-            and 0.0 < fabric_side_mm <= frame_side_mm):
-        raise DrapeInputError(f"picture frame: need 0 < fabric_side_mm <= frame_side_mm, got "
-                              f"fabric_side_mm = {fabric_side_mm}, frame_side_mm = "
-                              f"{frame_side_mm}")
-    γ = np.radians(picture_frame_shear_angle(u, frame_side_mm))
-    k, m = model.n_sets, model.n_sets or 1
-    laws = model.laws(conditions)
-    diagonals = _stacked_laws(model, conditions)["shear"]
+    (curve,) = _picture_frame(model, [{"time_s": time_s, "displacement_mm": displacement_mm,
+                                       "frame_side_mm": frame_side_mm,
+                                       "fabric_side_mm": fabric_side_mm,
+                                       "conditions": conditions}])
+    return curve
+
+
+def _picture_frame(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve]:
+    histories, angles, ratios = [], [], []
+    for run in runs:
+        t, u = _history(run["time_s"], run["displacement_mm"])
+        frame, fabric = run["frame_side_mm"], run["fabric_side_mm"]
+        if not (np.isfinite(frame) and np.isfinite(fabric) and 0.0 < fabric <= frame):
+            raise DrapeInputError(f"picture frame: need 0 < fabric_side_mm <= frame_side_mm, "
+                                  f"got fabric_side_mm = {fabric}, frame_side_mm = {frame}")
+        histories.append((t, u))
+        angles.append(np.radians(picture_frame_shear_angle(u, frame)))
+        ratios.append(fabric / frame)
+    cell = _Lanes(model, [t for t, _ in histories], [r.get("conditions") for r in runs])
+    lane = np.repeat(np.arange(cell.T), cell.m)
+    γ = cell.rows(angles)[:, lane]
+    n, m = γ.shape
+    diagonals, tow = cell.stacked["shear"], cell.laws["tow"]
     # The tows stay at their length: their stress is the law's at zero strain (what a
     # shear-tension coupling sees).
-    σ_t, _, _ = laws["tow"]._update(np.zeros(m), 0.0, laws["tow"].initial_state(m))
-    k_st = model.parameters["k_st"] if "shear_tension_coupling" in model.effects else 0.0
-    c, _ = shear_tension_factor(σ_t, k_st)
+    σ_t, _, _ = tow._update(np.zeros(m), 0.0, tow.initial_state(m))
+    c, _ = shear_tension_factor(σ_t, cell.k_st)
     εd = 0.5 * np.sin(γ)
     cot_θ = np.sqrt((1.0 + np.sin(γ)) / (1.0 - np.sin(γ)))  # λ_1/λ_2
-    n = t.size
+    ratio = cell.lanes(ratios)
     force, tau_1 = np.zeros((n, m)), np.zeros((n, m))
     state = diagonals.initial_state(2 * m)
     for i in range(n):
-        dt = t[i] - t[i - 1] if i else 0.0
-        τ, _, state = diagonals._update(np.repeat([εd[i], -εd[i]], m), dt, state)
+        _, dt2 = cell.step(i)
+        τ, _, state = diagonals._update(np.concatenate([εd[i], -εd[i]]), dt2, state)
         τ1, τ2 = c * τ[:m], c * τ[m:]
-        force[i] = fabric_side_mm / frame_side_mm * (τ1 - τ2 * cot_θ[i])
+        force[i] = ratio * (τ1 - τ2 * cot_θ[i])
         tau_1[i] = τ1
-    ones = np.ones((1, m))
-    return _finish(k, time_s=t, displacement_mm=u, force_per_tow_N=force,
-                   tow_strain=np.zeros((n, m)), diagonal_strain=εd[:, None] * ones,
-                   shear_deg=np.degrees(γ)[:, None] * ones,
-                   transverse_strain=-εd[:, None] * ones, tow_stress_N=σ_t * ones + 0.0 * force,
-                   diagonal_stress_N=tau_1)
+    return cell.curves(histories, force_per_tow_N=force, tow_strain=np.zeros((n, m)),
+                       diagonal_strain=εd, shear_deg=np.degrees(γ), transverse_strain=-εd,
+                       tow_stress_N=σ_t + 0.0 * force, diagonal_stress_N=tau_1)
 
 
 def diagonal_response(

@@ -162,6 +162,45 @@ def test_vectorised_parameter_sets_equal_separate_runs():
         np.testing.assert_allclose(ct.force_per_tow_N[:, j], ctj.force_per_tow_N, rtol=1e-10)
 
 
+def test_tests_side_by_side_equal_each_test_alone():
+    """Tests of one kind solved together (rows of unequal number and pace, a hold, other
+    geometries and temperatures, several parameter sets) give each test's own curves."""
+    model = default_model().with_effects("temperature_dependence", "shear_tension_coupling")
+    many = model.with_parameters(eta_o=np.array([0.8, 1.37, 2.5]))
+    t1, u1 = bias_ramp(10.0, rows=90)
+    t2, u2 = bias_ramp(160.0, strain_end=0.3, rows=40)
+    t2, u2 = np.r_[t2, t2[-1] + np.linspace(1.0, 30.0, 15)], np.r_[u2, np.full(15, u2[-1])]
+    hot, warm = {"temperature_C": 50.0}, {"temperature_C": 30.0}
+    runs = {
+        "bias_extension": [dict(time_s=t1, displacement_mm=u1, length_mm=L0, width_mm=W0,
+                                conditions=hot),
+                           dict(time_s=t2, displacement_mm=0.8 * u2, length_mm=150.0,
+                                width_mm=50.0, conditions=warm),
+                           dict(time_s=t2, displacement_mm=u2, length_mm=L0, width_mm=W0)],
+        "tensile": [dict(time_s=t1, displacement_mm=u1 / 100.0, gauge_length_mm=100.0,
+                         conditions=hot),
+                    dict(time_s=t2, displacement_mm=u2 / 50.0, gauge_length_mm=80.0,
+                         conditions=warm)],
+        "picture_frame": [dict(time_s=t1, displacement_mm=0.3 * u1, frame_side_mm=200.0,
+                               fabric_side_mm=150.0, conditions=hot),
+                          dict(time_s=t2, displacement_mm=0.3 * u2, frame_side_mm=145.0,
+                               fabric_side_mm=145.0, conditions=warm)],
+    }
+    alone = {"bias_extension": uc.bias_extension, "tensile": uc.tensile,
+             "picture_frame": uc.picture_frame}
+    for m in (model, many):
+        for kind, given in runs.items():
+            together = uc.curves(m, kind, given)
+            for run, curve in zip(given, together):
+                one = alone[kind](m, **run)
+                assert curve.force_per_tow_N.shape == one.force_per_tow_N.shape
+                for name in ("force_per_tow_N", "tow_strain", "shear_deg",
+                             "transverse_strain", "diagonal_stress_N"):
+                    np.testing.assert_allclose(getattr(curve, name), getattr(one, name),
+                                               rtol=1e-9, atol=1e-12, err_msg=f"{kind} {name}")
+                np.testing.assert_array_equal(curve.time_s, run["time_s"])
+
+
 def test_shear_tension_coupling_and_temperature():
     model = default_model()
     t, u = bias_ramp(40.0, rows=80)

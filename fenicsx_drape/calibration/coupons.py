@@ -57,27 +57,33 @@ def simulate(bundle_or_test: Bundle | Test, model) -> np.ndarray | dict[str, np.
     ``(k, n_rows)``.
     """
     if isinstance(bundle_or_test, Bundle):
-        return {t.id: simulate(t, model) for t in bundle_or_test.of_kind(*COUPON_KINDS)}
+        tests = bundle_or_test.of_kind(*COUPON_KINDS)
+        return {t.id: f for t, f in zip(tests, simulate_tests(tests, model))}
+    return simulate_tests([bundle_or_test], model)[0]
+
+
+def simulate_tests(tests: Sequence[Test], model) -> list[np.ndarray]:
+    """:func:`simulate` of each test; the tests of one kind are solved side by side."""
     from fenicsx_drape import unitcell
 
-    test = bundle_or_test
-    if test.kind == "tensile":
-        curve = unitcell.tensile(model, test.time_s, test.displacement_mm,
-                                 gauge_length_mm=test.gauge_length_mm,
-                                 conditions=test.conditions)
-    elif test.kind == "bias_extension":
-        curve = unitcell.bias_extension(model, test.time_s, test.displacement_mm,
-                                        length_mm=test.length_mm, width_mm=test.width_mm,
-                                        conditions=test.conditions)
-    elif test.kind == "picture_frame":
-        curve = unitcell.picture_frame(model, test.time_s, test.displacement_mm,
-                                       frame_side_mm=test.frame_side_mm,
-                                       fabric_side_mm=test.fabric_side_mm,
-                                       conditions=test.conditions)
-    else:
-        raise ValueError(f"test {test.id!r}: a {test.kind} test is not a coupon test")
-    # curves are (n_rows,) or (n_rows, k): return one row per parameter set
-    return np.asarray(curve.force_per_tow_N).T * test.tows
+    for test in tests:
+        if test.kind not in COUPON_KINDS:
+            raise ValueError(f"test {test.id!r}: a {test.kind} test is not a coupon test")
+    forces: list[np.ndarray] = [np.empty(0)] * len(tests)
+    for kind in COUPON_KINDS:
+        chosen = [i for i, t in enumerate(tests) if t.kind == kind]
+        runs = [{"time_s": tests[i].time_s, "displacement_mm": tests[i].displacement_mm,
+                 "conditions": tests[i].conditions,
+                 **{name: getattr(tests[i], name) for name in _GEOMETRY[kind]}}
+                for i in chosen]
+        for i, curve in zip(chosen, unitcell.curves(model, kind, runs)):
+            # curves are (n_rows,) or (n_rows, k): one row per parameter set
+            forces[i] = np.asarray(curve.force_per_tow_N).T * tests[i].tows
+    return forces
+
+
+_GEOMETRY = {"tensile": ("gauge_length_mm",), "bias_extension": ("length_mm", "width_mm"),
+             "picture_frame": ("frame_side_mm", "fabric_side_mm")}
 
 
 def test_noise(test: Test) -> tuple[np.ndarray, float, str]:
@@ -209,7 +215,7 @@ class Residuals:
         """Simulated forces (k × n_rows per test) for parameter sets ``P``."""
         model = self.model_at(P)
         self.evaluations += 1 if P.ndim == 1 else P.shape[0]
-        return [np.atleast_2d(simulate(t, model)) for t in self.tests]
+        return [np.atleast_2d(f) for f in simulate_tests(self.tests, model)]
 
     def residuals_sets(self, X: np.ndarray) -> np.ndarray:
         """Residual vectors (k × m) for variable sets ``X`` (k × n)."""
