@@ -322,8 +322,11 @@ def curves(model: Model, kind: str, runs: Sequence[Mapping]) -> list[UnitCellCur
         Each run's curve, as the kind's function gives it; a row of T tests costs about
         one test's (tests whose conditions have the same names are stepped together).
     """
-    solve = {"tensile": _tensile, "bias_extension": _bias_extension,
-             "picture_frame": _picture_frame}[kind]
+    solvers = {"tensile": _tensile, "bias_extension": _bias_extension,
+               "picture_frame": _picture_frame}
+    if kind not in solvers:
+        raise ValueError(f"unit cell: no coupon test of kind {kind!r} (one of {list(solvers)})")
+    solve = solvers[kind]
     out: list[UnitCellCurve | None] = [None] * len(runs)
     for batch in _batches(model, runs):
         for i, curve in zip(batch, solve(model, [runs[i] for i in batch])):

@@ -22,6 +22,12 @@ def test_translation_is_piecewise_linear_and_constant_beyond_the_table():
     np.testing.assert_allclose(m.apply(X, 25.0), X + np.array([5.0, 0.0, 50.0]))
     np.testing.assert_allclose(m.displacement(X, 5.0, 25.0), np.tile([2.5, 0, 40], (20, 1)))
     assert RigidMotion.fixed().is_fixed and not m.is_fixed
+    # The translations kept for the times asked are not the caller's to change.
+    m.at(25.0)[1][:] = 0.0
+    np.testing.assert_allclose(m.at(25.0)[1], [5, 0, 50], atol=1e-12)
+    np.testing.assert_allclose(m.apply(X, 25.0), X + np.array([5.0, 0.0, 50.0]))
+    assert m == RigidMotion(time_s=[0.0, 10.0, 40.0], z_mm=[0.0, 20.0, 80.0],
+                            x_mm=[0.0, 5.0, 5.0])
 
 
 def test_rotation_about_an_axis_through_a_centre():

@@ -136,26 +136,40 @@ class RigidMotion:
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The rotation R (3, 3) and translation T (3,) at time ``t``: x = R (X − c) + c + T."""
-        T = np.array([np.interp(t, self.time_s, c) for c in (self.x_mm, self.y_mm, self.z_mm)])
+        T = self._translation(t).copy()
         if self.rotation_deg is None:
             return np.eye(3), T
         return rotation_matrix(self.axis, self.angle_deg(t)), T
 
+    def _translation(self, t: float) -> np.ndarray:
+        """T(t) (read only), kept for the last few times asked.
+
+        A load step asks for the same few times at every contact evaluation.
+        """
+        known = self.__dict__.setdefault("_known", {})  # not a field: no part of eq, replace()
+        T = known.get(t)
+        if T is None:
+            if len(known) >= 8:
+                known.clear()
+            T = known[t] = np.array([np.interp(t, self.time_s, c)
+                                     for c in (self.x_mm, self.y_mm, self.z_mm)])
+        return T
+
     def apply(self, X: np.ndarray, t: float) -> np.ndarray:
         """Positions (n, 3) at time ``t`` of the tool's material points ``X`` (its own frame)."""
         X = np.asarray(X, dtype=float).reshape(-1, 3)
-        R, T = self.at(t)
         if self.rotation_deg is None:
-            return X + T
+            return X + self._translation(t)
+        R, T = self.at(t)
         c = np.asarray(self.centre_mm)
         return (X - c) @ R.T + c + T
 
     def inverse(self, x: np.ndarray, t: float) -> np.ndarray:
         """The tool-frame coordinates X (n, 3) of the points at ``x`` at time ``t``."""
         x = np.asarray(x, dtype=float).reshape(-1, 3)
-        R, T = self.at(t)
         if self.rotation_deg is None:
-            return x - T
+            return x - self._translation(t)
+        R, T = self.at(t)
         c = np.asarray(self.centre_mm)
         return (x - c - T) @ R + c  # Rᵀ (x − c − T) + c, row by row
 
@@ -191,6 +205,6 @@ class RigidMotion:
         """How far (n, 3) the tool's material point at ``x`` at time ``t1`` moved since ``t0``."""
         x = np.asarray(x, dtype=float).reshape(-1, 3)
         if self.rotation_deg is None:
-            T1, T0 = self.at(t1)[1], self.at(t0)[1]
-            return np.broadcast_to(T1 - T0, x.shape).copy()
+            d = self._translation(t1) - self._translation(t0)
+            return np.broadcast_to(d, x.shape).copy()
         return x - self.apply(self.inverse(x, t1), t0)
