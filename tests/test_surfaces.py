@@ -212,6 +212,32 @@ def test_closest_points_are_exact_and_the_boundary_is_flagged():
     assert (sd[on_boundary] >= 0).all()
 
 
+def test_few_points_measured_against_every_triangle_are_the_search(monkeypatch):
+    """Few points (a holder per step): all point-triangle pairs, the search's answer; a point
+    on an edge or a corner inside the surface is on it, whichever triangle wins the tie."""
+    import fenicsx_drape.forming.tools.surfaces as surfaces
+
+    s = disc_surface()
+    x = np.column_stack([RNG.uniform(-12, 12, (300, 2)), RNG.uniform(-3, 3, 300)])
+    chunks = np.array_split(np.arange(len(x)), 10)  # 30 points × 192 triangles a call
+    assert 30 * len(s.triangles) <= surfaces._ALL_PAIRS
+    pairs = [np.concatenate(c) for c in zip(*(s.closest(x[i]) for i in chunks))]
+    monkeypatch.setattr(surfaces, "_ALL_PAIRS", 0)
+    searched = [np.concatenate(c) for c in zip(*(s.closest(x[i]) for i in chunks))]
+    np.testing.assert_allclose(pairs[0], searched[0], atol=1e-12)
+    np.testing.assert_allclose(pairs[1], searched[1], atol=1e-12)
+    np.testing.assert_array_equal(pairs[2], searched[2])
+    monkeypatch.undo()
+    p, t = s.points, s.triangles
+    r = np.hypot(p[:, 0], p[:, 1])
+    middles = 0.5 * (p[t[:, 0]] + p[t[:, 1]])
+    rm = np.hypot(middles[:, 0], middles[:, 1])
+    on = np.concatenate([p[(r > 3) & (r < 9)], middles[(rm > 3) & (rm < 9)]])
+    for part in np.array_split(on, 8):
+        _, d, on_boundary = s.closest(part)
+        assert d.max() < 1e-12 and not on_boundary.any()
+
+
 def test_point_triangle_regions():
     a, b, c = np.array([0.0, 0, 0]), np.array([1.0, 0, 0]), np.array([0.0, 1, 0])
     p = np.array([[0.2, 0.2, 1.0], [-1, -1, 0], [2, -0.1, 0], [-0.5, 2, 0], [0.5, -1, 0],

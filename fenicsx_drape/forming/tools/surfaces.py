@@ -77,6 +77,7 @@ _read_cache: dict[tuple, TriangleSurface] = {}
 
 # Regions of the closest point on a triangle (a, b, c): the face, the corners, the edges.
 FACE, CORNER_A, CORNER_B, CORNER_C, EDGE_AB, EDGE_BC, EDGE_CA = range(7)
+_ALL_PAIRS = 16384  # nearest(): up to this many point-triangle pairs, all are measured
 
 
 def sheet_side_vector(side: str | Sequence[float] | None) -> np.ndarray:
@@ -476,18 +477,26 @@ class TriangleSurface:
     _k_start = 8  # candidates per point in the first round of a group's search
 
     def _nearest(self, x: np.ndarray):
-        tree, _, groups = self._tree
-        n = len(x)
-        # A first bound: the triangles of the 4 nearest centroids.
-        k = min(4, len(self.triangles))
-        _, cand = tree.query(x, k=k)
-        cand = cand.reshape(n, -1)
-        d2 = self._pairs(np.repeat(x, cand.shape[1], axis=0), cand.ravel())[0]
-        d2 = d2.reshape(n, -1)
-        j = np.argmin(d2, axis=1)
-        best, best_t = d2[np.arange(n), j], cand[np.arange(n), j]
-        for gtree, reach, ids in groups:
-            self._search(x, gtree, reach, ids, best, best_t)
+        n, m = len(x), len(self.triangles)
+        if n * m <= _ALL_PAIRS:  # few pairs (a holder ring per step): measure them all
+            d2, _, _, region = self._pairs(np.repeat(x, m, axis=0), np.tile(np.arange(m), n))
+            d2, region = d2.reshape(n, m), region.reshape(n, m)
+            # Triangles equally close to rounding (a point on an edge or corner they share):
+            # one whose face holds the point wins over an edge or a corner.
+            tie = d2 <= d2.min(axis=1, keepdims=True) + 1e-12
+            best_t = np.argmax(np.where(tie, 1 + (region == FACE), 0), axis=1)
+        else:
+            tree, _, groups = self._tree
+            # A first bound: the triangles of the 4 nearest centroids.
+            k = min(4, m)
+            _, cand = tree.query(x, k=k)
+            cand = cand.reshape(n, -1)
+            d2 = self._pairs(np.repeat(x, cand.shape[1], axis=0), cand.ravel())[0]
+            d2 = d2.reshape(n, -1)
+            j = np.argmin(d2, axis=1)
+            best, best_t = d2[np.arange(n), j], cand[np.arange(n), j]
+            for gtree, reach, ids in groups:
+                self._search(x, gtree, reach, ids, best, best_t)
         # The winners again, with their closest points and regions.
         _, v, w, region = self._pairs(x, best_t)
         a, ab, ac, _ = self._frames
