@@ -189,9 +189,9 @@ def test_tests_side_by_side_equal_each_test_alone():
     alone = {"bias_extension": uc.bias_extension, "tensile": uc.tensile,
              "picture_frame": uc.picture_frame}
     for m in (model, many):
-        for kind, given in runs.items():
-            together = uc.curves(m, kind, given)
-            for run, curve in zip(given, together):
+        for kind, of_kind in runs.items():
+            together = uc.curves(m, kind, of_kind)
+            for run, curve in zip(of_kind, together):
                 one = alone[kind](m, **run)
                 assert curve.force_per_tow_N.shape == one.force_per_tow_N.shape
                 for name in ("force_per_tow_N", "tow_strain", "shear_deg",
