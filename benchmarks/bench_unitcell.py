@@ -4,13 +4,11 @@
 
 Prints CPU milliseconds per test (best of 5) for a tensile and a bias-extension test of 300
 rows with Table 2, with 1 and with k parameter sets evaluated together (the fitting code's
-finite-difference Jacobians), the cost of a fit-sized batch (tensile + three bias rates) one
-test at a time and with the bias tests side by side (``unitcell.curves``), and the wall time
-of ``drape fit`` (no analysis) on two bundles of ``demos/bundles``.
+finite-difference Jacobians), and the cost of a fit-sized batch (tensile + three bias rates)
+one test at a time and with the bias tests side by side (``unitcell.curves``).
 """
 
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -57,17 +55,6 @@ def main():
 
     print(f"tensile + three bias rates: {best_ms(batch, 3):.0f} ms one by one, "
           f"{best_ms(side_by_side, 3):.0f} ms side by side")
-
-    from fenicsx_drape.calibration.fit import fit
-    from fenicsx_drape.measurements.bundle import load_bundle
-
-    bundles = Path(__file__).resolve().parents[1] / "demos" / "bundles"
-    for name in ("cao2008-plain-hkust", "twill-table2"):
-        bundle = load_bundle(bundles / name)
-        start = time.perf_counter()
-        fit(bundle, default_model(), analyse=False)
-        print(f"drape fit {name} ({len(bundle.tests)} tests, no analysis): "
-              f"{time.perf_counter() - start:.1f} s")
 
 
 if __name__ == "__main__":
