@@ -33,6 +33,9 @@ from fenicsx_drape.measurements.noise import (
 COUPON_KINDS = ("tensile", "bias_extension", "picture_frame")
 # The law role whose parameters each coupon kind identifies (the paper's blocks).
 BLOCK_ROLE = {"tensile": "tow", "bias_extension": "shear", "picture_frame": "shear"}
+# The geometry of each coupon kind: a test's keys the unit cell takes.
+_GEOMETRY = {"tensile": ("gauge_length_mm",), "bias_extension": ("length_mm", "width_mm"),
+             "picture_frame": ("frame_side_mm", "fabric_side_mm")}
 
 
 def law_role(kind: str) -> str:
@@ -80,10 +83,6 @@ def simulate_tests(tests: Sequence[Test], model) -> list[np.ndarray]:
             # curves are (n_rows,) or (n_rows, k): one row per parameter set
             forces[i] = np.asarray(curve.force_per_tow_N).T * tests[i].tows
     return forces
-
-
-_GEOMETRY = {"tensile": ("gauge_length_mm",), "bias_extension": ("length_mm", "width_mm"),
-             "picture_frame": ("frame_side_mm", "fabric_side_mm")}
 
 
 def test_noise(test: Test) -> tuple[np.ndarray, float, str]:
