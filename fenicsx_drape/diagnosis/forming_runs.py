@@ -372,18 +372,25 @@ def _shutdown() -> None:
     _pools.clear()
 
 
+# Open MPI's settings that ./drape gives (not a launcher's job): as root, without the
+# libfabric transport, whose probe of the network costs a second of each worker's start.
+_MPI_SETTINGS = ("OMPI_ALLOW_RUN_AS_ROOT", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "OMPI_MCA_btl")
+
+
 @contextlib.contextmanager
 def _fresh_workers() -> Iterator[None]:
     """Start local workers as fresh programs: each its own MPI job, not the caller's script.
 
-    Without the MPI launcher's environment a worker is a job of one process; without the
-    caller's ``__main__`` (the worker would run a script again, e.g. a demo, to import it) it
-    imports only this package.
+    Without the MPI launcher's environment a worker is a job of one process (the settings of
+    how Open MPI runs here stay: :data:`_MPI_SETTINGS`); without the caller's ``__main__``
+    (the worker would run a script again, e.g. a demo, to import it) it imports only this
+    package.
     """
     import sys
     import types
 
-    launcher = {k: v for k, v in os.environ.items() if k.startswith(("OMPI_", "PMIX_", "PMI_"))}
+    launcher = {k: v for k, v in os.environ.items()
+                if k.startswith(("OMPI_", "PMIX_", "PMI_")) and k not in _MPI_SETTINGS}
     for k in launcher:
         del os.environ[k]
     main = sys.modules["__main__"]
