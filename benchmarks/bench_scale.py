@@ -1,7 +1,7 @@
 """The forming runs of a diagnosis at scale: workers, a warm cache, the executor's cost.
 
 The bundle is a whole grid of the small octagon case of ``tests/test_forming_case_diagnosis.py``
-(20 mm cells, a few seconds a run), formed with the paper's model and 0.3 mm noise; the
+(20 mm cells, under a second a run), formed with the paper's model and 0.3 mm noise; the
 baseline lacks ``tow_buckling``. Printed:
 
 - the wall time of ``diagnose`` (candidates ``--candidates``, no set-up candidates, no disk

@@ -1,7 +1,7 @@
 """The forming runs at scale: every core through concurrent.futures, and remembered on disk.
 
 The runs are those of the small octagon case of ``test_forming_case_diagnosis.py`` (39
-nodes, a few seconds each). The same runs on 1, 2 and 3 worker processes (and under
+nodes, under a second each). The same runs on 1, 2 and 3 worker processes (and under
 ``mpi4py.futures``) give the same sheets to the last digit, in the order asked; a run that
 fails comes back as its error, naming its case and model, after the others; a second
 ``compare`` of a bundle with its cache forms nothing; a damaged cache entry or one of another
