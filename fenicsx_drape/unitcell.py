@@ -229,17 +229,19 @@ class _Lanes:
     every lane twice.
     """
 
-    def __init__(self, model: Model, times: Sequence[np.ndarray],
-                 conditions: Sequence[Mapping[str, float] | None]) -> None:
-        self.k, self.m, self.T = model.n_sets, model.n_sets or 1, len(times)
-        self.n_rows = [len(t) for t in times]
-        self.t = self.rows(times)
+    def __init__(self, model: Model, runs: Sequence[Mapping]) -> None:
+        self.histories = [_history(run["time_s"], run["displacement_mm"]) for run in runs]
+        self.k, self.m, self.T = model.n_sets, model.n_sets or 1, len(runs)
+        self.n_rows = [len(t) for t, _ in self.histories]
+        self.t = self.rows([t for t, _ in self.histories])
+        self.lane = np.repeat(np.arange(self.T), self.m)  # the test of each lane
         weights, used = zip(*(_extrapolation(self.t[:, j]) for j in range(self.T)))
         self._weights = np.repeat(np.stack(weights, axis=2), self.m, axis=2)  # (n, 4, lanes)
         # Which of the 3 changes between rows i-4..i-1 the safeguard of predict() looks at.
         self._changes = np.repeat(np.stack(used, axis=1), self.m, axis=1)[:, None, :] > (
             3 - np.arange(3))[None, :, None]
-        lanes = dict(conditions[0] or {})
+        conditions = [run.get("conditions") or {} for run in runs]
+        lanes = dict(conditions[0])
         if self.T > 1:  # the callers group tests by the names of their conditions
             model = dataclasses.replace(model, parameters={
                 n: np.tile(v, self.T) if np.ndim(v) else v for n, v in model.parameters.items()})
@@ -260,7 +262,6 @@ class _Lanes:
     def lanes(self, per_test) -> np.ndarray:
         """A value per test (T,) as a value per lane (T·m,)."""
         return np.repeat(np.asarray(per_test, dtype=float), self.m)
-
     def step(self, i: int):
         """The step to row i (s): per lane and per stacked lane (one number for one test)."""
         if self.T == 1:
@@ -283,11 +284,10 @@ class _Lanes:
         return np.clip(np.einsum("ql,ql->l", self._weights[i], rows), last - reach,
                        last + reach)
 
-    def curves(self, histories: Sequence[tuple[np.ndarray, np.ndarray]],
-               **columns: np.ndarray) -> list[UnitCellCurve]:
+    def curves(self, **columns: np.ndarray) -> list[UnitCellCurve]:
         """Each test's curve: its (time, displacement) and its rows and lanes of ``columns``."""
         out = []
-        for j, (t, u) in enumerate(histories):
+        for j, (t, u) in enumerate(self.histories):
             lanes = slice(j * self.m, (j + 1) * self.m)
             test = {name: c[:len(t), lanes] for name, c in columns.items()}
             if self.k is None:
@@ -361,18 +361,14 @@ def tensile(
 
 
 def _tensile(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve]:
-    histories, strains = [], []
     for run in runs:
-        t, u = _history(run["time_s"], run["displacement_mm"])
         L_g = run["gauge_length_mm"]
         if not (np.isfinite(L_g) and L_g > 0.0):
             raise DrapeInputError(f"tensile: gauge_length_mm = {L_g} must be > 0")
-        e = u / L_g
-        histories.append((t, u))
-        strains.append(e + 0.5 * e**2)
-    cell = _Lanes(model, [t for t, _ in histories], [r.get("conditions") for r in runs])
+    cell = _Lanes(model, runs)
     tows, shear, k_st = cell.stacked["tow"], cell.laws["shear"], cell.k_st
-    ε1_rows = cell.rows(strains)
+    e = [u / run["gauge_length_mm"] for run, (_, u) in zip(runs, cell.histories)]
+    ε1_rows = cell.rows([e_j + 0.5 * e_j**2 for e_j in e])
     n, m = ε1_rows.shape[0], cell.T * cell.m
     xs = np.zeros((n, m))
     out = {name: np.zeros((n, m)) for name in ("force", "sigma_1", "tau")}
@@ -404,9 +400,9 @@ def _tensile(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve]:
                                                         f"tensile balance at row {i}")
         xs[i], out["force"][i] = x + δ, f + df * δ
         out["sigma_1"][i], out["tau"][i] = σ1, τ + dτ * δ
-    lane = np.repeat(np.arange(cell.T), cell.m)
-    return cell.curves(histories, force_per_tow_N=out["force"], tow_strain=ε1_rows[:, lane],
-                       diagonal_strain=0.5 * (ε1_rows[:, lane] + xs),
+    ε1 = ε1_rows[:, cell.lane]
+    return cell.curves(force_per_tow_N=out["force"], tow_strain=ε1,
+                       diagonal_strain=0.5 * (ε1 + xs),
                        shear_deg=np.zeros((n, m)), transverse_strain=xs,
                        tow_stress_N=out["sigma_1"], diagonal_stress_N=out["tau"])
 
@@ -440,16 +436,13 @@ def bias_extension(
 
 
 def _bias_extension(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve]:
-    histories, strains = [], []
-    for run in runs:
-        t, u = _history(run["time_s"], run["displacement_mm"])
-        εd1 = bias_diagonal_strain(u, run["length_mm"], run["width_mm"])
-        if np.any(εd1 <= -0.5):
+    cell = _Lanes(model, runs)
+    strains = []
+    for run, (_, u) in zip(runs, cell.histories):
+        strains.append(bias_diagonal_strain(u, run["length_mm"], run["width_mm"]))
+        if np.any(strains[-1] <= -0.5):
             raise DrapeInputError(f"bias extension: displacement {u.min()} mm closes the gauge "
                                   "region (diagonal strain <= -0.5)")
-        histories.append((t, u))
-        strains.append(εd1)
-    cell = _Lanes(model, [t for t, _ in histories], [r.get("conditions") for r in runs])
     tow, diagonals, k_st = cell.laws["tow"], cell.stacked["shear"], cell.k_st
     εd1_rows = cell.rows(strains)
     n, m = εd1_rows.shape[0], cell.T * cell.m
@@ -484,11 +477,10 @@ def _bias_extension(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve
             residual, guess, lower, f"bias-extension balance at row {i}")
         xs[i], out["force"][i] = x + δ, f + df * δ
         out["sigma"][i], out["tau_1"][i] = σ + dσ * δ, τ1 + dτ1 * δ
-    lane = np.repeat(np.arange(cell.T), cell.m)
-    εd1 = εd1_rows[:, lane]
+    εd1 = εd1_rows[:, cell.lane]
     εd2 = 2.0 * xs - εd1
     shear_deg = np.degrees(np.arcsin(np.clip((εd1 - εd2) / (1.0 + 2.0 * xs), -1.0, 1.0)))
-    return cell.curves(histories, force_per_tow_N=out["force"], tow_strain=xs, diagonal_strain=εd1,
+    return cell.curves(force_per_tow_N=out["force"], tow_strain=xs, diagonal_strain=εd1,
                        shear_deg=shear_deg, transverse_strain=εd2, tow_stress_N=out["sigma"],
                        diagonal_stress_N=out["tau_1"])
 
@@ -653,19 +645,14 @@ def picture_frame(
 
 
 def _picture_frame(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve]:
-    histories, angles, ratios = [], [], []
     for run in runs:
-        t, u = _history(run["time_s"], run["displacement_mm"])
         frame, fabric = run["frame_side_mm"], run["fabric_side_mm"]
         if not (np.isfinite(frame) and np.isfinite(fabric) and 0.0 < fabric <= frame):
             raise DrapeInputError(f"picture frame: need 0 < fabric_side_mm <= frame_side_mm, "
                                   f"got fabric_side_mm = {fabric}, frame_side_mm = {frame}")
-        histories.append((t, u))
-        angles.append(np.radians(picture_frame_shear_angle(u, frame)))
-        ratios.append(fabric / frame)
-    cell = _Lanes(model, [t for t, _ in histories], [r.get("conditions") for r in runs])
-    lane = np.repeat(np.arange(cell.T), cell.m)
-    γ = cell.rows(angles)[:, lane]
+    cell = _Lanes(model, runs)
+    γ = cell.rows([np.radians(picture_frame_shear_angle(u, run["frame_side_mm"]))
+                   for run, (_, u) in zip(runs, cell.histories)])[:, cell.lane]
     n, m = γ.shape
     diagonals, tow = cell.stacked["shear"], cell.laws["tow"]
     # The tows stay at their length: their stress is the law's at zero strain (what a
@@ -674,7 +661,7 @@ def _picture_frame(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve]
     c, _ = shear_tension_factor(σ_t, cell.k_st)
     εd = 0.5 * np.sin(γ)
     cot_θ = np.sqrt((1.0 + np.sin(γ)) / (1.0 - np.sin(γ)))  # λ_1/λ_2
-    ratio = cell.lanes(ratios)
+    ratio = cell.lanes([run["fabric_side_mm"] / run["frame_side_mm"] for run in runs])
     force, tau_1 = np.zeros((n, m)), np.zeros((n, m))
     state = diagonals.initial_state(2 * m)
     for i in range(n):
@@ -683,7 +670,7 @@ def _picture_frame(model: Model, runs: Sequence[Mapping]) -> list[UnitCellCurve]
         τ1, τ2 = c * τ[:m], c * τ[m:]
         force[i] = ratio * (τ1 - τ2 * cot_θ[i])
         tau_1[i] = τ1
-    return cell.curves(histories, force_per_tow_N=force, tow_strain=np.zeros((n, m)),
+    return cell.curves(force_per_tow_N=force, tow_strain=np.zeros((n, m)),
                        diagonal_strain=εd, shear_deg=np.degrees(γ), transverse_strain=-εd,
                        tow_stress_N=σ_t + 0.0 * force, diagonal_stress_N=tau_1)
 
