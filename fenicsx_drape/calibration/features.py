@@ -37,7 +37,6 @@ from collections.abc import Sequence
 
 import numpy as np
 from scipy.optimize import nnls
-from scipy.signal import savgol_filter
 
 from fenicsx_drape.measurements.bundle import Test
 
@@ -72,6 +71,8 @@ def _increasing(grid: np.ndarray, n: int):
 
 def _smooth(y: np.ndarray, window: int = 9) -> np.ndarray:
     """Local quadratic smoothing (Savitzky-Golay) of a densely sampled curve."""
+    from scipy.signal import savgol_filter  # here: scipy.signal takes half a second to import
+
     return savgol_filter(y, window, 2) if y.size > 2 * window else y
 
 

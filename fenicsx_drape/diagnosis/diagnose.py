@@ -59,15 +59,20 @@ the held-out folds); the baseline fitted, with its outliers left out (:func:`_ba
 the set-up stage on the bundle less its outliers
 (:func:`~fenicsx_drape.diagnosis.setup.setup_stage`: the stated set-up's own fits are its
 reference; the best set-up, when one is significant, is applied and the baseline refitted at
-it, :func:`_at_setup`); the baseline's held-out error (:func:`_with_heldout`); resolution
-(:func:`~fenicsx_drape.diagnosis.resolution.check_resolution`); the effects, one candidate at a
-time (:func:`_try_effect`); the report and its decision (:func:`_report`). The confirmation on
-a finer net is ``drape diagnose --confirm-cell-mm`` (:func:`confirm`).
+it, :func:`_at_setup`); the baseline's held-out error (:func:`_with_heldout`) and resolution
+(:func:`~fenicsx_drape.diagnosis.resolution.check_resolution`); the effects, each candidate
+refitted and judged (:func:`_try_effect`); the report and its decision (:func:`_report`).
+The confirmation on a finer net is ``drape diagnose --confirm-cell-mm`` (:func:`confirm`).
+Stages that do not need each other's results (the candidates; the folds; the held-out error
+and resolution) run through :func:`~fenicsx_drape.diagnosis.forming_runs.together`: the same
+results as one after the other, their forming runs in common batches that keep every worker
+busy.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -97,7 +102,7 @@ from fenicsx_drape.diagnosis.data_check import (
     say_suspects,
     suspect_tests,
 )
-from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM
+from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM, together
 from fenicsx_drape.diagnosis.kinds import Comparison, sd_column_of
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained, finer_net
 from fenicsx_drape.diagnosis.resolution import sentence as resolution_sentence
@@ -281,18 +286,23 @@ def _with_setup_refitted(stage: dict[str, Any], model: Model, data: _Data, noise
 
 
 def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
-    """Every row predicted by the fold that held it out (module doc, 5.)."""
+    """Every row predicted by the fold that held it out (module doc, 5.); the folds at once."""
     predicted = {t.id: np.full(np.shape(KINDS[t.kind].measured(t)), np.nan) for t in data.tests}
     tests = {t.id: t for t in data.tests}
-    for i, fold in enumerate(data.folds):
+
+    def fold_values(fold: Fold, i: int, say: Progress) -> np.ndarray:
         say(f"    held-out fold {i + 1}/{len(data.folds)}: {fold.label}")
         test = tests[fold.predicts]
         fitted = _fit(fold.bundle, model, tests=fold.fitted,
                       parameters=_kind_parameters(model, test.kind),
                       max_iterations=FOLD_ITERATIONS)
-        values = simulate([test], fitted)[test.id]
+        return simulate([test], fitted)[test.id]
+
+    folds = together([functools.partial(fold_values, fold, i)
+                      for i, fold in enumerate(data.folds)], say)
+    for fold, values in zip(data.folds, folds):
         rows = np.repeat(fold.rows, values.size // fold.rows.size)  # forming: x, y, z per row
-        predicted[test.id][rows] = values[rows]
+        predicted[fold.predicts][rows] = values[rows]
     return predicted
 
 
@@ -446,18 +456,19 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         stage.update(parameters=list(parameters), given_model=model)
     if fixed is not base.data.bundle:
         base = _at_setup(base, _prepare(declare_noise(fixed, model.noise)), model, say)
-    base = _with_heldout(base, say)
-    # 5. Resolution before physics (spec version 4): the net's own error on each measurement.
-    checked = check_resolution(base.data.tests, base.model, base.compared, ADEQUATE, say)
+    # The baseline's held-out error, and 5. resolution before physics (spec version 4): the
+    # net's own error on each measurement. Independent of each other: their runs together.
+    base, checked = together([functools.partial(_with_heldout, base), functools.partial(
+        check_resolution, base.data.tests, base.model, base.compared, ADEQUATE)], say)
     resolved = explained(checked)
     if resolved:
         say(f"  the net explains the residual of {', '.join(sorted(resolved))}")
     # 6. Effects: every candidate refitted, judged on held-out rows.
+    # They are independent: tried together, their runs formed in common batches.
     tried, untestable = [], []
     names = [n for n in candidate_names(model) if candidates is None or n in candidates]
-    _first_runs_at_once(model, base, names)
-    for name in names:
-        entry = _try_effect(name, model, base, stage, resolved, say)
+    for entry in together([functools.partial(_try_effect, name, model, base, stage, resolved)
+                           for name in names], say):
         (untestable if "reason" in entry else tried).append(entry)
     # 7. The report (the confirmation on a finer net is drape diagnose's --confirm-cell-mm).
     report = _report(bundle, base, tried, untestable, stage, checked, resolved, say)
@@ -526,26 +537,6 @@ def _with_heldout(base: _Base, say: Progress) -> _Base:
     heldout = base.data.compare(_heldout(base.data, base.model, say))
     say(f"  held-out normalised error {normalised_error(heldout):.3g}")
     return dataclasses.replace(base, heldout=heldout)
-
-
-def _first_runs_at_once(model: Model, base: _Base, names: list[str]) -> None:
-    """Each candidate's first runs (its sensitivity, :func:`_sensitivity`) in one batch.
-
-    Asked one candidate after the other they were batches of a run or two: the workers
-    waited.
-    """
-    from fenicsx_drape.diagnosis.forming_runs import prefetch
-    from fenicsx_drape.effects import describe_effect
-
-    models = []
-    for name in names:
-        added = (*(p for p in describe_effect(name).prerequisites if p not in model.effects),
-                 name)
-        try:
-            models.append(base.model.with_effects(*added))
-        except DrapeInputError:  # its entry says why
-            continue
-    prefetch(lambda t=t, m=m: simulate([t], m) for m in models for t in base.data.tests)
 
 
 def _try_effect(name: str, model: Model, base: _Base, stage: dict[str, Any] | None,

@@ -212,8 +212,9 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     h = FD_STEP * np.eye(k)
     # A point's k finite differences are formed with it when it fits in their last batch of
     # runs at once for no extra time (k not a multiple of the workers: one parameter on two
-    # workers); else only at a point the fit takes (a rejected step's would be wasted: a
-    # fifth of a diagnosis's runs on one worker). The same numbers either way.
+    # workers; both starts' with them); else only at a point the fit takes (a rejected
+    # step's would be wasted: a fifth of a diagnosis's runs on one worker). The same numbers
+    # either way.
     eager = k % runs_at_once() != 0
 
     def residuals(*points: np.ndarray) -> np.ndarray:
@@ -223,22 +224,25 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
         R = residuals(*(p + h)) if R is None else R
         return (R - r).T / FD_STEP
 
-    def evaluate(*points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """The residuals at ``points`` and, when formed with them, the first one's Jacobian."""
-        R = residuals(*points, *((points[0] + h) if eager else ()))
+    def evaluate(*points: np.ndarray) -> tuple[np.ndarray, list[np.ndarray | None]]:
+        """The residuals at ``points`` and, when formed with them, each one's Jacobian."""
         m = len(points)
-        return R[:m], (slopes(points[0], R[0], R[m:]) if eager else None)
+        R = residuals(*points, *((q + h for q in points) if eager else ()))
+        if not eager:
+            return R[:m], [None] * m
+        return R[:m], [slopes(q, R[i], R[m + i * k:m + (i + 1) * k])
+                       for i, q in enumerate(points)]
 
     # Two starts, judged in the first batch of runs: the model's values and the parameters'
     # defaults (a warm start from a model without the right physics can sit far off).
     default = np.clip([parameter_info(n).default for n in names], *MU_BOUNDS)
-    R, J = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
-    r = R[0]
+    R, Js = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
+    r, J = R[0], Js[0]
     if len(R) > 1 and R[1] @ R[1] < r @ r:
         say(f"  forming fit: starting from the defaults "
             f"{ {n: round(float(v), 4) for n, v in zip(names, default)} } "
             f"(cost {R[1] @ R[1]:.4g}, was {r @ r:.4g})")
-        p, r, J = default, R[1], None
+        p, r, J = default, R[1], Js[1]
     for iteration in range(min(max_iterations, MAX_ITERATIONS)):
         J = slopes(p, r) if J is None else J
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
@@ -247,7 +251,7 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
             trial = np.clip(p + step / 2**attempt, *MU_BOUNDS)
             if np.abs(trial - p).max() < XTOL:
                 break
-            (r_new,), J_new = evaluate(trial)
+            (r_new,), (J_new,) = evaluate(trial)
             say(f"  forming fit {iteration + 1}: "
                 f"{ {n: round(float(v), 4) for n, v in zip(names, trial)} }, "
                 f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")

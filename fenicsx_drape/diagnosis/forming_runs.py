@@ -28,7 +28,9 @@ This module knows forming cases and models, not tests: the forming kind
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
+import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -54,8 +56,9 @@ WORKERS_ENV = "DRAPE_WORKERS"  # processes forming at once, when not given
 # run depends on, unlike the ones each problem keeps under its own prefix while it lives.
 USER_OPTIONS = ("snes_", "ksp_", "pc_", "mat_", "npc_", "sub_", "log_")
 
-_settings: dict[str, Any] = {"cell_mm": None,  # None: each case's own cell
-                             "workers": None,  # None: default_workers()
+# The cells of resolution(): a context variable, as a call of together() may set its own.
+_cell_mm: contextvars.ContextVar[float | None] = contextvars.ContextVar("cell_mm", default=None)
+_settings: dict[str, Any] = {"workers": None,  # None: default_workers()
                              "ranks_per_run": None,  # under mpirun; None: all ranks
                              "store": None}  # a RunStore, or None: runs kept in memory only
 _cache: dict[tuple, FormedGrid] = {}
@@ -76,17 +79,16 @@ def resolution(cell_mm: float | None) -> Iterator[None]:
     """
     if cell_mm is not None and not cell_mm > 0:
         raise DrapeInputError(f"forming cell size {cell_mm} mm must be > 0")
-    old = _settings["cell_mm"]
-    _settings["cell_mm"] = None if cell_mm is None else float(cell_mm)
+    token = _cell_mm.set(None if cell_mm is None else float(cell_mm))
     try:
         yield
     finally:
-        _settings["cell_mm"] = old
+        _cell_mm.reset(token)
 
 
 def cell_override() -> float | None:
     """The unit cell (mm) a :func:`resolution` sets for every run, None for the cases' own."""
-    return _settings["cell_mm"]
+    return _cell_mm.get()
 
 
 def default_workers() -> int:
@@ -534,50 +536,173 @@ def _form_in_groups(jobs: list[tuple[Any, Model]], groups: int) -> list[tuple[st
     return results
 
 
-class _Collected(BaseException):  # not an Exception: it passes the kinds' handlers
-    """Raised by :func:`form_many` while :func:`prefetch` collects the jobs it is asked."""
+class _Cancelled(BaseException):  # not an Exception: it passes the calls' handlers
+    """Raised in the calls of :func:`together` when forming their batch failed."""
 
 
-_collecting: list[list] = []
+_task = threading.local()  # in a call of together(): its group (.group) and place (.index)
 
 
-def prefetch(calls: Iterable[Callable[[], Any]]) -> None:
-    """Form at once, into memory, the runs that ``calls`` would each ask for in turn.
+class _Turns:
+    """The calls of one :func:`together`: which one runs, and the runs each waits for."""
 
-    Each call is run until it asks :func:`form_many` for its first runs, which are noted
-    instead of formed; then all of them go to the workers together, and the calls made
-    afterwards find their runs in memory. A run that fails is left for its call to report.
+    def __init__(self) -> None:
+        self.changed = threading.Condition()
+        self.running: int | None = None  # the call whose turn it is; None: the caller's
+        self.asked: dict[int, list] = {}  # the jobs each waiting call asked for
+        self.answers: dict[int, Any] = {}  # their results, or _Cancelled
+
+    def give(self, i: int) -> None:
+        """The caller's side: call ``i`` runs until it asks for runs or returns."""
+        with self.changed:
+            self.running = i
+            self.changed.notify_all()
+            self.changed.wait_for(lambda: self.running is None)
+
+    def wait(self, i: int) -> None:
+        with self.changed:
+            self.changed.wait_for(lambda: self.running == i)
+
+    def back(self) -> None:
+        with self.changed:
+            self.running = None
+            self.changed.notify_all()
+
+    def ask(self, i: int, jobs: list) -> list[tuple[str, Any]]:
+        """A call's side: the results of its jobs, formed with the other calls' (its turn ends)."""
+        self.asked[i] = jobs
+        self.back()
+        self.wait(i)
+        answer = self.answers.pop(i)
+        if answer is _Cancelled:
+            raise _Cancelled
+        return answer
+
+
+def together(calls: Sequence[Callable[[Callable[[str], None]], Any]],
+             progress: Callable[[str], None] | None = None) -> list[Any]:
+    """The results of ``calls`` as made one after the other, their forming runs formed at once.
+
+    Each call runs in a thread of its own, but only one at a time and in a fixed order: a call
+    runs until it asks :func:`form_many` for runs or returns, then the next one; when every
+    call waits or is done, the runs they wait for go to the workers in one batch (the
+    independent candidates of a diagnosis keep every core busy, where one after the other
+    they asked a run or two at a time). Every result is the one calling them in turn gives:
+    a run is the same whichever batch formed it. Calls may nest (a candidate's held-out
+    folds): an inner group's batch is a request of its caller's.
+
+    Args:
+        calls: Each is given its own ``say`` (a line of progress): the lines of every call
+            reach ``progress`` in the calls' order, each call's once those before it are done.
+        progress: Where the lines go (None: nowhere).
+
+    Returns:
+        Each call's result, in order. A call's exception is raised once all are done (the
+        first one's).
     """
-    jobs: list[tuple[Any, Model]] = []
-    _collecting.append(jobs)
-    try:
-        for call in calls:
-            try:
-                call()
-            except (_Collected, Exception):  # a call that fails fails again when made
-                pass
-    finally:
-        _collecting.pop()
-    if jobs:
-        with contextlib.suppress(Exception):
-            form_many(jobs)
+    calls = list(calls)
+    progress = progress or (lambda line: None)
+    turns = _Turns()
+    results: list[Any] = [None] * len(calls)
+    errors: dict[int, BaseException] = {}
+    lines: list[list[str]] = [[] for _ in calls]
+    done: set[int] = set()
+    shown = [0]  # the first call whose lines are not all shown
+
+    def show() -> None:
+        while shown[0] < len(calls):
+            i = shown[0]
+            for line in lines[i]:
+                progress(line)
+            lines[i].clear()
+            if i not in done:
+                return
+            shown[0] += 1
+
+    contexts = [contextvars.copy_context() for _ in calls]  # each call sees the caller's
+
+    def body(i: int) -> None:
+        _task.group, _task.index = turns, i
+        turns.wait(i)
+
+        def say(line: str) -> None:
+            lines[i].append(line)
+            show()
+
+        try:
+            results[i] = contexts[i].run(calls[i], say)
+        except BaseException as error:  # raised by together() once all are done
+            errors[i] = error
+        finally:
+            done.add(i)
+            show()
+            turns.back()
+
+    threads = [threading.Thread(target=body, args=(i,), daemon=True, name=f"together-{i}")
+               for i in range(len(calls))]
+    for thread in threads:
+        thread.start()
+    ready = list(range(len(calls)))
+    while ready:
+        for i in ready:
+            turns.give(i)
+        ready = sorted(turns.asked)
+        if not ready:
+            break
+        jobs = [turns.asked[i] for i in ready]
+        try:
+            formed = _gathered([job for asked in jobs for job in asked])
+        except BaseException:  # every waiting call stops; then this is raised
+            for i in ready:
+                turns.answers[i] = _Cancelled
+                del turns.asked[i]
+                turns.give(i)
+            raise
+        at = 0
+        for i, asked in zip(ready, jobs):
+            turns.answers[i] = formed[at:at + len(asked)]
+            at += len(asked)
+            del turns.asked[i]
+    for thread in threads:
+        thread.join()
+    if errors:
+        raise errors[min(errors)]
+    return results
 
 
 def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     """Formed sheets (modelled parts) of ``(case, model)`` jobs: remembered, new ones at once.
 
     The runs not in memory are looked up in the disk cache of :func:`execution`, the rest
-    formed by :func:`executor`'s processes and stored. A run that fails is raised (its
-    message naming the case and model) once the others are formed and kept.
+    formed by :func:`executor`'s processes and stored; inside :func:`together`, with the
+    runs the other calls wait for. A run that fails is raised (its message naming the case
+    and model) once the others are formed and kept.
     """
-    if _collecting:
-        _collecting[-1].extend(jobs)
-        raise _Collected
+    results = _gathered(list(jobs))
+    for (case, model), (status, value) in zip(jobs, results):
+        if status == "error":
+            raise _named(value, describe(case, model))
+    return [grid for _, grid in results]
+
+
+def _gathered(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
+    """``("ok", sheet)`` or ``("error", exception)`` per job, in the order of ``jobs``.
+
+    In a call of :func:`together`: from its group's batch; else formed here (:func:`_gather`).
+    """
+    turns = getattr(_task, "group", None)
+    if turns is not None:
+        return turns.ask(_task.index, jobs)
+    return _gather(jobs)
+
+
+def _gather(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
+    """:func:`_gathered`'s work: memory, then the disk cache, then the executor."""
     keys = [_key(case, model) for case, model in jobs]
     for k in dict.fromkeys(keys):  # the batch's runs in memory are the newest: kept
         if k in _cache:
             _cache[k] = _cache.pop(k)
-    got = {k: _cache[k] for k in keys if k in _cache}
+    got: dict[tuple, tuple[str, Any]] = {k: ("ok", _cache[k]) for k in keys if k in _cache}
     todo = {k: job for k, job in zip(keys, jobs) if k not in _cache}
     counts["asked"] += len(set(keys))
     counts["from_memory"] += len(set(keys)) - len(todo)
@@ -591,23 +716,19 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
             found = store.get(names[k])
             if found is not None:
                 _keep(k, found)
-                got[k] = found[0]
+                got[k] = ("ok", found[0])
                 counts["from_disk"] += 1
                 del todo[k]
-    failed = []
     if todo:
-        for (k, job), (status, value) in zip(todo.items(), _form_all(list(todo.values()))):
+        for k, (status, value) in zip(todo, _form_all(list(todo.values()))):
             if status == "error":
-                failed.append((job, value))
+                got[k] = (status, value)
                 continue
             counts["formed"] += 1
             _keep(k, value)
-            got[k] = value[0]
+            got[k] = ("ok", value[0])
             if store is not None:
                 store.put(names[k], *value)
-    if failed:
-        (case, model), error = failed[0]
-        raise _named(error, describe(case, model))
     return [got[k] for k in keys]
 
 

@@ -80,6 +80,7 @@ core of the pool, or all ranks under ``mpirun``.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -96,7 +97,7 @@ from fenicsx_drape.diagnosis.forming_fit import (
     value_sd,
     widened,
 )
-from fenicsx_drape.diagnosis.forming_runs import form_many, new_runs
+from fenicsx_drape.diagnosis.forming_runs import form_many, new_runs, together
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained
 from fenicsx_drape.errors import DrapeInputError, SolverError
 from fenicsx_drape.forming.case.format import FormingCase, broken_planes, with_overrides
@@ -414,15 +415,14 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     start = _start(name, test0, model)
     lo, hi = BOUNDS[name]
     k = len(start)
-    # The stated set-up on the model this parameter needs (the same runs when it keeps the
+    # 1. The scan: each axis moved by the values of SCAN, in one batch of runs with the
+    # stated set-up on the model this parameter needs (the same runs when it keeps the
     # case's planes).
-    base_values = runs.values([start])[0]
-    base_ho = normalised_error(runs.compare(base_values))
-    r0 = runs.residual(base_values)
-    # 1. The scan: each axis moved by the values of SCAN (one batch of runs).
     axes = [(i, v) for i in range(k) for v in SCAN[name]]
     points = [start + v * np.eye(k)[i] for i, v in axes]
-    scanned = runs.values(points, mirror=True)
+    base_values, *scanned = runs.values([start, *points], mirror=True)
+    base_ho = normalised_error(runs.compare(base_values))
+    r0 = runs.residual(base_values)
     first = [j for j, (i, v) in enumerate(axes) if v == min(u for u in SCAN[name] if u > 0)]
     change = float(np.sqrt(np.mean([
         np.mean((scanned[j][t.id] - base_values[t.id]) ** 2) / runs.noise[t.id][0] ** 2
@@ -640,6 +640,54 @@ def _show(name: str, p: np.ndarray, test: Test, model: Model) -> str:
 # The set-up stage
 
 
+def _setup_candidate(name: str, tests: Sequence[Test], test0: Test, model: Model,
+                     base_ho: float, rules: Rules, say: Progress
+                     ) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """One set-up candidate: its report entry and internal values, or (untestable entry, None).
+
+    ``base_ho`` is the stated set-up's held-out error (its evidence's numerator).
+    """
+    reason = _why_not(name, tests)
+    if reason is not None:
+        return {"effect": name, "setup": True, "reason": reason}, None
+    runs = _Runs(tests, model, name)
+    start = _start(name, test0, model)
+    say(f"set-up candidate {name}: from {_show(name, start, test0, model)}")
+    try:
+        c = _candidate(runs, test0, rules.untestable_below, say)
+    except (SolverError, DrapeInputError) as err:
+        return {"effect": name, "setup": True,
+                "reason": f"the part cannot be formed so: {err}"}, None
+    if c["untestable"]:
+        say(f"  untestable: {c['reason']}")
+        return {"effect": name, "setup": True, "reason": c["reason"],
+                "sensitivity": c["sensitivity"]}, None
+    ratio = base_ho / c["heldout_normalised"] if c["heldout_normalised"] > 0 else math.inf
+    entry = {"parameter": name, "stated": stated(test0, name, model),
+             "fitted": _fitted(name, c["p"], test0, model),
+             "sd": _sd(name, c["sd_internal"], test0, model),
+             "sd_fit": _sd(name, c["sd_fit"], test0, model),
+             "error_after": error_record(c["after"]),
+             "heldout_normalised": c["heldout_normalised"],
+             "evidence": ratio,
+             "evidence_on_model": c["evidence"],
+             "significant": bool(min(ratio, c["evidence"]) >= rules.evidence and _distinct(c)),
+             "sensitivity": c["sensitivity"],
+             "stated_on_model": c["stated_normalised"],
+             "n_parameters": len(c["p"]),
+             "model": "full" if not _planes(tests, name, c["p"], model) else
+                      "/".join(_planes(tests, name, c["p"], model)) + " symmetry"}
+    if name in CONFOUNDED:
+        entry["confounded_with"] = CONFOUNDED[name]
+    entry["runs"] = runs.formed
+    say(f"  fitted {_show(name, c['p'], test0, model)} ± {value_text(entry['sd'])} "
+        f"(fit alone ± {value_text(entry['sd_fit'])}), normalised "
+        f"{entry['error_after']['normalised']:.3g}, held-out "
+        f"{c['heldout_normalised']:.3g}, evidence {c['evidence']:.3g}; "
+        f"{runs.formed} new forming runs ({c['folds_formed']} for the folds)")
+    return entry, c
+
+
 def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
               parameters: Sequence[str] | None = None,
               progress: Progress | None = None) -> dict[str, Any]:
@@ -703,65 +751,34 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                      f"ranked by held-out error, "
                      f"near-ties ({100 * rules.parsimony:g} %) to fewer parameters, then to the "
                      f"order {', '.join(SETUP_PARAMETERS)}"))
+    # The candidates are independent (but μ after the force: it is tied to it, eq. 1): tried
+    # together, their runs formed in common batches; the outcomes taken in order.
+    tied = "mu" in names and "holder_force_N" in names[:names.index("mu")]
+    own = [n for n in names if not (n == "mu" and tied)]
+    outcomes = dict(zip(own, together([functools.partial(
+        _setup_candidate, name, tests, test0, model, base_ho, rules) for name in own], say)))
     tried = []
     for name in names:
+        if name in outcomes:
+            entry, c = outcomes[name]
+            if c is None:
+                out["untestable"].append(entry)
+            else:
+                tried.append((entry, c))
+            continue
         reason = _why_not(name, tests)
+        force = [ec for ec in tried if ec[0]["parameter"] == "holder_force_N"]
         if reason is not None:
             out["untestable"].append({"effect": name, "setup": True, "reason": reason})
-            continue
-        force = [ec for ec in tried if ec[0]["parameter"] == "holder_force_N"]
-        if name == "mu" and force:  # eq. 1: μ acts through μF only, as the force does
+        elif force:  # eq. 1: μ acts through μF only, as the force does
             tried.append(_tied_mu(*force[0], test0, model))
             say(f"set-up candidate mu: tied to holder_force_N (μF, eq. 1), "
                 f"{value_text(tried[-1][0]['fitted'])}, no runs of its own")
-            continue
-        if name == "mu" and "holder_force_N" in names:  # the force was untestable: so is μ
+        else:  # the force was untestable: so is μ
             untestable = [u for u in out["untestable"] if u["effect"] == "holder_force_N"]
-            if untestable:
-                out["untestable"].append({**untestable[0], "effect": "mu", "reason": (
-                    f"as holder_force_N (μ acts through μF only, eq. 1): "
-                    f"{untestable[0]['reason']}")})
-                continue
-        runs = _Runs(tests, model, name)
-        # The stated point is the same for every parameter: its values are shared.
-        start = _start(name, test0, model)
-        say(f"set-up candidate {name}: from {_show(name, start, test0, model)}")
-        try:
-            c = _candidate(runs, test0, rules.untestable_below, say)
-        except (SolverError, DrapeInputError) as err:
-            out["untestable"].append({"effect": name, "setup": True,
-                                      "reason": f"the part cannot be formed so: {err}"})
-            continue
-        if c["untestable"]:
-            out["untestable"].append({"effect": name, "setup": True, "reason": c["reason"],
-                                      "sensitivity": c["sensitivity"]})
-            say(f"  untestable: {c['reason']}")
-            continue
-        ratio = base_ho / c["heldout_normalised"] if c["heldout_normalised"] > 0 else math.inf
-        entry = {"parameter": name, "stated": stated(test0, name, model),
-                 "fitted": _fitted(name, c["p"], test0, model),
-                 "sd": _sd(name, c["sd_internal"], test0, model),
-                 "sd_fit": _sd(name, c["sd_fit"], test0, model),
-                 "error_after": error_record(c["after"]),
-                 "heldout_normalised": c["heldout_normalised"],
-                 "evidence": ratio,
-                 "evidence_on_model": c["evidence"],
-                 "significant": bool(min(ratio, c["evidence"])
-                                     >= rules.evidence and _distinct(c)),
-                 "sensitivity": c["sensitivity"],
-                 "stated_on_model": c["stated_normalised"],
-                 "n_parameters": len(c["p"]),
-                 "model": "full" if not _planes(tests, name, c["p"], model) else
-                          "/".join(_planes(tests, name, c["p"], model)) + " symmetry"}
-        if name in CONFOUNDED:
-            entry["confounded_with"] = CONFOUNDED[name]
-        entry["runs"] = runs.formed
-        say(f"  fitted {_show(name, c['p'], test0, model)} ± {value_text(entry['sd'])} "
-            f"(fit alone ± {value_text(entry['sd_fit'])}), normalised "
-            f"{entry['error_after']['normalised']:.3g}, held-out "
-            f"{c['heldout_normalised']:.3g}, evidence {c['evidence']:.3g}; "
-            f"{runs.formed} new forming runs ({c['folds_formed']} for the folds)")
-        tried.append((entry, c))
+            out["untestable"].append({**untestable[0], "effect": "mu", "reason": (
+                f"as holder_force_N (μ acts through μF only, eq. 1): "
+                f"{untestable[0]['reason']}")})
     order = {n: i for i, n in enumerate(dict.fromkeys(setup_names(SETUP_PARAMETERS, tests)
                                                        + names))}
     tried.sort(key=lambda ec: (ec[0]["heldout_normalised"], order[ec[0]["parameter"]]))

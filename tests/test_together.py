@@ -1,0 +1,107 @@
+"""Calls made together (forming_runs.together): their results as one after the other, their runs
+in common batches.
+
+A "run" here is a stand-in: the forming of a job is replaced by a function of the job, and
+every batch handed to the executor is recorded. Each call is a little fit that asks one run
+at a time, its next job depending on the last result (as a Gauss-Newton fit does).
+"""
+
+import threading
+
+import pytest
+
+from fenicsx_drape.diagnosis import forming_runs as runs
+
+
+@pytest.fixture
+def batches(monkeypatch):
+    """Runs formed as a function of their job; each batch of new runs recorded."""
+    seen = []
+
+    def form_all(jobs):
+        seen.append(list(jobs))
+        return [("error", RuntimeError("diverged")) if model == "bad" else
+                ("ok", (f"{case}:{model}", None, {})) for case, model in jobs]
+
+    monkeypatch.setattr(runs, "_key", lambda case, model: (case, model))
+    monkeypatch.setattr(runs, "_form_all", form_all)
+    monkeypatch.setattr(runs, "describe", lambda case, model: f"the run of {case!r} ({model})")
+    runs._cache.clear()
+    yield seen
+    runs._cache.clear()
+
+
+def fit(name, steps, say):
+    """A call: ``steps`` runs, each job named by the last result; a line per run."""
+    last = "start"
+    for k in range(steps):
+        (last,) = runs.form_many([(name, f"{k}<{len(last)}")])
+        say(f"{name} {k}")
+    return last
+
+
+def test_together_gives_each_calls_result_and_forms_their_runs_in_common_batches(batches):
+    steps = {"a": 3, "b": 1, "c": 2}
+    alone_lines = []
+    alone = [fit(n, s, alone_lines.append) for n, s in steps.items()]
+    assert [len(b) for b in batches] == [1] * 6  # one after the other: a run at a time
+    batches.clear()
+    runs._cache.clear()
+    lines = []
+    made = runs.together([lambda say, n=n, s=s: fit(n, s, say) for n, s in steps.items()],
+                         lines.append)
+    assert made == alone
+    # Each round: the first run of every call still going, in the calls' order.
+    assert [[job[0] for job in b] for b in batches] == [["a", "b", "c"], ["a", "c"], ["a"]]
+    assert lines == alone_lines  # each call's lines together, in the calls' order
+
+
+def test_a_call_within_a_call_asks_with_the_outer_batch(batches):
+    def folds(say):
+        return runs.together([lambda say, n=n: fit(n, 2, say) for n in ("f1", "f2")], say)
+
+    made = runs.together([folds, lambda say: fit("x", 2, say)])
+    assert made == [[fit("f1", 2, print), fit("f2", 2, print)], fit("x", 2, print)]
+    assert [sorted(job[0] for job in b) for b in batches] == [["f1", "f2", "x"]] * 2
+
+
+def test_a_failing_call_or_run_is_raised_after_the_others_are_done(batches):
+    finished = []
+
+    def breaks(say):
+        runs.form_many([("p", "0")])
+        raise ValueError("a call's own error")
+
+    def done(say):
+        finished.append(fit("q", 3, say))
+
+    with pytest.raises(ValueError, match="a call's own error"):
+        runs.together([done, breaks])
+    assert finished == [fit("q", 3, print)]
+
+    def bad_run(say):
+        try:
+            runs.form_many([("r", "bad")])
+        except RuntimeError as error:  # the run's error, named, reaches its own call only
+            return str(error)
+
+    message, ok = runs.together([bad_run, lambda say: fit("s", 1, say)])
+    assert "diverged" in message and "'r'" in message and ok == fit("s", 1, print)
+
+
+def test_each_call_keeps_its_own_resolution(batches):
+    seen = {}
+
+    def finer(say):  # a job carries the cells it is formed on (as a case does)
+        with runs.resolution(5.0):
+            runs.form_many([("fine", f"{runs.cell_override()} mm")])  # waits in its resolution
+            seen["finer"] = runs.cell_override()
+
+    def own(say):
+        runs.form_many([("own", f"{runs.cell_override()} mm")])
+        seen["own"] = runs.cell_override()
+
+    runs.together([finer, own])
+    assert seen == {"finer": 5.0, "own": None} and runs.cell_override() is None
+    assert batches == [[("fine", "5.0 mm"), ("own", "None mm")]]
+    assert not [t for t in threading.enumerate() if t.name.startswith("together-")]
