@@ -89,7 +89,7 @@ def test_a_failing_call_or_run_is_raised_after_the_others_are_done(batches):
     assert "diverged" in message and "'r'" in message and ok == fit("s", 1, print)
 
 
-def test_each_call_keeps_its_own_resolution(batches):
+def test_each_call_sees_the_callers_resolution_and_keeps_its_own(batches):
     seen = {}
 
     def finer(say):  # a job carries the cells it is formed on (as a case does)
@@ -101,7 +101,9 @@ def test_each_call_keeps_its_own_resolution(batches):
         runs.form_many([("own", f"{runs.cell_override()} mm")])
         seen["own"] = runs.cell_override()
 
-    runs.together([finer, own])
-    assert seen == {"finer": 5.0, "own": None} and runs.cell_override() is None
-    assert batches == [[("fine", "5.0 mm"), ("own", "None mm")]]
+    with runs.resolution(7.0):  # the command's (drape diagnose --forming-cell-mm 7)
+        runs.together([finer, own])
+        assert runs.cell_override() == 7.0
+    assert seen == {"finer": 5.0, "own": 7.0} and runs.cell_override() is None
+    assert batches == [[("fine", "5.0 mm"), ("own", "7.0 mm")]]
     assert not [t for t in threading.enumerate() if t.name.startswith("together-")]
