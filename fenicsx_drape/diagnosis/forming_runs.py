@@ -759,9 +759,9 @@ def cached(case, model: Model) -> bool:
     return _key(case, model) in _cache
 
 
-def new_runs(jobs: Iterable[tuple[Any, Model]]) -> int:
-    """How many distinct runs of ``jobs`` are not in memory (:func:`form_many` forms each once)."""
-    return len({k for k in (_key(case, model) for case, model in jobs) if k not in _cache})
+def runs_of(jobs: Iterable[tuple[Any, Model]]) -> set[tuple]:
+    """The distinct runs ``jobs`` ask for (:func:`form_many` forms each once), by their keys."""
+    return {_key(case, model) for case, model in jobs}
 
 
 def tool_forces(case, model: Model) -> dict[str, np.ndarray]:

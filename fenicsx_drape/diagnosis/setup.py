@@ -79,6 +79,7 @@ core of the pool, or all ranks under ``mpirun``.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import math
@@ -97,7 +98,7 @@ from fenicsx_drape.diagnosis.forming_fit import (
     value_sd,
     widened,
 )
-from fenicsx_drape.diagnosis.forming_runs import form_many, new_runs, together
+from fenicsx_drape.diagnosis.forming_runs import form_many, runs_of, together
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained
 from fenicsx_drape.errors import DrapeInputError, SolverError
 from fenicsx_drape.forming.case.format import FormingCase, broken_planes, with_overrides
@@ -317,12 +318,17 @@ class _Runs:
         self.per_row = {t.id: self.measured[t.id].size // max(1, t.n_rows) for t in self.tests}
         self.size = sum(v.size for v in self.measured.values())
         self.mirrorable = all(mirrorable(t) for t in self.tests)
-        self.formed = 0  # new forming runs asked of form_many (not in its cache)
+        self.asked: set[tuple] = set()  # the forming runs its values were read from
         self.known: dict[tuple[float, ...], dict[str, np.ndarray]] = {}  # values by point
         # The stated cases' common symmetry planes (a case keeps them with a ply at a
         # multiple of 90° only, which mirrors to itself).
         cases = [fk.forming_case_of(t) for t in self.tests]
         self.planes = [q for q in ("x", "y") if all(q in c.planes for c in cases)]
+
+    @property
+    def formed(self) -> int:
+        """How many forming runs this parameter's values needed (whichever call formed them)."""
+        return len(self.asked)
 
     def values(self, points: Sequence[np.ndarray], mirror: bool = False
                ) -> list[dict[str, np.ndarray]]:
@@ -362,7 +368,7 @@ class _Runs:
                     t, _ = applied(test, self.name, np.array(source), self.model)
                 jobs.append((fk.case_of(t), self.model))
                 reads.append((test, shift, plane))
-        self.formed += new_runs(jobs)  # the tests of one part share its run
+        self.asked |= runs_of(jobs)  # the tests of one part share its run
         sheets = form_many(jobs)
         out: list[dict[str, np.ndarray]] = [{} for _ in points]
         for k, (sheet, (test, shift, plane), (case, _)) in enumerate(zip(sheets, reads, jobs)):
@@ -409,6 +415,25 @@ def _mirrored(name: str | None, p: tuple[float, ...], plane: str) -> tuple[float
 # One candidate
 
 
+def _scan(name: str, start: np.ndarray) -> tuple[list[tuple[int, float]], list[np.ndarray]]:
+    """The scan about ``start``: each (axis, move) of :data:`SCAN` and its point."""
+    axes = [(i, v) for i in range(len(start)) for v in SCAN[name]]
+    return axes, [start + v * np.eye(len(start))[i] for i, v in axes]
+
+
+def _first_runs(name: str, tests: Sequence[Test], test0: Test, model: Model, say: Progress
+                ) -> None:
+    """A candidate's first batch of runs (:func:`_candidate`'s stated point and scan), formed.
+
+    Ahead of its fit, with other work; a failure is left for the fit to report.
+    """
+    if _why_not(name, tests) is not None:
+        return
+    start = _start(name, test0, model)
+    with contextlib.suppress(SolverError, DrapeInputError):
+        _Runs(tests, model, name).values([start, *_scan(name, start)[1]], mirror=True)
+
+
 def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[str, Any]:
     """Fit one set-up parameter, its held-out error and evidence (module doc, 1.-4.)."""
     name, model = runs.name, runs.model
@@ -418,8 +443,7 @@ def _candidate(runs: _Runs, test0: Test, below: float, say: Progress) -> dict[st
     # 1. The scan: each axis moved by the values of SCAN, in one batch of runs with the
     # stated set-up on the model this parameter needs (the same runs when it keeps the
     # case's planes).
-    axes = [(i, v) for i in range(k) for v in SCAN[name]]
-    points = [start + v * np.eye(k)[i] for i, v in axes]
+    axes, points = _scan(name, start)
     base_values, *scanned = runs.values([start, *points], mirror=True)
     base_ho = normalised_error(runs.compare(base_values))
     r0 = runs.residual(base_values)
@@ -684,7 +708,7 @@ def _setup_candidate(name: str, tests: Sequence[Test], test0: Test, model: Model
         f"(fit alone ± {value_text(entry['sd_fit'])}), normalised "
         f"{entry['error_after']['normalised']:.3g}, held-out "
         f"{c['heldout_normalised']:.3g}, evidence {c['evidence']:.3g}; "
-        f"{runs.formed} new forming runs ({c['folds_formed']} for the folds)")
+        f"{runs.formed} forming runs ({c['folds_formed']} for the folds)")
     return entry, c
 
 
@@ -721,10 +745,17 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
         return out
     test0 = tests[0]
     base_cmp = _stated(tests, model)
+    # The candidates are independent (but μ after the force: it is tied to it, eq. 1): tried
+    # together, their runs formed in common batches; the outcomes taken in order.
+    tied = "mu" in names and "holder_force_N" in names[:names.index("mu")]
+    own = [n for n in names if not (n == "mu" and tied)]
     if rules.adequate is not None:
         # Resolution before the set-up, too: a measurement whose residual at the stated
-        # set-up is the net's own error is no evidence of a set-up error.
-        out["resolution"] = check_resolution(tests, model, base_cmp, rules.adequate, say)
+        # set-up is the net's own error is no evidence of a set-up error. Its verdict weighs
+        # the candidates' runs, not which they are: their first batch is formed with its run.
+        out["resolution"], *_ = together([
+            functools.partial(check_resolution, tests, model, base_cmp, rules.adequate),
+            *(functools.partial(_first_runs, name, tests, test0, model) for name in own)], say)
         resolved = explained(out["resolution"])
         if resolved:
             # They still count: a set-up that moves the part far from them must pay for it.
@@ -751,10 +782,6 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                      f"ranked by held-out error, "
                      f"near-ties ({100 * rules.parsimony:g} %) to fewer parameters, then to the "
                      f"order {', '.join(SETUP_PARAMETERS)}"))
-    # The candidates are independent (but μ after the force: it is tied to it, eq. 1): tried
-    # together, their runs formed in common batches; the outcomes taken in order.
-    tied = "mu" in names and "holder_force_N" in names[:names.index("mu")]
-    own = [n for n in names if not (n == "mu" and tied)]
     outcomes = dict(zip(own, together([functools.partial(
         _setup_candidate, name, tests, test0, model, base_ho, rules) for name in own], say)))
     tried = []
