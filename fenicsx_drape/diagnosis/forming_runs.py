@@ -426,16 +426,18 @@ def _form_all(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
     from concurrent.futures import BrokenExecutor
 
     options = _solver_options()
+    order = _largest_first(jobs)
     try:
         with _fresh_workers():
-            futures = [pool.submit(_run, c, m, trusted(), options) for c, m in jobs]
+            futures = {k: pool.submit(_run, *jobs[k], trusted(), options) for k in order}
     except BrokenExecutor:  # a worker died since the last batch: a new pool
         _shutdown()
         name, pool = executor()
         with _fresh_workers():
-            futures = [pool.submit(_run, c, m, trusted(), options) for c, m in jobs]
+            futures = {k: pool.submit(_run, *jobs[k], trusted(), options) for k in order}
     results, broken = [], False
-    for future in futures:  # in the order asked: the same gathering whichever finishes first
+    for k in range(len(jobs)):  # in the order asked: the same gathering whichever finishes first
+        future = futures[k]
         try:
             results.append(future.result())
         except Exception as error:  # a worker that died, a job that did not pickle
@@ -450,10 +452,11 @@ def _share(jobs: list[tuple[Any, Model]], pool: Executor, workers: int
            ) -> list[tuple[str, Any]]:
     """The jobs formed by this process and the pool's ``workers`` together, in the order asked.
 
-    Each next job goes to whichever is free first (a feeding thread per worker waits on
-    it). A run is the same wherever it is formed, so the results do not depend on who formed
-    what. A job the pool refuses (a worker died since the last batch) is formed here; one
-    whose worker died comes back as its error, and the next batch starts a new pool.
+    Each next job, the largest first (:func:`_largest_first`), goes to whichever is free
+    first (a feeding thread per worker waits on it). A run is the same wherever it is
+    formed, so the results do not depend on who formed what. A job the pool refuses (a
+    worker died since the last batch) is formed here; one whose worker died comes back as
+    its error, and the next batch starts a new pool.
     """
     import threading
     from concurrent.futures import BrokenExecutor, wait
@@ -462,7 +465,7 @@ def _share(jobs: list[tuple[Any, Model]], pool: Executor, workers: int
 
     options = _solver_options()
     results: list[tuple[str, Any] | None] = [None] * len(jobs)
-    queue = list(range(len(jobs)))[::-1]  # popped from the end: in the order asked
+    queue = _largest_first(jobs)[::-1]  # popped from the end
     lock = threading.Lock()
     died = []
 
@@ -506,6 +509,19 @@ def _share(jobs: list[tuple[Any, Model]], pool: Executor, workers: int
     if any(died):  # the next batch starts a new pool
         _shutdown()
     return results
+
+
+def _largest_first(jobs: list[tuple[Any, Model]]) -> list[int]:
+    """The jobs' places, the runs with the most nodes first (a batch's last run is short).
+
+    Nodes: the blank's area over Δ², halved by each symmetry plane, times the plies.
+    """
+    def nodes(job) -> float:
+        blank = job[0].blank
+        return (blank.area_mm2 / blank.cell_mm**2 / 2 ** len(job[0].planes)
+                * max(1, len(job[0].plies)))
+
+    return sorted(range(len(jobs)), key=lambda k: -nodes(jobs[k]))
 
 
 def _form_in_groups(jobs: list[tuple[Any, Model]], groups: int) -> list[tuple[str, Any]]:
