@@ -67,3 +67,22 @@ def test_in_the_image_a_script_reads_the_callers_file_and_nothing_is_left(tmp_pa
     done = subprocess.run([DRAPE, "exec", "python3", "-c", hidden, str(data)[::-1]], cwd=ROOT,
                           env=env, capture_output=True, text=True)
     assert done.returncode == 0 and done.stdout.strip() == "False", done.stderr
+
+
+@pytest.mark.skipif(shutil.which("buildah") is None or Path("/run/.containerenv").exists()
+                    or os.environ.get("container") is not None,
+                    reason="runs where ./drape runs the image (the host, with buildah)")
+def test_in_the_image_the_runs_go_to_the_hosts_cache_folder():
+    """The default run cache is the documented one on the host, or DRAPE_CACHE when set."""
+    state = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "fenicsx-drape"
+    code = ("from fenicsx_drape.diagnosis.run_store import default_folder; "
+            "print(default_folder())")
+    env = {k: v for k, v in os.environ.items() if k != "DRAPE_CACHE"}
+    env["DRAPE_MODE"] = "container"
+    done = subprocess.run([DRAPE, "exec", "python3", "-c", code], cwd=ROOT, env=env,
+                          capture_output=True, text=True)
+    assert done.returncode == 0 and done.stdout.strip() == str(state / "runs"), done.stderr
+    env["DRAPE_CACHE"] = "off"
+    done = subprocess.run([DRAPE, "exec", "python3", "-c", code], cwd=ROOT, env=env,
+                          capture_output=True, text=True)
+    assert done.returncode == 0 and done.stdout.strip() == "None", done.stderr
