@@ -107,3 +107,38 @@ def test_each_call_sees_the_callers_resolution_and_keeps_its_own(batches):
     assert seen == {"finer": 5.0, "own": 7.0} and runs.cell_override() is None
     assert batches == [[("fine", "5.0 mm"), ("own", "7.0 mm")]]
     assert not [t for t in threading.enumerate() if t.name.startswith("together-")]
+
+
+def test_spare_runs_fill_the_free_slots_of_a_batch_and_no_more(batches, monkeypatch):
+    """A fit's finite differences are spare: formed beside its point only where a worker would
+    wait (forming_runs.spare), else left, and never formed for their own sake."""
+    monkeypatch.setattr(runs, "runs_at_once", lambda: 2)
+    with runs.spare(1):  # a point and one difference: two workers, one batch
+        assert runs.form_many([("p", 0), ("p", 1)]) == ["p:0", "p:1"]
+    assert batches == [[("p", 0), ("p", 1)]]
+    batches.clear()
+    with runs.spare(1), pytest.raises(runs.Deferred):  # two differences: one has no slot
+        runs.form_many([("q", 0), ("q", 1), ("q", 2)])
+    assert batches == [[("q", 0), ("q", 1)]]
+    with runs.spare(0):  # only what is at hand: nothing formed
+        assert runs.form_many([("q", 1)]) == ["q:1"]
+        with pytest.raises(runs.Deferred):
+            runs.form_many([("q", 1), ("q", 2)])
+    assert len(batches) == 1
+    assert runs.form_many([("q", 2)]) == ["q:2"]  # asked as a run: formed
+    batches.clear()
+
+    def point(name, say):  # a call whose point fills the batch: its difference waits
+        with runs.spare(1):
+            try:
+                return runs.form_many([(name, 0), (name, 1)])
+            except runs.Deferred:
+                return runs.cached(name, 1)
+
+    assert runs.together([lambda say, n=n: point(n, say) for n in "ab"]) == [False, False]
+    assert batches == [[("a", 0), ("b", 0)]]
+    batches.clear()
+    monkeypatch.setattr(runs, "runs_at_once", lambda: 1)  # one worker: no free slot ever
+    with runs.spare(1), pytest.raises(runs.Deferred):
+        runs.form_many([("r", 0), ("r", 1)])
+    assert batches == [[("r", 0)]]

@@ -29,7 +29,7 @@ from fenicsx_drape.diagnosis.forming_kind import (
     XTOL,
     holder_mu_free,
 )
-from fenicsx_drape.diagnosis.forming_runs import runs_at_once
+from fenicsx_drape.diagnosis.forming_runs import Deferred, spare
 from fenicsx_drape.diagnosis.kinds import Kind
 
 if TYPE_CHECKING:
@@ -210,12 +210,6 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     p = np.array([float(model.parameters[n]) for n in names])
     k = len(names)
     h = FD_STEP * np.eye(k)
-    # A point's k finite differences are formed with it when it fits in their last batch of
-    # runs at once for no extra time (k not a multiple of the workers: one parameter on two
-    # workers; both starts' with them); else only at a point the fit takes (a rejected
-    # step's would be wasted: a fifth of a diagnosis's runs on one worker). The same numbers
-    # either way.
-    eager = k % runs_at_once() != 0
 
     def residuals(*points: np.ndarray) -> np.ndarray:
         return _residuals(chosen, model, names, np.vstack(points))
@@ -225,13 +219,28 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
         return (R - r).T / FD_STEP
 
     def evaluate(*points: np.ndarray) -> tuple[np.ndarray, list[np.ndarray | None]]:
-        """The residuals at ``points`` and, when formed with them, each one's Jacobian."""
+        """The residuals at ``points`` and each one's Jacobian where its runs were at hand.
+
+        A point's finite differences are spare runs (forming_runs.spare): formed with it where
+        the batch leaves a worker free (one parameter on two workers), else only once the fit
+        takes the point (a rejected step's would be wasted). The same numbers either way.
+        """
         m = len(points)
-        R = residuals(*points, *((q + h for q in points) if eager else ()))
-        if not eager:
-            return R[:m], [None] * m
-        return R[:m], [slopes(q, R[i], R[m + i * k:m + (i + 1) * k])
-                       for i, q in enumerate(points)]
+        try:
+            with spare(m):
+                R = residuals(*points, *(q + h for q in points))
+            return R[:m], [slopes(q, R[i], R[m + i * k:m + (i + 1) * k])
+                           for i, q in enumerate(points)]
+        except Deferred:  # the points are formed: their slopes where their runs are
+            R = residuals(*points)
+        Js = []
+        for i, q in enumerate(points):
+            try:
+                with spare(0):
+                    Js.append(slopes(q, R[i]))
+            except Deferred:
+                Js.append(None)
+        return R, Js
 
     # Two starts, judged in the first batch of runs: the model's values and the parameters'
     # defaults (a warm start from a model without the right physics can sit far off).

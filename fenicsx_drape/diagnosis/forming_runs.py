@@ -58,6 +58,8 @@ USER_OPTIONS = ("snes_", "ksp_", "pc_", "mat_", "npc_", "sub_", "log_")
 
 # The cells of resolution(): a context variable, as a call of together() may set its own.
 _cell_mm: contextvars.ContextVar[float | None] = contextvars.ContextVar("cell_mm", default=None)
+# In spare(): form_many's jobs from this index on are spare.
+_spare_from: contextvars.ContextVar[int | None] = contextvars.ContextVar("spare", default=None)
 _settings: dict[str, Any] = {"workers": None,  # None: default_workers()
                              "ranks_per_run": None,  # under mpirun; None: all ranks
                              "store": None}  # a RunStore, or None: runs kept in memory only
@@ -89,6 +91,27 @@ def resolution(cell_mm: float | None) -> Iterator[None]:
 def cell_override() -> float | None:
     """The unit cell (mm) a :func:`resolution` sets for every run, None for the cases' own."""
     return _cell_mm.get()
+
+
+class Deferred(BaseException):  # not an Exception: it passes the callers' handlers
+    """Raised by :func:`form_many` in :func:`spare` when spare runs were left unformed."""
+
+
+@contextlib.contextmanager
+def spare(first: int) -> Iterator[None]:
+    """Inside, :func:`form_many`'s jobs from index ``first`` on are spare.
+
+    A spare run is formed only in a slot the batch's other runs leave free (its new runs not
+    a multiple of :func:`runs_at_once`: one run on two workers), or read where it is kept;
+    when one is left, form_many keeps what it formed and raises :class:`Deferred`. A fit's
+    finite differences are spare: formed beside its point for no extra time, never at the
+    cost of a run (a rejected step's would be wasted). ``spare(0)``: only runs at hand.
+    """
+    token = _spare_from.set(first)
+    try:
+        yield
+    finally:
+        _spare_from.reset(token)
 
 
 def default_workers() -> int:
@@ -565,7 +588,7 @@ class _Turns:
     def __init__(self) -> None:
         self.changed = threading.Condition()
         self.running: int | None = None  # the call whose turn it is; None: the caller's
-        self.asked: dict[int, list] = {}  # the jobs each waiting call asked for
+        self.asked: dict[int, tuple[list, list]] = {}  # each waiting call's jobs and spares
         self.answers: dict[int, Any] = {}  # their results, or _Cancelled
 
     def give(self, i: int) -> None:
@@ -584,9 +607,9 @@ class _Turns:
             self.running = None
             self.changed.notify_all()
 
-    def ask(self, i: int, jobs: list) -> list[tuple[str, Any]]:
+    def ask(self, i: int, jobs: list, spares: list) -> list[tuple[str, Any] | None]:
         """A call's side: the results of its jobs, formed with the other calls' (its turn ends)."""
-        self.asked[i] = jobs
+        self.asked[i] = jobs, spares
         self.back()
         self.wait(i)
         answer = self.answers.pop(i)
@@ -665,20 +688,20 @@ def together(calls: Sequence[Callable[[Callable[[str], None]], Any]],
         ready = sorted(turns.asked)
         if not ready:
             break
-        jobs = [turns.asked[i] for i in ready]
+        asked = [turns.asked.pop(i) for i in ready]
         try:
-            formed = _gathered([job for asked in jobs for job in asked])
+            formed = _gathered([job for jobs, _ in asked for job in jobs],
+                               [job for _, spares in asked for job in spares])
         except BaseException:  # every waiting call stops; then this is raised
             for i in ready:
                 turns.answers[i] = _Cancelled
-                del turns.asked[i]
                 turns.give(i)
             raise
-        at = 0
-        for i, asked in zip(ready, jobs):
-            turns.answers[i] = formed[at:at + len(asked)]
-            at += len(asked)
-            del turns.asked[i]
+        at = [0, sum(len(jobs) for jobs, _ in asked)]  # where each call's jobs and spares are
+        for i, (jobs, spares) in zip(ready, asked):
+            turns.answers[i] = (formed[at[0]:at[0] + len(jobs)]
+                                + formed[at[1]:at[1] + len(spares)])
+            at = [at[0] + len(jobs), at[1] + len(spares)]
     for thread in threads:
         thread.join()
     if errors:
@@ -694,48 +717,63 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     runs the other calls wait for. A run that fails is raised (its message naming the case
     and model) once the others are formed and kept.
     """
-    results = _gathered(list(jobs))
-    for (case, model), (status, value) in zip(jobs, results):
-        if status == "error":
-            raise _named(value, describe(case, model))
+    first = _spare_from.get()
+    jobs = list(jobs)
+    first = len(jobs) if first is None else first
+    results = _gathered(jobs[:first], jobs[first:])
+    for (case, model), got in zip(jobs, results):
+        if got is not None and got[0] == "error":
+            raise _named(got[1], describe(case, model))
+    if None in results:
+        raise Deferred
     return [grid for _, grid in results]
 
 
-def _gathered(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
-    """``("ok", sheet)`` or ``("error", exception)`` per job, in the order of ``jobs``.
+def _gathered(jobs: list[tuple[Any, Model]], spares: list[tuple[Any, Model]] = ()
+              ) -> list[tuple[str, Any] | None]:
+    """``("ok", sheet)`` or ``("error", exception)`` per job, then per spare (None: left).
 
     In a call of :func:`together`: from its group's batch; else formed here (:func:`_gather`).
     """
     turns = getattr(_task, "group", None)
     if turns is not None:
-        return turns.ask(_task.index, jobs)
-    return _gather(jobs)
+        return turns.ask(_task.index, jobs, list(spares))
+    return _gather(jobs, list(spares))
 
 
-def _gather(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
-    """:func:`_gathered`'s work: memory, then the disk cache, then the executor."""
+def _gather(jobs: list[tuple[Any, Model]], spares: list[tuple[Any, Model]] = ()
+            ) -> list[tuple[str, Any] | None]:
+    """:func:`_gathered`'s work: memory, then the disk cache, then the executor.
+
+    The spare jobs (:func:`spare`) fill the batch's free slots, the first first.
+    """
     keys = [_key(case, model) for case, model in jobs]
-    for k in dict.fromkeys(keys):  # the batch's runs in memory are the newest: kept
+    extra = [_key(case, model) for case, model in spares]
+    for k in dict.fromkeys(keys + extra):  # the batch's runs in memory are the newest: kept
         if k in _cache:
             _cache[k] = _cache.pop(k)
-    got: dict[tuple, tuple[str, Any]] = {k: ("ok", _cache[k]) for k in keys if k in _cache}
+    got: dict[tuple, tuple[str, Any]] = {k: ("ok", _cache[k])
+                                         for k in keys + extra if k in _cache}
+    in_memory = set(got)
     todo = {k: job for k, job in zip(keys, jobs) if k not in _cache}
-    counts["asked"] += len(set(keys))
-    counts["from_memory"] += len(set(keys)) - len(todo)
+    maybe = {k: job for k, job in zip(extra, spares) if k not in _cache and k not in todo}
     store: RunStore | None = _settings["store"]
     names = {}
     if store is not None:
         from fenicsx_drape.diagnosis.run_store import run_key
 
-        names = {k: run_key(k) for k in todo}
-        for k in list(todo):
+        names = {k: run_key(k) for k in (*todo, *maybe)}
+        for k in (*todo, *maybe):
             found = store.get(names[k])
             if found is not None:
                 _keep(k, found)
                 got[k] = ("ok", found[0])
                 counts["from_disk"] += 1
-                del todo[k]
-    if todo:
+                todo.pop(k, None)
+                maybe.pop(k, None)
+    if todo:  # the spares that fill the last round of runs at once
+        free = -len(todo) % runs_at_once()
+        todo.update(list(maybe.items())[:free])
         for k, (status, value) in zip(todo, _form_all(list(todo.values()))):
             if status == "error":
                 got[k] = (status, value)
@@ -745,7 +783,10 @@ def _gather(jobs: list[tuple[Any, Model]]) -> list[tuple[str, Any]]:
             got[k] = ("ok", value[0])
             if store is not None:
                 store.put(names[k], *value)
-    return [got[k] for k in keys]
+    asked = set(keys) | (set(extra) & set(got))
+    counts["asked"] += len(asked)
+    counts["from_memory"] += len(asked & in_memory)
+    return [got[k] for k in keys] + [got.get(k) for k in extra]
 
 
 def _named(error: Exception, run: str) -> Exception:
