@@ -697,11 +697,11 @@ def together(calls: Sequence[Callable[[Callable[[str], None]], Any]],
                 turns.answers[i] = _Cancelled
                 turns.give(i)
             raise
-        at = [0, sum(len(jobs) for jobs, _ in asked)]  # where each call's jobs and spares are
+        n = sum(len(jobs) for jobs, _ in asked)
+        ran, spared = formed[:n], formed[n:]
         for i, (jobs, spares) in zip(ready, asked):
-            turns.answers[i] = (formed[at[0]:at[0] + len(jobs)]
-                                + formed[at[1]:at[1] + len(spares)])
-            at = [at[0] + len(jobs), at[1] + len(spares)]
+            turns.answers[i] = ran[:len(jobs)] + spared[:len(spares)]
+            ran, spared = ran[len(jobs):], spared[len(spares):]
     for thread in threads:
         thread.join()
     if errors:
