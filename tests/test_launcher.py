@@ -16,6 +16,10 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DRAPE = str(ROOT / "drape")
+on_the_host = pytest.mark.skipif(
+    shutil.which("buildah") is None or Path("/run/.containerenv").exists()
+    or os.environ.get("container") is not None,
+    reason="runs where ./drape runs the image (the host, with buildah)")
 
 
 def mounts(*args: str, cwd: Path) -> list[str]:
@@ -49,9 +53,7 @@ def test_mount_needs_a_folder(tmp_path):
     assert done.returncode == 2 and "--mount" in done.stderr and "no such folder" in done.stderr
 
 
-@pytest.mark.skipif(shutil.which("buildah") is None or Path("/run/.containerenv").exists()
-                    or os.environ.get("container") is not None,
-                    reason="runs where ./drape runs the image (the host, with buildah)")
+@on_the_host
 def test_in_the_image_a_script_reads_the_callers_file_and_nothing_is_left(tmp_path):
     data = tmp_path / "data"
     data.mkdir()
@@ -69,9 +71,7 @@ def test_in_the_image_a_script_reads_the_callers_file_and_nothing_is_left(tmp_pa
     assert done.returncode == 0 and done.stdout.strip() == "False", done.stderr
 
 
-@pytest.mark.skipif(shutil.which("buildah") is None or Path("/run/.containerenv").exists()
-                    or os.environ.get("container") is not None,
-                    reason="runs where ./drape runs the image (the host, with buildah)")
+@on_the_host
 def test_in_the_image_the_runs_go_to_the_hosts_cache_folder():
     """The default run cache is the documented one on the host, or DRAPE_CACHE when set."""
     state = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "fenicsx-drape"
