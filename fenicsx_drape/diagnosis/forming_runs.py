@@ -715,10 +715,11 @@ def form_many(jobs: Sequence[tuple[Any, Model]]) -> list[FormedGrid]:
     The runs not in memory are looked up in the disk cache of :func:`execution`, the rest
     formed by :func:`executor`'s processes and stored; inside :func:`together`, with the
     runs the other calls wait for. A run that fails is raised (its message naming the case
-    and model) once the others are formed and kept.
+    and model) once the others are formed and kept. Inside :func:`spare`, the jobs from its
+    index on are spare: :class:`Deferred` is raised when one is left unformed.
     """
-    first = _spare_from.get()
     jobs = list(jobs)
+    first = _spare_from.get()
     first = len(jobs) if first is None else first
     results = _gathered(jobs[:first], jobs[first:])
     for (case, model), got in zip(jobs, results):
