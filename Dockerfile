@@ -15,14 +15,15 @@ ENV DEBIAN_FRONTEND=noninteractive \
     MPLBACKEND=Agg
 
 # gcc and python3-dev: FFCx compiles forms at run time; python3-h5py: meshio's XDMF files;
-# pytest-xdist: `make test` runs the serial tests on every core; diskcache: the forming runs' cache.
+# pytest-xdist: `make test` runs the serial tests on every core; pytest-timeout: a test that runs
+# too long fails by its name; diskcache: the forming runs' cache; tomli-w: TOML files written.
 # Sphinx, MyST-NB, Jupytext and a kernel: `make docs` executes the demos as pages.
 RUN apt-get $APT_OPTS update \
  && apt-get $APT_OPTS install -y --no-install-recommends \
       python3-dolfinx python3-gmsh python3-meshio python3-petsc4py python3-mpi4py \
       python3-numpy python3-scipy python3-matplotlib python3-pytest python3-hypothesis \
       python3-h5py python3-pip python3-setuptools ruff mpi-default-bin gcc python3-dev make \
-      python3-pytest-xdist python3-diskcache \
+      python3-pytest-xdist python3-pytest-timeout python3-diskcache python3-tomli-w \
       python3-sphinx python3-myst-nb python3-jupytext python3-ipykernel python3-sphinx-book-theme \
  && rm -rf /var/lib/apt/lists/*
 
