@@ -249,13 +249,13 @@ def grid(sheet: Sheet, spacing_mm: float, rng, sd_mm: float, offset=(0.0, 0.0),
                                                                       / spacing_mm) + 1)
     j = np.arange(math.floor((lo[1] - o[1]) / spacing_mm), math.ceil((hi[1] - o[1])
                                                                       / spacing_mm) + 1)
-    I, J = (a.ravel() for a in np.meshgrid(i, j, indexing="ij"))
+    ii, jj = (a.ravel() for a in np.meshgrid(i, j, indexing="ij"))
     if quarter:
-        I, J = I[(I >= 0) & (J >= 0)], J[(I >= 0) & (J >= 0)]
-    flat = np.column_stack([I * spacing_mm, J * spacing_mm])
+        ii, jj = ii[(ii >= 0) & (jj >= 0)], jj[(ii >= 0) & (jj >= 0)]
+    flat = np.column_stack([ii * spacing_mm, jj * spacing_mm])
     pos, ok = sheet.formed(flat + o)
     pos = pos[ok] + rng.normal(0.0, sd_mm, (ok.sum(), 3))
-    return {"i": I[ok], "j": J[ok], "x0_mm": flat[ok, 0], "y0_mm": flat[ok, 1],
+    return {"i": ii[ok], "j": jj[ok], "x0_mm": flat[ok, 0], "y0_mm": flat[ok, 1],
             "x_mm": pos[:, 0], "y_mm": pos[:, 1], "z_mm": pos[:, 2]}
 
 

@@ -64,7 +64,7 @@ STACK = {"plies": [{"angle_deg": 0.0, "thickness_mm": 0.3},
                    {"angle_deg": 45.0, "thickness_mm": 0.3}],
          "interply": {"tau0_MPa": 0.0, "mu_ply": 0.2, "eta_f_MPa_s_per_mm": 0.002,
                       "slip_mm": 0.1},
-         "cell_mm": 30.0, "step_mm": 4.0, "duration_s": 8.0}
+         "cell_mm": 30.0, "step_mm": 2.0, "duration_s": 8.0}
 """The [0/90, ±45] stack: on the hemisphere, the whole blank on 30 mm cells, 8 s."""
 
 
