@@ -168,15 +168,16 @@ def draw(seed: int, index: int, attempt: int, cls: str, detail: str | None,
          fixed: dict | None = None) -> Draw:
     """One scenario's draw (module doc); ``fixed`` sets some choices (the tests' small
     scenarios): ``part``, ``net``, ``kinds``, ``shear_mode``, ``trials``, ``stated``,
-    ``setup`` (its value), ``hidden`` (the effect of a set-up with an effect), ``other``."""
+    ``setup`` (its value), ``hidden`` (the effect of a set-up with an effect), ``other``,
+    ``case_cell``, ``case_step`` (the lab case's net), ``noise`` (sds)."""
     fixed = fixed or {}
     rng = np.random.default_rng([seed, index, attempt])
     stack = cls.startswith("stack")
     part = "hemisphere" if stack else _pick(rng, list(parts.PARTS))
     part = fixed.get("part", part)
     p = parts.PARTS[part]
-    case_cell = parts.STACK["cell_mm"] if stack else p["cell_mm"]
-    case_step = parts.STACK["step_mm"] if stack else p["step_mm"]
+    case_cell = fixed.get("case_cell", parts.STACK["cell_mm"] if stack else p["cell_mm"])
+    case_step = fixed.get("case_step", parts.STACK["step_mm"] if stack else p["step_mm"])
     duration = parts.STACK["duration_s"] if stack else p["duration_s"]
     hidden = detail if cls == "effect" else None
     setup_name = detail if cls == "setup" else None
@@ -278,7 +279,7 @@ def draw(seed: int, index: int, attempt: int, cls: str, detail: str | None,
         other = {"part": _pick(rng, [q for q in parts.PARTS if q != part]),
                  "kind": _pick(rng, pool)}
         other = fixed.get("other", other)
-    noise = _noise(rng)
+    noise = {**_noise(rng), **fixed.get("noise", {})}
     if "stated" in fixed:
         noise["stated"] = fixed["stated"]
     return Draw(
@@ -509,7 +510,8 @@ def write_bundle(d: Draw, folder: Path, tables: list[dict[str, dict]], stl_cache
         shutil.rmtree(folder)
     folder.mkdir(parents=True)
     parts.write_case(folder / "case", d.part, truth=False, stack=d.stack is not None,
-                     mu=d.stated_mu, stl_cache=stl_cache)
+                     mu=d.stated_mu, stl_cache=stl_cache, cell_mm=d.case_cell_mm,
+                     step_mm=d.case_step_mm)
     text = (f"# A lab's forming trials of the {d.part.replace('_', ' ')}"
             f"{' stack' if d.stack else ''} (benchmarks/scenarios, scenario {d.id})\n\n")
     text += lab.toml_table("[bundle]", {"name": f"scenario-{d.id}",

@@ -1,0 +1,150 @@
+"""The scenario benchmark's generator, and small scenarios through the README's command.
+
+``benchmarks/scenarios/`` makes bundles the way a lab or another group would: the truth
+formed with the forming API, read back from the run's files (``fields.h5``,
+``tool_forces.csv``) and measured with the lab's own NumPy code (docs/scenarios.md). Here:
+
+- the lab's measures against closed forms, on a net sheared by a known angle (its own code
+  must measure what a lab measures: each cell's angle between its tows, central differences
+  of tracked points, the edge's draw-in), and its STL copies against the shapes they copy;
+- that the generator reads nothing of the diagnosis or of the project's measures;
+- one small scenario of each truth class (the octagon on the lab case's own 20 mm net, one
+  trial, few kinds) through ``drape diagnose BUNDLE --model MODEL.toml --json REPORT.json``
+  with default options, judged by the benchmark's own rule (``classify.judge``). Those the
+  diagnosis gets wrong today are marked ``xfail(strict=True)`` with the answer it misses, so
+  that they flip when it is fixed. ``make test`` runs the cheapest (``slow``); the rest are
+  ``bench``.
+"""
+
+import ast
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "benchmarks" / "scenarios"
+sys.path.insert(0, str(SCENARIOS))
+
+import classify  # noqa: E402  (the benchmark's own modules)
+import lab  # noqa: E402
+import tools  # noqa: E402
+
+
+def sheared_sheet(gamma_deg: float, n: int = 6, delta: float = 10.0) -> lab.Sheet:
+    """A flat net of n × n cells sheared in its plane: warp along x, weft turned by γ."""
+    g = math.radians(gamma_deg)
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(-n // 2, n // 2 + 1),
+                                           np.arange(-n // 2, n // 2 + 1), indexing="ij"))
+    X = np.column_stack([i * delta, j * delta, np.zeros(i.size)])
+    x = np.column_stack([i * delta + j * delta * math.sin(g), j * delta * math.cos(g),
+                         np.zeros(i.size)])
+    at = {(a, b): k for k, (a, b) in enumerate(zip(i, j, strict=True))}
+    cells = np.array([[at[(a, b)], at[(a + 1, b)], at[(a, b + 1)], at[(a + 1, b + 1)]]
+                      for a in range(-n // 2, n // 2) for b in range(-n // 2, n // 2)])
+    return lab.Sheet(X, x, np.column_stack([i, j]), cells, np.zeros(2), np.array([1.0, 0.0]),
+                     np.array([0.0, 1.0]), (delta, delta))
+
+
+def test_each_cell_and_central_differences_read_a_known_shear():
+    sheet = sheared_sheet(12.5)
+    assert np.allclose(sheet.cell_shear_deg(), 12.5, atol=1e-9)
+    rng = np.random.default_rng(0)
+    lines = [("warp", (-30.0, 5.0), (1.0, 0.0)), ("bias", (-20.0, -20.0), (1.0, 1.0))]
+    table = lab.shear_cells(sheet, lines, 5.0, 60.0, rng, 0.0)
+    assert len(table["shear_deg"]) >= 8 and np.allclose(table["shear_deg"], 12.5)
+    fd, sd = lab.shear_differences(sheet, lines, 5.0, 60.0, 5.0, rng, 0.2)
+    # Noise of sd 0.2 mm over ±5 mm: the lab's estimate sd/h rad; the mean is the shear.
+    assert sd == pytest.approx(math.degrees(0.2 / 5.0))
+    assert abs(np.mean(fd["shear_deg"]) - 12.5) < 3 * sd / math.sqrt(len(fd["shear_deg"]))
+
+
+def test_tracked_points_and_the_edge_follow_the_net():
+    sheet = sheared_sheet(20.0)
+    rng = np.random.default_rng(1)
+    grid = lab.grid(sheet, 5.0, rng, 0.0)
+    g = math.radians(20.0)
+    x0, y0 = grid["x0_mm"], grid["y0_mm"]
+    assert len(x0) == 13 * 13  # every 5 mm over the 60 mm square, its edges included
+    assert np.allclose(grid["x_mm"], x0 + y0 * math.sin(g))
+    assert np.allclose(grid["y_mm"], y0 * math.cos(g))
+    edge = lab.edge(sheet, 50, rng, 0.0, draw_in=True)
+    # The edge's material moved inward by |X| - |x|; its points lie on the sheared square.
+    assert len(sheet.boundary()) == 24
+    u = edge["x_mm"] - edge["y_mm"] * math.tan(g)
+    v = edge["y_mm"] / math.cos(g)
+    assert np.allclose(np.maximum(np.abs(u), np.abs(v)), 30.0, atol=1e-9)
+    flat = np.hypot(u, v)
+    assert np.allclose(edge["draw_in_mm"], flat - np.hypot(edge["x_mm"], edge["y_mm"]))
+
+
+def test_the_lab_copies_of_the_tools_follow_their_shapes():
+    dome = tools.double_dome_height()
+    tri = tools.height_field(dome, 165.0, 115.0, 3.0, z0=-40.5)
+    z = tri[..., 2].ravel() + 40.5
+    xy = tri[..., :2].reshape(-1, 2)
+    assert np.allclose(z, dome(xy[:, 0], xy[:, 1]))
+    assert z.max() == pytest.approx(40.0, abs=0.05)  # each dome 40 mm high
+    box = tools.swept_box(50.0, 50.0, 20.0, 15.0, 5.0, 25.0, -25.5, 100.0, 2.0)
+    p = box.reshape(-1, 3)
+    top = p[np.isclose(p[:, 2], -0.5)]
+    assert np.abs(top[:, :2]).max() == pytest.approx(50.0 - 15.0, abs=1e-9)
+    # The wall (z from -20.5 to -15.5, between the fillets) lies on the rounded square of
+    # half side 50 with 20 mm corners.
+    wall = p[(p[:, 2] > -20.4) & (p[:, 2] < -15.6)]
+    q = np.abs(wall[:, :2]) - 30.0
+    distance = np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0) - 20
+    assert len(wall) > 50 and np.allclose(distance, 0.0, atol=1e-9)
+    normals = np.cross(box[:, 1] - box[:, 0], box[:, 2] - box[:, 0])
+    assert np.all(np.linalg.norm(normals, axis=1) > 0)
+    plate = tools.holder_plate(115.0, 75.0, 15.0, 80.0)
+    q = plate.reshape(-1, 3)
+    assert np.all(q[:, 2] == 0.0)
+    assert np.all((np.abs(q[:, 0]) >= 115.0 - 1e-6) | (np.abs(q[:, 1]) >= 75.0 - 1e-6)
+                  | (np.hypot(np.abs(q[:, 0]) - 100.0, np.abs(q[:, 1]) - 60.0) >= 15 - 1e-6))
+
+
+def _imports(path: Path) -> set[str]:
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found.add(node.module)
+    return found
+
+
+def test_the_generator_reads_nothing_of_the_diagnosis_or_the_projects_measures():
+    """Only the forming API forms the truth (truth.py); the lab's code is its own."""
+    allowed = {"truth.py": {"fenicsx_drape.forming", "fenicsx_drape.model"}}
+    for path in sorted(SCENARIOS.glob("*.py")):
+        if path.name in ("run.py", "rate_refit.py"):
+            continue  # the runner calls the README's command; the study reads the diagnosis
+        used = {m for m in _imports(path) if m.split(".")[0] == "fenicsx_drape"}
+        assert used <= allowed.get(path.name, set()), f"{path.name} imports {used}"
+
+
+def test_the_rule_of_what_is_right():
+    record = {"expected": {"effect": "tow_buckling", "setup": None, "data": None,
+                           "resolution_ok": False}}
+    report = {"missing_effect": "tow_buckling", "add_effects": ["tow_buckling"],
+              "setup_error": None, "conclusion": "Missing effect: tow_buckling", "data_check": [],
+              "baseline": {"error": {"normalised": 4.0}}, "candidates": [], "setup": []}
+    assert classify.judge(record, report) == (True, "")
+    wrong = dict(report, setup_error="holder_force_N",
+                 setup=[{"parameter": "holder_force_N", "fitted": 90.0, "sd": 3.0,
+                         "stated": 200.0, "evidence": 1.5, "significant": True}])
+    right, why = classify.judge(record, wrong)
+    assert not right and "holder_force_N fitted 90 ± 3" in why
+    nothing = {"expected": {"effect": None, "setup": None, "data": None,
+                            "resolution_ok": False}}
+    law = dict(report, missing_effect=None, add_effects=[],
+               conclusion="None of the candidates ... write it as a user law (plugins)")
+    right, why = classify.judge(nothing, law)
+    assert not right and "user law" in why
+    assert classify.label(classify.answer(law), nothing["expected"]) == "write a user law"
+    force = {"expected": {"effect": None, "setup": ["holder_force_N", "mu"], "data": None,
+                          "resolution_ok": False}}
+    assert classify.judge(force, dict(law, conclusion="", setup_error="mu"))[0]
