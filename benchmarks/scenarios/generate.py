@@ -48,6 +48,7 @@ SETUPS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", "tool_offs
 KINDS = ("grid", "shear", "scan", "edge", "force")
 SHOW = 3.0  # a hidden effect or set-up error must move the lab's measures this far (× noise)
 ATTEMPTS = 4  # draws of part, net and kinds before a slot is given up
+RECORD = 2  # version of a scenario's record and bundle (its truths are kept apart: truth.py)
 ETA_O = 1.37  # Table 2 (N·s/tow)
 T_REF_C = 20.0
 R_GAS = 8.314  # J/(mol K)
@@ -169,7 +170,8 @@ def draw(seed: int, index: int, attempt: int, cls: str, detail: str | None,
     """One scenario's draw (module doc); ``fixed`` sets some choices (the tests' small
     scenarios): ``part``, ``net``, ``kinds``, ``shear_mode``, ``trials``, ``stated``,
     ``setup`` (its value), ``hidden`` (the effect of a set-up with an effect), ``other``,
-    ``case_cell``, ``case_step`` (the lab case's net), ``noise`` (sds)."""
+    ``case_cell``, ``case_step`` (the lab case's net), ``noise`` (sds), ``stated_mu`` (the
+    holder's μ the lab case states, None: none)."""
     fixed = fixed or {}
     rng = np.random.default_rng([seed, index, attempt])
     stack = cls.startswith("stack")
@@ -249,6 +251,7 @@ def draw(seed: int, index: int, attempt: int, cls: str, detail: str | None,
     stated_mu = 0.3 if rng.random() < 0.5 else None
     if setup_name in ("holder_force_N", "mu"):
         stated_mu = 0.3  # else the baseline's fit of the holder's μ takes the error up
+    stated_mu = fixed.get("stated_mu", stated_mu)
     if setup_name == "ply_angle_deg":
         setup = {"value": round(float(rng.uniform(3.0, 6.0) * _pick(rng, [-1, 1])), 2),
                  "stated": 0.0}
@@ -621,7 +624,7 @@ def make(seed: int, index: int, work: Path, cache: Path, say=print) -> dict:
     record_path = folder / "truth.json"
     if record_path.is_file():
         record = json.loads(record_path.read_text())
-        if record.get("seed") == seed and record.get("generator") == truths.VERSION:
+        if record.get("seed") == seed and record.get("generator") == [truths.VERSION, RECORD]:
             return record
     tried = []
     attempts = ATTEMPTS if cls in ("effect", "setup", "setup+effect", "stack: sliding") else 2
@@ -641,17 +644,16 @@ def make(seed: int, index: int, work: Path, cache: Path, say=print) -> dict:
             break
     else:
         failed = all("failed" in t for t in tried)
-        record = {"id": d.id, "seed": seed, "generator": truths.VERSION, "class": cls,
-                  "detail": detail, "left_out": "its runs failed" if failed else
+        record = {"id": d.id, "seed": seed, "generator": [truths.VERSION, RECORD],
+                  "class": cls, "detail": detail, "left_out": "its runs failed" if failed else
                   f"cannot show: below {SHOW} × the noise on {len(tried)} draws",
                   "attempts": tried, "hidden_effect": d.hidden_effect, "setup": d.setup}
         folder.mkdir(parents=True, exist_ok=True)
         record_path.write_text(json.dumps(record, indent=1, default=_plain))
         say(f"  {d.id}: {detail or cls}: {record['left_out']}: left out")
         return record
-    return _finish(d, got, folder, cache, {"id": d.id, "seed": seed,
-                                           "generator": truths.VERSION, "attempts": tried},
-                   say)
+    own = {"id": d.id, "seed": seed, "generator": [truths.VERSION, RECORD], "attempts": tried}
+    return _finish(d, got, folder, cache, own, say)
 
 
 def small(folder: Path, cache: Path, cls: str, detail: str | None = None, seed: int = 7,

@@ -3,7 +3,7 @@
 Makes the two-trial double-dome bundle of the scenario generator — the paper's model at
 Table 2 formed at 8 s and 240 s on the case's 10 mm net (2 mm steps), the lab's STL copy of
 the tools, shear at cell centres along measuring lines (1°) and the blank's edge (0.3 mm),
-noise stated by keys — and follows the diagnosis's refit of ``rate_dependence`` step by step
+noise stated by keys, the holder's μ not stated (the baseline fits it) — and follows the diagnosis's refit of ``rate_dependence`` step by step
 with the model less that effect: the baseline's fit, the candidate's starts and their costs,
 its refit, against the truth's own error on the same net.
 
@@ -35,7 +35,8 @@ def make(work: Path) -> Path:
                        part="double_dome", case_cell=10.0, case_step=2.0,
                        kinds=["shear", "edge"], shear_mode="cells",
                        noise={"shear_sd_deg": 1.0, "position_sd_mm": 0.3},
-                       trials=[{"duration_s": 8.0}, {"duration_s": 240.0}])
+                       trials=[{"duration_s": 8.0}, {"duration_s": 240.0}],
+                       stated_mu=None)
     return folder
 
 
