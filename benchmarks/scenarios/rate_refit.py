@@ -3,9 +3,10 @@
 Makes the two-trial double-dome bundle of the scenario generator — the paper's model at
 Table 2 formed at 8 s and 240 s on the case's 10 mm net (2 mm steps), the lab's STL copy of
 the tools, shear at cell centres along measuring lines (1°) and the blank's edge (0.3 mm),
-noise stated by keys, the holder's μ not stated (the baseline fits it) — and follows the diagnosis's refit of ``rate_dependence`` step by step
-with the model less that effect: the baseline's fit, the candidate's starts and their costs,
-its refit, against the truth's own error on the same net.
+noise stated by keys, the holder's μ not stated (the baseline fits it) — and follows the
+diagnosis's refit of ``rate_dependence`` step by step with the model less that effect: the
+baseline's fit, the candidate's starts and their costs, its refit, against the truth's own
+error on the same net.
 
     ./drape exec python3 benchmarks/scenarios/rate_refit.py [--work DIR] [--full]
 
