@@ -148,3 +148,43 @@ def test_the_rule_of_what_is_right():
     force = {"expected": {"effect": None, "setup": ["holder_force_N", "mu"], "data": None,
                           "resolution_ok": False}}
     assert classify.judge(force, dict(law, conclusion="", setup_error="mu"))[0]
+
+
+# --------------------------------------------------------------------------------------------
+# Small scenarios through the README's command
+
+SMALL = {  # id: class, detail, the fixed choices (the rest: generate.small's defaults)
+    "nothing": ("nothing", None, {"kinds": ["edge"]}),
+    "effect": ("effect", "tow_buckling", {"kinds": ["edge", "force"]}),
+    "setup": ("setup", "ply_angle_deg", {"kinds": ["edge", "shear"], "shear_mode": "cells",
+                                         "setup": 5.0}),
+    "setup+effect": ("setup+effect", None, {"kinds": ["edge", "force"], "hidden": "tow_buckling",
+                                            "setup": [8.0, 0.0]}),
+    "discretisation": ("discretisation", "fd", {"kinds": ["shear"], "shear_mode": "fd"}),
+    "other part": ("other part", None, {"kinds": ["grid", "edge"],
+                                        "other": {"part": "hemisphere", "kind": "grid"}}),
+    "stack: sliding": ("stack: sliding", None, {"kinds": ["edge", "grid"], "part": "hemisphere",
+                                                "net": "same"}),
+    "stack: bonded": ("stack: bonded", None, {"kinds": ["edge", "grid"], "part": "hemisphere",
+                                              "net": "same"}),
+}
+
+
+@pytest.fixture(scope="module")
+def truths(tmp_path_factory):
+    """The small scenarios' truths, formed once for the module."""
+    return tmp_path_factory.mktemp("truths")
+
+
+def diagnose_small(folder: Path, truths: Path, name: str) -> tuple[dict, dict]:
+    """Make the small scenario ``name`` and run the README's command on it."""
+    from fenicsx_drape.cli import main
+
+    generate = pytest.importorskip("generate")
+    cls, detail, fixed = SMALL[name]
+    record = generate.small(folder, truths, cls, detail, say=lambda line: None, **fixed)
+    if record["hidden_effect"] or record["setup"]:
+        assert record["signal"] >= generate.SHOW  # it can show on these measures
+    assert main(["diagnose", str(folder / "bundle"), "--model", str(folder / "model.toml"),
+                 "--json", str(folder / "REPORT.json")]) == 0
+    return record, json.loads((folder / "REPORT.json").read_text())
