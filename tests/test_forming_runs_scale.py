@@ -407,3 +407,15 @@ def test_a_local_worker_leaves_the_launchers_job_and_keeps_how_mpi_runs_here(mon
         assert not set(job) & set(os.environ)
         assert all(os.environ[name] == value for name, value in settings.items())
     assert all(os.environ[name] == value for name, value in {**job, **settings}.items())
+
+
+def test_the_runs_package_imports_no_dolfinx():
+    """A worker of mpi4py.futures imports runs.mpi (its initializer) before it starts PETSc on
+    itself alone: had the package started PETSc on MPI.COMM_WORLD, every rank would wait
+    for the others in a collective that never comes."""
+    code = ("import sys, fenicsx_drape.runs, fenicsx_drape.runs.mpi; "
+            "print(sorted({m.split('.')[0] for m in sys.modules} & "
+            "{'dolfinx', 'petsc4py', 'ufl', 'basix', 'ffcx'}))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)}, check=True, timeout=120)
+    assert done.stdout.strip() == "[]"

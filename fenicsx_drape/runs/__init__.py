@@ -35,7 +35,8 @@ workers). By default a case runs on its own blank's ``cell_mm`` (the hemisphere'
 full travel is kept as far as it got, and :func:`stopped_at` tells the travel it reached.
 
 This package knows forming cases and models, not tests: the forming kind of the diagnosis
-turns a test into a case.
+turns a test into a case. Importing it loads no DOLFINx (nor PETSc): the workers of
+``mpi4py.futures`` import :mod:`~fenicsx_drape.runs.mpi` before each starts PETSc on itself.
 """
 
 from __future__ import annotations
@@ -44,7 +45,6 @@ from collections.abc import Callable, Iterable, Sequence
 from contextlib import AbstractContextManager
 from typing import TYPE_CHECKING, Any
 
-from fenicsx_drape.forming.case.format import case_key
 from fenicsx_drape.runs.keys import USER_OPTIONS, describe, key_of, solver_options
 from fenicsx_drape.runs.runner import MEMORY_SIZE, Deferred, Runs, current
 from fenicsx_drape.runs.store import CACHE_ENV, RunStore, default_folder
@@ -70,7 +70,17 @@ __all__ = [
 FULL_CELL_MM = 10.0  # unit cell of the forming runs (mm), the paper's Δ
 SCREEN_CELL_MM = 20.0  # a coarse screening mesh (mm), for data formed on it (tests)
 
-_ = case_key  # importable from here as from diagnosis.forming_runs (its home: forming.case)
+
+
+def __getattr__(name: str):
+    # case_key, importable from here as from diagnosis.forming_runs (its home: forming.case),
+    # is imported when asked: importing this package loads no DOLFINx (a pool's worker
+    # imports runs.mpi before its PETSc starts on itself alone).
+    if name == "case_key":
+        from fenicsx_drape.forming.case.format import case_key
+
+        return case_key
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def execution(workers: int | None = None, cache: str | os.PathLike | None = None, *,

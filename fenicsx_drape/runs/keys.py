@@ -13,7 +13,6 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from fenicsx_drape.forming.case.format import case_key
 from fenicsx_drape.provenance import file_digest
 
 if TYPE_CHECKING:
@@ -26,6 +25,8 @@ USER_OPTIONS = ("snes_", "ksp_", "pc_", "mat_", "npc_", "sub_", "log_")
 
 def key_of(case, model: Model) -> tuple:
     """The identity of the run of ``(case, model)``: equal keys, the same run."""
+    from fenicsx_drape.forming.case.format import case_key  # DOLFINx: only once a run is asked
+
     if "interply_friction" in model.effects and not case.stack:  # it acts on stacks only
         model = model.without_effects("interply_friction")
     params = tuple(sorted((k, float(v)) for k, v in model.parameters.items()))

@@ -90,6 +90,7 @@ class Runs:
         self.ranks_per_run = ranks_per_run
         self.store: RunStore | None = RunStore(cache) if cache is not None else None
         self.memory = memory
+        self._rebuilt = 0  # the store's rebuilds seen
         self.counts = dict.fromkeys(COUNTED, 0)
         self._kept: dict[tuple, ex.Run] = {}  # the runs in memory, the oldest first
         self._pool: ex.LocalPool | None = None
@@ -363,6 +364,10 @@ class Runs:
                 got[k] = ("ok", value[0])
                 if store is not None:
                     store.put(names[k], *value)
+        if store is not None and store.rebuilt != self._rebuilt:  # a new database: the runs
+            self._rebuilt = store.rebuilt  # read from the damaged one go into it
+            for k, run in self._kept.items():
+                store.put(store.name(k), *run)
         asked = set(keys) | (set(extra) & set(got))
         self.counts["asked"] += len(asked)
         self.counts["from_memory"] += len(asked & in_memory)

@@ -170,6 +170,7 @@ class RunStore:
         self.code = code or code_digest()
         self._say = say or (lambda line: print(f"drape: {line}", file=sys.stderr, flush=True))
         self.replaced: list[str] = []  # the names of the entries that were not what they said
+        self.rebuilt = 0  # how many times a damaged database was replaced while in use
         if self.folder.exists() and not self.folder.is_dir():
             raise DrapeInputError(f"--cache {folder}: not a folder")
         try:
@@ -218,12 +219,17 @@ class RunStore:
         return True
 
     def _rebuild(self, err: Exception) -> None:
-        """A database found damaged while in use: closed, moved aside, a new one opened."""
+        """A database found damaged while in use: closed, moved aside, a new one opened.
+
+        The runs read from it before are not in the new one: its user puts them back
+        (:attr:`rebuilt` counts the rebuilds).
+        """
         try:
             self._cache.close()
         except Exception:  # a damaged database may not close cleanly: it is moved aside
             pass
         self._cache = self._open() if self._move_aside(err) else None
+        self.rebuilt += 1
 
     def name(self, parts: Any) -> str:
         """The name of the run made of ``parts`` in this store (:func:`run_key`)."""
