@@ -4,8 +4,9 @@ A stored run carries the name it is filed under and its own checksum, and both a
 every read (``fenicsx_drape/runs/store.py``): a value swapped with another entry's, values
 rotated among fourteen entries, a flipped byte, a database truncated, scribbled over or half
 written -- each is a miss (the run formed again, the entry replaced) and a note, never another
-run's result. The bundle: two forming tests of the small octagon case (39 nodes, under a
-second a run), at two holder forces, whose ``compare`` fits μ through 18 stored runs.
+run's result. The bundle: two forming tests of the small octagon case (39 nodes, 11 steps,
+a quarter of a second a run), at two holder forces, whose ``compare`` fits μ through 18
+stored runs.
 """
 
 import json
@@ -20,7 +21,7 @@ import pytest
 from fenicsx_drape.cli import main
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_forming_case_diagnosis import write_case  # noqa: E402
+from test_forming_case_diagnosis import write_case
 
 pytestmark = pytest.mark.skip_in_parallel  # a cache folder of one process
 
@@ -36,7 +37,8 @@ def intact(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("run_cache")
     case = load_case(write_case(tmp / "part"))
     truth = default_model().with_parameters(mu=0.45)
-    tests = [fc.synthetic_case_test(truth, with_overrides(case, holder_force_N=force),
+    tests = [fc.synthetic_case_test(truth, with_overrides(case, holder_force_N=force,
+                                                          step_mm=5.0),  # 11 steps a run
                                     test_id=f"oct{force:g}", sd_mm=0.3, seed=k,
                                     case_file=f"c{force:g}/case.toml")
              for k, force in enumerate((100.0, 400.0))]
