@@ -145,3 +145,62 @@ def test_a_corrupted_cache_gives_the_intact_report_and_heals(intact, corrupt, ca
     again, made = compare(tmp, cache, f"{corrupt.__name__} 2")
     assert again == expected and made["formed"] == 0 and made["from_disk"] == 18
     assert "drape: the run cache" not in capsys.readouterr().err
+
+
+def descendants(pid: int) -> set[int]:
+    """The processes ``pid`` started, and theirs (from /proc)."""
+    found = set()
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            found |= {int(c) for c in (task / "children").read_text().split()}
+        except OSError:  # gone meanwhile
+            pass
+    for child in list(found):
+        found |= descendants(child)
+    return found
+
+
+def running(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie, dead but not yet reaped, does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_ctrl_c_on_a_parallel_diagnose_stops_the_workers_and_says_what_was_kept(intact):
+    """SIGINT to the command's process group, as a terminal's Ctrl-C sends it, once its pool of
+    workers forms runs: exit status 130, one line saying the runs are kept in the cache, no
+    traceback, and no worker left running."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    tmp, _ = intact
+    cache = tmp / "interrupted"
+    command = [sys.executable, "-m", "fenicsx_drape", "diagnose", str(tmp / "bundle"),
+               "--model", str(tmp / "model.toml"), "--json", str(tmp / "REPORT.json"),
+               "--cache", str(cache), "--workers", "2"]
+    root = Path(__file__).resolve().parents[1]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True, env={**os.environ, "PYTHONPATH": str(root)})
+    try:
+        start = time.monotonic()
+        while not descendants(process.pid) and time.monotonic() - start < 300:
+            time.sleep(0.1)  # the pool starts with the first batch of runs
+        time.sleep(1.0)
+        workers = descendants(process.pid)
+        assert workers and process.poll() is None
+        os.killpg(process.pid, signal.SIGINT)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    lines = err.splitlines()
+    assert process.returncode == 130
+    assert "Traceback" not in err and [line for line in lines if "interrupted" in line] == [
+        lines[-1]]
+    assert lines[-1].startswith("drape diagnose: interrupted; ") and str(cache) in lines[-1]
+    time.sleep(1.0)
+    assert not [pid for pid in workers if running(pid)]

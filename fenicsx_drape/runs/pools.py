@@ -19,7 +19,7 @@ import contextlib
 import os
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -55,10 +55,41 @@ def form(case, model: Model, comm=None) -> Run:
     from fenicsx_drape.forming.running.run import run_case
 
     comm = comm or MPI.COMM_SELF
-    run = run_case(case, model, comm=comm, allow_incomplete=True)
+    with interrupts_between_steps() as check:
+        run = run_case(case, model, comm=comm, allow_incomplete=True, on_step=check)
     rows = run.tool_forces
     curves = {k: np.array([r[k] for r in rows]) for k in (rows[0] if rows else {})}
     return run.grid, (run.travel_mm if run.stopped else None), curves
+
+
+@contextlib.contextmanager
+def interrupts_between_steps() -> Iterator[Callable[[object], None]]:
+    """Inside, a Ctrl-C (SIGINT) is raised as KeyboardInterrupt only between load steps.
+
+    Raised inside a solve it would reach one of PETSc's calls back into Python (a residual, a
+    convergence test), where it reads as a failed step: the step would be cut and the run go
+    on, interrupted in nothing but its path. So SIGINT is noted while a run is formed and
+    raised by the ``check`` yielded (called after each converged step), or at the end.
+    Elsewhere than in the main thread (where Python handles signals), or under a handler of
+    the caller's own, nothing changes.
+    """
+    noted: list[int] = []
+
+    def check(problem=None) -> None:
+        if noted:
+            noted.clear()
+            raise KeyboardInterrupt
+
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield check  # a worker (SIGINT ignored), or a caller's own handler: left as it is
+        return
+    signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
+    try:
+        yield check
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    check()
 
 
 def run_job(case, model: Model, trust: bool, options: tuple) -> tuple[str, Any]:

@@ -134,10 +134,12 @@ class Runs:
     def kept(self) -> str:
         """What the runs so far left behind, in a sentence (for an interrupted command)."""
         made = self.counts["formed"]
-        if self.store is not None and self.store.usable:
-            return (f"the {made} run(s) formed so far are kept in the cache {self.store.folder}"
-                    ": the same command again reads them")
-        return f"no run is kept ({made} formed; no cache folder)"
+        if self.store is None or not self.store.usable:
+            return f"no run is kept ({made} formed, no cache folder)"
+        if not made:
+            return f"no run was formed yet (the cache {self.store.folder} is as it was)"
+        return (f"the {made} run(s) formed so far are kept in the cache {self.store.folder}: "
+                "the same command again reads them")
 
     # -- settings ---------------------------------------------------------------------------
 
