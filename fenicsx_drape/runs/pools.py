@@ -300,7 +300,11 @@ class LocalPool:
         """Shut the pool down: after its jobs, or ``now`` (its processes killed: an interrupt)."""
         if now:
             with contextlib.suppress(Exception):
-                self.pool.kill_workers()
+                if hasattr(self.pool, "kill_workers"):  # Python >= 3.14
+                    self.pool.kill_workers()
+                else:
+                    for process in list((self.pool._processes or {}).values()):
+                        process.kill()
         self.pool.shutdown(wait=not now, cancel_futures=True)
 
 
