@@ -297,7 +297,11 @@ class LocalPool:
         return results
 
     def stop(self, now: bool = False) -> None:
-        """Shut the pool down: after its jobs, or ``now`` (its processes killed: an interrupt)."""
+        """Shut the pool down, or ``now`` (an interrupt): its processes killed.
+
+        Not ``now``, nothing waits: the batches are gathered, and a worker still warming up
+        ends once its warm-up is done (the interpreter's exit waits for it).
+        """
         if now:
             with contextlib.suppress(Exception):
                 if hasattr(self.pool, "kill_workers"):  # Python >= 3.14
@@ -305,7 +309,7 @@ class LocalPool:
                 else:
                     for process in list((self.pool._processes or {}).values()):
                         process.kill()
-        self.pool.shutdown(wait=not now, cancel_futures=True)
+        self.pool.shutdown(wait=False, cancel_futures=True)
 
 
 def submit_all(jobs: list[Job], pool: Executor) -> dict[int, Future]:
