@@ -89,7 +89,9 @@ def forming_runs_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cache", metavar="DIR", default=None,
                         help="folder keeping the forming runs across commands, by content "
                         "(default: DRAPE_CACHE, else $XDG_CACHE_HOME/fenicsx-drape/runs; "
-                        "remove it to clear it)")
+                        "remove it to clear it). Each run read is checked to be the run "
+                        "asked for; a damaged database is moved aside into DIR/damaged-TIME, "
+                        "with a note")
     parser.add_argument("--no-cache", action="store_true", help="keep no forming run on disk")
     parser.add_argument("--ranks-per-run", type=positive_int, default=None, metavar="K",
                         help="under plain mpirun: each run on K ranks, (ranks / K) runs at "
