@@ -17,6 +17,7 @@ made, with a note naming the folder to delete. Removing the cache folder clears 
 from __future__ import annotations
 
 import datetime
+import functools
 import hashlib
 import io
 import json
@@ -43,11 +44,12 @@ OK, ABSENT, DAMAGED_VALUE, OTHER_CODE, OTHER_RUN = (
     "ok", "absent", "damaged", "another code's", "another run's")
 
 
+@functools.cache  # the code this process runs: files edited since are not what runs here
 def code_digest() -> str:
     """SHA-256 of the package's version and the bytes of its source and data files.
 
-    Any change of the code is another version: its runs are not the old ones. A
-    :class:`RunStore` computes it once, when it opens.
+    Any change of the code is another version: its runs are not the old ones. Read once in a
+    process (at its first store).
     """
     root = Path(fenicsx_drape.__file__).parent
     h = hashlib.sha256(fenicsx_drape.__version__.encode())
