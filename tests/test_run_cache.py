@@ -183,8 +183,9 @@ def test_ctrl_c_on_a_parallel_diagnose_stops_the_workers_and_says_what_was_kept(
                "--model", str(tmp / "model.toml"), "--json", str(tmp / "REPORT.json"),
                "--cache", str(cache), "--workers", "2"]
     root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root), "PYTHONFAULTHANDLER": "1"}
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True, env={**os.environ, "PYTHONPATH": str(root)})
+                               start_new_session=True, env=env)
     try:
         start = time.monotonic()
         while not descendants(process.pid) and time.monotonic() - start < 300:
@@ -193,7 +194,11 @@ def test_ctrl_c_on_a_parallel_diagnose_stops_the_workers_and_says_what_was_kept(
         workers = descendants(process.pid)
         assert workers and process.poll() is None
         os.killpg(process.pid, signal.SIGINT)
-        _, err = process.communicate(timeout=120)
+        try:
+            _, err = process.communicate(timeout=120)
+        except subprocess.TimeoutExpired:  # where it waits: every thread's stack (faulthandler)
+            os.kill(process.pid, signal.SIGABRT)
+            pytest.fail("not stopped 120 s after SIGINT:\n" + process.communicate()[1][-8000:])
     finally:
         if process.poll() is None:
             process.kill()

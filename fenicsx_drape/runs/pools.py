@@ -168,9 +168,10 @@ def fresh_workers() -> Iterator[None]:
     Without the MPI launcher's environment a worker is a job of one process (the settings of
     how Open MPI runs here stay: :data:`_MPI_SETTINGS`); without the caller's ``__main__``
     (the worker would run a script again, e.g. a demo, to import it) it imports only this
-    package. A worker started inside ignores SIGINT from its first instruction (the signal's
-    disposition is inherited): a Ctrl-C, which reaches every process of the terminal's
-    group, is the command's to handle.
+    package. A worker started inside has SIGINT blocked from its first instruction (the
+    signal mask is inherited; :func:`ignore_interrupts` then ignores it): a Ctrl-C, which
+    reaches every process of the terminal's group, is the command's to handle. Here SIGINT is
+    only held back meanwhile, and raised when the block ends.
     """
     import sys
     import types
@@ -181,16 +182,13 @@ def fresh_workers() -> Iterator[None]:
         del os.environ[k]
     main = sys.modules["__main__"]
     sys.modules["__main__"] = types.ModuleType("__main__")
-    interrupts = None
-    if threading.current_thread() is threading.main_thread():
-        interrupts = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        if interrupts is not None:
-            signal.signal(signal.SIGINT, interrupts)
         sys.modules["__main__"] = main
         os.environ.update(launcher)
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 def _ignore_broken_pipes() -> None:
@@ -233,9 +231,14 @@ class LocalPool:
         # last worker (it is warm: DOLFINx imported, forms compiled).
         self.pool = ProcessPoolExecutor(workers - 1, initializer=ignore_interrupts,
                                         mp_context=multiprocessing.get_context("spawn"))
-        with fresh_workers():  # every process starts now and warms while this one works
-            self.warming: list[Future] = [self.pool.submit(warm) for _ in range(workers - 1)]
         self.broken = False  # a worker died: the next batch needs a new pool
+        try:
+            with fresh_workers():  # every process starts now and warms while this one works
+                self.warming: list[Future] = [self.pool.submit(warm)
+                                              for _ in range(workers - 1)]
+        except BaseException:  # interrupted as it starts: no worker left behind
+            self.stop(now=True)
+            raise
 
     def share(self, jobs: list[Job]) -> list[tuple[str, Any]]:
         """The jobs formed by this process and the pool's workers together, in the order asked.
