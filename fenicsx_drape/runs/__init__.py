@@ -71,7 +71,6 @@ FULL_CELL_MM = 10.0  # unit cell of the forming runs (mm), the paper's Δ
 SCREEN_CELL_MM = 20.0  # a coarse screening mesh (mm), for data formed on it (tests)
 
 
-
 def __getattr__(name: str):
     # case_key, importable from here as from diagnosis.forming_runs (its home: forming.case),
     # is imported when asked: importing this package loads no DOLFINx (a pool's worker
