@@ -171,7 +171,8 @@ def draw(seed: int, index: int, attempt: int, cls: str, detail: str | None,
     scenarios): ``part``, ``net``, ``kinds``, ``shear_mode``, ``trials``, ``stated``,
     ``setup`` (its value), ``hidden`` (the effect of a set-up with an effect), ``other``,
     ``case_cell``, ``case_step`` (the lab case's net), ``noise`` (sds), ``stated_mu`` (the
-    holder's μ the lab case states, None: none)."""
+    holder's μ the lab case states, None: none), ``lab_tools`` (the truth formed on the lab's
+    copy of the tools)."""
     fixed = fixed or {}
     rng = np.random.default_rng([seed, index, attempt])
     stack = cls.startswith("stack")
@@ -293,7 +294,7 @@ def draw(seed: int, index: int, attempt: int, cls: str, detail: str | None,
         truth_parameters=truth_parameters, model_effects=model_effects, hidden_effect=hidden,
         effect_parameters=effect_parameters, setup=setup,
         stack=(cls.split(": ")[1] if stack else None), other_part=other,
-        plan=_plan(rng, part, kinds, stack))
+        plan={**_plan(rng, part, kinds, stack), "lab_tools": bool(fixed.get("lab_tools"))})
 
 
 # --------------------------------------------------------------------------------------------
@@ -308,6 +309,8 @@ def _run_spec(d: Draw, trial: dict, *, effects, parameters, setup: bool, cell_mm
             "parameters": dict(parameters)}
     if d.stated_mu is not None:
         spec["mu"] = d.stated_mu
+    if d.plan.get("lab_tools") and part is None:
+        spec["lab_tools"] = True
     params = spec["parameters"]
     if "temperature_dependence" in effects:
         # Forming runs read no test temperature: the truth at T is the model whose viscosity

@@ -54,8 +54,10 @@ def prepare(spec: dict, cache: Path) -> Path:
     if (folder / "run" / "summary.json").is_file():
         return folder
     folder.mkdir(parents=True, exist_ok=True)
-    parts.write_case(folder / "case", spec["part"], truth=True, stack=spec.get("stack", False),
-                     stl_cache=cache / "stl")
+    # "lab_tools": the truth formed on the lab's own copy of the tools (a check of the lab's
+    # measures against the diagnosis's reading of them, with nothing else apart).
+    parts.write_case(folder / "case", spec["part"], truth=not spec.get("lab_tools"),
+                     stack=spec.get("stack", False), stl_cache=cache / "stl")
     (folder / "model.toml").write_text(model_toml(spec["effects"], spec.get("parameters", {})))
     (folder / "spec.json").write_text(json.dumps(spec, indent=1, sort_keys=True))
     return folder
