@@ -48,7 +48,7 @@ SETUPS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", "tool_offs
 KINDS = ("grid", "shear", "scan", "edge", "force")
 SHOW = 3.0  # a hidden effect or set-up error must move the lab's measures this far (× noise)
 ATTEMPTS = 4  # draws of part, net and kinds before a slot is given up
-RECORD = 2  # version of a scenario's record and bundle (its truths are kept apart: truth.py)
+RECORD = 3  # version of a scenario's record and bundle (its truths are kept apart: truth.py)
 ETA_O = 1.37  # Table 2 (N·s/tow)
 T_REF_C = 20.0
 R_GAS = 8.314  # J/(mol K)
@@ -384,10 +384,11 @@ def measure(d: Draw, trial_index: int, sheets: list[lab.Sheet], forces: dict, no
             table["_flat"] = np.column_stack([table["x0_mm"], table["y0_mm"]]) + offset
             table["_sd"] = pos_sd
         elif kind == "shear" and d.shear_mode == "fd":
-            table, sd = lab.shear_differences(sheet, plan["lines"], plan["line_spacing_mm"],
-                                              plan["line_reach_mm"], plan["fd_h_mm"], rng,
-                                              pos_sd * f)
-            table["_sd"] = sd  # the lab's own estimate: the position noise propagated
+            table, _ = lab.shear_differences(sheet, plan["lines"], plan["line_spacing_mm"],
+                                             plan["line_reach_mm"], plan["fd_h_mm"], rng,
+                                             pos_sd * f)
+            # the lab's own estimate of the noise: the position noise propagated (sd/h rad)
+            table["_sd"] = math.degrees(pos_sd / plan["fd_h_mm"])
         elif kind == "shear":
             flat = plan["flat_shear"] and offset == (0.0, 0.0)
             table = lab.shear_cells(sheet, plan["lines"], plan["line_spacing_mm"],
