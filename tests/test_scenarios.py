@@ -188,3 +188,31 @@ def diagnose_small(folder: Path, truths: Path, name: str) -> tuple[dict, dict]:
     assert main(["diagnose", str(folder / "bundle"), "--model", str(folder / "model.toml"),
                  "--json", str(folder / "REPORT.json")]) == 0
     return record, json.loads((folder / "REPORT.json").read_text())
+
+
+def _case(name: str, *marks, xfail: str | None = None):
+    if xfail:
+        marks = (*marks, pytest.mark.xfail(strict=True, reason=xfail))
+    return pytest.param(name, marks=marks, id=name.replace(": ", "-").replace(" ", "-"))
+
+
+@pytest.mark.skip_in_parallel
+@pytest.mark.parametrize("name", [
+    _case("nothing", pytest.mark.slow),
+    _case("effect", pytest.mark.slow),
+    _case("setup", pytest.mark.slow),
+    _case("other part", pytest.mark.slow),
+    _case("setup+effect", pytest.mark.bench,
+          xfail="names neither the blank offset nor tow_buckling: 'write a user law' at 21 x "
+                "the noise, tow_buckling's refit at 18 x (evidence 1.19)"),
+    _case("discretisation", pytest.mark.bench),
+    _case("stack: sliding", pytest.mark.bench),
+    _case("stack: bonded", pytest.mark.bench),
+])
+def test_a_small_scenario_gets_the_right_answer(tmp_path, truths, name):
+    """The README's command on one small scenario of each truth class (module doc)."""
+    pytest.importorskip("dolfinx")
+    pytest.importorskip("h5py")
+    record, report = diagnose_small(tmp_path, truths, name)
+    right, why = classify.judge(record, report)
+    assert right, why
