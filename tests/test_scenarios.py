@@ -17,6 +17,7 @@ formed with the forming API, read back from the run's files (``fields.h5``,
 """
 
 import ast
+import json
 import math
 import sys
 from pathlib import Path
