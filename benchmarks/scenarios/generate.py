@@ -48,7 +48,7 @@ SETUPS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", "tool_offs
 KINDS = ("grid", "shear", "scan", "edge", "force")
 SHOW = 3.0  # a hidden effect or set-up error must move the lab's measures this far (× noise)
 ATTEMPTS = 4  # draws of part, net and kinds before a slot is given up
-RECORD = 3  # version of a scenario's record and bundle (its truths are kept apart: truth.py)
+RECORD = 4  # version of a scenario's record and bundle (its truths are kept apart: truth.py)
 ETA_O = 1.37  # Table 2 (N·s/tow)
 T_REF_C = 20.0
 R_GAS = 8.314  # J/(mol K)
@@ -309,6 +309,8 @@ def _run_spec(d: Draw, trial: dict, *, effects, parameters, setup: bool, cell_mm
             "parameters": dict(parameters)}
     if d.stated_mu is not None:
         spec["mu"] = d.stated_mu
+    if spec["stack"]:
+        spec["die"] = False  # parts.STACK: no die
     if d.plan.get("lab_tools") and part is None:
         spec["lab_tools"] = True
     params = spec["parameters"]
