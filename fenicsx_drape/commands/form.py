@@ -201,11 +201,14 @@ def run(args: argparse.Namespace) -> int:
                   + (" (the tools end before the blank, or the net locks)" if partial else ""))
         for note in result.get("tool_force_notes", []):
             print(f"note: {note}")
+        for name, why in result.get("outputs_left_out", {}).items():
+            print(f"note: {name} left out ({why}); the other outputs are written")
         pictures = ["shear.png", "wrinkling.png", "kinematic_shear.png",
                     *(["paths.png"] if hemisphere else [])]
         for k in range(1, len(result.get("plies", [])) + 1):  # a stack: each ply, the slip
             pictures += [f"shear_ply{k}.png", f"wrinkling_ply{k}.png"]
         pictures += ["interply.png"] if result.get("plies") else []
+        pictures = [p for p in pictures if (args.out / p).is_file()]
         print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "
               f"{args.out / 'summary.json'}")
     return 0

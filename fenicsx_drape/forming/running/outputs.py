@@ -268,40 +268,64 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
     with _WrittenOnFailure(out, run, comm, "drape form") as partial:
         result = partial.update(case_summary(run))
         if comm.rank == 0:
+            left_out: dict[str, str] = {}  # an output that cannot be made: its name, why
+
+            def attempt(name: str, make: Callable[[], object]) -> object:
+                try:
+                    return make()
+                except Exception as err:  # left out with a note, not the whole run
+                    left_out[name] = f"{type(err).__name__}: {err}"
+                    return None
+
             net, kinematic = _kinematic_beside(case, run, out if pictures else None)
             result.update(kinematic)
-            result.update(write_tool_forces(run, out, case.name, pictures=pictures))
+            if "kinematic_error" in kinematic:
+                left_out["kinematic drape"] = kinematic["kinematic_error"]
+            result.update(attempt("tool_forces.csv", lambda: write_tool_forces(
+                run, out, case.name, pictures=pictures)) or {})
             write_json(out / "summary.json", result)
             given = case.holder.mu if case.holder is not None else None
             μ = float(np.max(given if given is not None else model.parameters.get("mu", 0.0)))
             note = (f"simulated by fenicsx_drape (drape form): case {case.name!r}, cell "
-                    f"{case.blank.cell_mm:g} mm, symmetry {list(case.planes) or 'none'}")
+                    f"{run.grid.cell_mm:g} mm, symmetry {list(case.planes) or 'none'}")
             # The tools as the run meshed them: the bundle is data (no code, no Gmsh script).
             meshes = {name: tool.surface for name, tool in run.tools.items()
                       if hasattr(getattr(tool, "surface", None), "triangles")}
-            write_case(case, out / "bundle" / "case", comment=note, surfaces=meshes)
-            write_bundle(case_bundle(run, μ, grid_mm), out / "bundle", comment=note)
+
+            def bundle() -> None:
+                write_case(case, out / "bundle" / "case", comment=note, surfaces=meshes)
+                write_bundle(case_bundle(run, μ, grid_mm), out / "bundle", comment=note)
+
+            attempt("bundle", bundle)
             if pictures:
-                plot_shear(run.grid, out / "shear.png",
-                           f"{case.name}: shear angle (max {result['max_shear_deg']:.1f}°)")
-                plot_wrinkling(run.grid, out / "wrinkling.png")
+                attempt("shear.png", lambda: plot_shear(
+                    run.grid, out / "shear.png",
+                    f"{case.name}: shear angle (max {result['max_shear_deg']:.1f}°)"))
+                attempt("wrinkling.png", lambda: plot_wrinkling(run.grid, out / "wrinkling.png"))
                 for k, (g, ply) in enumerate(zip(run.plies, result.get("plies", [])), 1):
-                    plot_shear(g, out / f"shear_ply{k}.png",
-                               f"{case.name}: ply {k} at {ply['angle_deg']:g}°, shear angle "
-                               f"(max {ply['max_shear_deg']:.1f}°)")
-                    plot_wrinkling(g, out / f"wrinkling_ply{k}.png")
+                    attempt(f"shear_ply{k}.png", lambda g=g, k=k, ply=ply: plot_shear(
+                        g, out / f"shear_ply{k}.png",
+                        f"{case.name}: ply {k} at {ply['angle_deg']:g}°, shear angle "
+                        f"(max {ply['max_shear_deg']:.1f}°)"))
+                    attempt(f"wrinkling_ply{k}.png", lambda g=g, k=k: plot_wrinkling(
+                        g, out / f"wrinkling_ply{k}.png"))
                 if run.plies:
                     faces = [dict(face, name=face["interface"]) for face in interply_maps(run)]
-                    plot_interply(faces, out / "interply.png",
-                                  f"{case.name}: where the plies slid, and their pressure "
-                                  "(the modelled part)")
+                    attempt("interply.png", lambda: plot_interply(
+                        faces, out / "interply.png",
+                        f"{case.name}: where the plies slid, and their pressure "
+                        "(the modelled part)"))
                 if is_paper_hemisphere(case) and net is not None:
-                    plot_paths({"FE truss": run.grid, "kinematic (PjN)": net},
-                               out / "paths.png")
+                    attempt("paths.png", lambda: plot_paths(
+                        {"FE truss": run.grid, "kinematic (PjN)": net}, out / "paths.png"))
             if fields:
-                result["tool_files"] = [str(p.relative_to(out)) for p in
-                                        write_case_tools(run, out / "tools")]
-                write_json(out / "summary.json", result)
+                files = attempt("tools", lambda: [str(p.relative_to(out)) for p in
+                                                  write_case_tools(run, out / "tools")])
+                if files is not None:
+                    result["tool_files"] = files
+            if left_out:
+                result["outputs_left_out"] = left_out
+            write_json(out / "summary.json", result)
             write_provenance(out, model={"effects": list(model.effects),
                                          "parameters": _plain(model.parameters)},
                              case=case_dict(case, case.folder),
@@ -398,16 +422,21 @@ def _kinematic_beside(case: FormingCase, run: FormingRun, pictures: Path | None
 
     Its picture ``kinematic_shear.png`` goes to ``pictures`` when given.
 
-    A net that cannot be draped (a surface the generators leave) is reported, not raised: the
-    mechanical result it stands beside is kept.
+    A net that cannot be draped (a surface the generators leave, a net that places too few
+    nodes to have a cell) is reported, not raised: the mechanical result it stands beside is
+    kept. The net has the run's Δ and, on a stack, the measured ply's angle.
     """
     from fenicsx_drape.forming.running.kinematic import drape_case
 
+    # The sheet the run formed: its Δ (a rectangle fits whole cells to its sides) and, on a
+    # stack, the measured ply's angle.
+    blank = case.ply_blanks()[-1]
     try:
-        net = drape_case(case, tools=run.tools, warn=False)  # summary and console say it
-    except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
-        return None, {"kinematic_error": str(err)}
-    numbers = net.summary()
+        net = drape_case(case, tools=run.tools, warn=False, cell_mm=run.grid.cell_mm,
+                         ply_angle_deg=blank.ply_angle_deg)  # summary and console say it
+        numbers = net.summary()
+    except Exception as err:  # the mechanical result is kept; the note says why
+        return None, {"kinematic_error": f"{type(err).__name__}: {err}"}
     placed, unplaced = numbers["nodes"], numbers["unplaced_nodes"]
     result = {"kinematic_max_shear_deg": numbers["max_shear_deg"],
               "kinematic_placed_nodes": placed, "kinematic_blank_nodes": placed + unplaced,

@@ -13,9 +13,10 @@ core and steps it to the end of its motion (the paper's hemisphere is the case
   with ``tool_friction`` when the model has it;
 - the blank holder (:mod:`~fenicsx_drape.forming.terms.holder`) on the clamping tool's surface:
   clamping with the same k and eq. 1 friction bars, the force shared as ``force_share`` says;
-- on a single ply that neither symmetry planes in both x and y nor ``hold_origin`` hold, the
-  stick of the punch's first point of contact (:mod:`~fenicsx_drape.forming.terms.stick`):
-  without it a frictionless punch leaves the whole sheet free to slide over it;
+- on a sheet that neither symmetry planes in both x and y nor ``hold_origin`` hold, the
+  stick of the punch's first point of contact (:mod:`~fenicsx_drape.forming.terms.stick`;
+  on a stack, each ply's point there): without it a frictionless punch leaves the whole
+  sheet free to slide over it;
 - the out-of-plane stabilisation of the slack net
   (:mod:`~fenicsx_drape.forming.terms.stabilisation`) along the nearest tool's normal.
 
@@ -54,7 +55,7 @@ from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.terms.contact import PenaltyContact
 from fenicsx_drape.forming.terms.holder import BlankHolder, StackHolder
 from fenicsx_drape.forming.terms.stabilisation import ExtrapolationSpring
-from fenicsx_drape.forming.terms.stick import ApexStick
+from fenicsx_drape.forming.terms.stick import ApexStick, PlyStick
 
 CONTACT_ROLES = ("punch", "die", "surface")
 # The geometry checks of the cases formed in this process, by content (the latest few): a
@@ -285,9 +286,11 @@ def run_case(case: FormingCase, model=None, options=None, *,
     terms = [*contact, *([holder] if holder is not None else [])]
     punches = [c.tool for c, t in zip(contact, (t for t in case.tools if t.role in CONTACT_ROLES))
                if t.role == "punch"]
-    if planes != ("x", "y") and not case.blank.hold_origin and len(punches) == 1 \
-            and plies is None:
-        terms.append(ApexStick(punches[0], k))  # the sheet's sliding mode held (stick.py)
+    if planes != ("x", "y") and not case.blank.hold_origin and len(punches) == 1:
+        # The sheet's sliding mode held (stick.py): one ply's node, or each ply's point, at
+        # the punch's first contact.
+        terms.append(ApexStick(punches[0], k) if plies is None
+                     else PlyStick(punches[0], k, plies))
     if interply is not None:
         terms.append(interply)
     if case.stabilisation_N_per_mm:

@@ -96,10 +96,111 @@ class ApexStick:
             return
         i = int(mine[np.argmin(d)])
         g = self.tool.gap(x[i:i + 1], t)
-        n_c = g.normal[0] / np.linalg.norm(g.normal[0])
+        size = np.linalg.norm(g.normal[0])
+        # Beyond a meshed tool's distance band (the node between a double dome's two tops)
+        # the gap has no normal: the contact's own then.
+        n_c = g.normal[0] / size if size > 0.5 else self._contact_normal(x[mine], t, local=True)
         self.node, self.x_c, self.t_c = i, x[i].copy(), t
         self.P = np.eye(3) - np.outer(n_c, n_c)
 
     def revert(self) -> None:
         """Forget the trial positions of a step that is cut back."""
         self._trial = None
+
+    def _contact_normal(self, x: np.ndarray, t: float, local: bool = False) -> np.ndarray:
+        """The punch's normal over the first contact: its penetrating nodes', by depth.
+
+        Collective unless ``local`` (the nodes ``x`` of this rank only).
+        """
+        g = self.tool.gap(x, t) if len(x) else None
+        w = np.maximum(-g.phi, 0.0) if g is not None else np.zeros(0)
+        n = w @ g.normal if g is not None else np.zeros(3)
+        if self.comm is not None and not local:
+            n = self.comm.allreduce(n, op=MPI.SUM)
+        return n / np.linalg.norm(n)
+
+
+class PlyStick(ApexStick):
+    """Each ply of a stack held at the punch's first point of contact (a NodalTerm).
+
+    A stack on frictionless tools has the single ply's sliding mode (the module docstring)
+    once per ply: the whole stack slides over the punch, and a ply slides over its
+    neighbours where their friction is small. The centre of the first contact is found as
+    for one ply (from every ply's penetrating nodes: ply 1's); then, in each ply, the
+    material point over that centre (in the flat stack) is held to the punch's material point
+    under it, in the punch's tangent plane there. The point is held through the four corners
+    of its unit cell, each by a spring k w_J with its bilinear weight w_J,
+
+        f_J = −k w_J P_c (x_J − x_J,c − Δx_punch),   K_J = k w_J P_c,
+
+    so that what is held moves smoothly as the blank or a ply is moved or turned (a point on
+    a node of the net is held by that node alone, as one ply's stick). It removes the sliding
+    of the stack as a whole and of each ply at one point; the plies slide on each other
+    everywhere else (on a part that a half turn about the punch's axis maps onto itself, as a
+    double dome or a hemisphere with a [0/90, ±45] stack, the centre does not slide anyway).
+
+    Args:
+        tool: the punch (``gap(x, t)`` and ``displacement(x, t0, t1)``).
+        stiffness_N_per_mm: the springs' total stiffness ``k`` (the contact penalty's).
+        plies: the stack (:class:`~fenicsx_drape.fe.plies.Ply`, ply 1 first).
+    """
+
+    def __init__(self, tool, stiffness_N_per_mm: float, plies) -> None:
+        super().__init__(tool, stiffness_N_per_mm)
+        self.plies = list(plies)
+        self.held: tuple[np.ndarray, np.ndarray] | None = None  # local nodes, weights
+
+    def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
+        """The reference positions (each ply's nodes are found by place), then as ApexStick."""
+        super().bind(X, owned, comm)
+        self.X = np.asarray(X, dtype=float)
+
+    def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """The springs' forces (N) and stiffness (N/mm) at positions ``x`` (zero before contact)."""
+        n = len(x)
+        f, K = np.zeros((n, 3)), np.zeros((n, 3, 3))
+        self._trial = (np.array(x, dtype=float), t)
+        if self.held is not None:
+            nodes, w = self.held
+            d = x[nodes] - self.x_c - self.tool.displacement(x[nodes], self.t_c, t)
+            np.add.at(f, nodes, -self.k * w[:, None] * (d @ self.P))
+            np.add.at(K, nodes, self.k * w[:, None, None] * self.P)
+        return f, K
+
+    def commit(self) -> None:
+        """After the first step with contact: each ply's point over its centre, and anchors."""
+        from fenicsx_drape.fe.plies import _bilinear, _corners
+
+        if self.chosen or self._trial is None:
+            return
+        x, t = self._trial
+        mine = np.flatnonzero(self.owned)
+        phi = self.tool.gap(x[mine], t).phi if len(mine) else np.zeros(0)
+        w = np.maximum(-phi, 0.0)
+        sums = np.append(w @ x[mine], w.sum()) if len(mine) else np.zeros(4)
+        total = self.comm.allreduce(sums, op=MPI.SUM) if self.comm is not None else sums
+        if not total[3] > 0.0:
+            return  # no contact yet
+        self.chosen = True
+        centre = total[:3] / total[3]
+        self.P = np.eye(3) - np.outer(*[self._contact_normal(x[mine], t)] * 2)
+        nodes, weights = [], []
+        for ply in self.plies:  # the point of each ply over the centre, in the flat stack
+            grid = ply.grid
+            ij = grid.grid_coordinates(centre[None, :2])[0]
+            lo = np.clip(np.floor(ij).astype(int), 0, [grid.nx - 1, grid.ny - 1])
+            if not grid.cells[lo[0], lo[1]]:
+                continue  # the centre is off this ply
+            q = np.clip(ij - lo, 0.0, 1.0)
+            corners = _corners(grid, lo[:1], lo[1:])[0]
+            at = grid.nodes[corners]
+            at[:, 2] = ply.z_mm
+            for X_J, w_J in zip(at, _bilinear(q[:1], q[1:])[0]):
+                i = np.flatnonzero(np.linalg.norm(self.X[mine] - X_J, axis=1)
+                                   <= 1e-6 * grid.cell_mm)
+                if len(i) and w_J > 1e-12:
+                    nodes.append(int(mine[i[0]]))
+                    weights.append(float(w_J))
+        if nodes:  # a rank holds the corners it owns
+            self.held = (np.array(nodes), np.array(weights))
+            self.x_c, self.t_c = x[self.held[0]].copy(), t
