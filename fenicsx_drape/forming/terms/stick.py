@@ -99,7 +99,7 @@ class ApexStick:
         size = np.linalg.norm(g.normal[0])
         # Beyond a meshed tool's distance band (the node between a double dome's two tops)
         # the gap has no normal: the contact's own then.
-        n_c = g.normal[0] / size if size > 0.5 else self._contact_normal(x[mine], t, local=True)
+        n_c = g.normal[0] / size if size > 0.5 else self._contact_normal(x[mine], t)
         self.node, self.x_c, self.t_c = i, x[i].copy(), t
         self.P = np.eye(3) - np.outer(n_c, n_c)
 
@@ -107,17 +107,15 @@ class ApexStick:
         """Forget the trial positions of a step that is cut back."""
         self._trial = None
 
-    def _contact_normal(self, x: np.ndarray, t: float, local: bool = False) -> np.ndarray:
-        """The punch's normal over the first contact: its penetrating nodes', by depth.
-
-        Collective unless ``local`` (the nodes ``x`` of this rank only).
-        """
-        g = self.tool.gap(x, t) if len(x) else None
-        w = np.maximum(-g.phi, 0.0) if g is not None else np.zeros(0)
-        n = w @ g.normal if g is not None else np.zeros(3)
-        if self.comm is not None and not local:
-            n = self.comm.allreduce(n, op=MPI.SUM)
+    def _contact_normal(self, x: np.ndarray, t: float) -> np.ndarray:
+        """The punch's normal over the contact of the nodes ``x``: theirs, by depth."""
+        g = self.tool.gap(x, t)
+        n = np.maximum(-g.phi, 0.0) @ g.normal
         return n / np.linalg.norm(n)
+
+
+TOP_CAP_MM = 1.0
+"""The punch's top, where a stack is held: the region within this of its highest point."""
 
 
 class PlyStick(ApexStick):
@@ -125,10 +123,10 @@ class PlyStick(ApexStick):
 
     A stack on frictionless tools has the single ply's sliding mode (the module docstring)
     once per ply: the whole stack slides over the punch, and a ply slides over its
-    neighbours where their friction is small. The centre of the first contact is found as
-    for one ply (from every ply's penetrating nodes: ply 1's); then, in each ply, the
-    material point over that centre (in the flat stack) is held to the punch's material point
-    under it, in the punch's tangent plane there. The point is held through the four corners
+    neighbours where their friction is small. When the punch first touches the stack, the
+    centroid of its top is found (:meth:`commit`); then, in each ply, the material point over
+    it (in the flat stack) is held to the punch's material point under it, in the punch's
+    tangent plane there. The point is held through the four corners
     of its unit cell, each by a spring k w_J with its bilinear weight w_J,
 
         f_J = −k w_J P_c (x_J − x_J,c − Δx_punch),   K_J = k w_J P_c,
@@ -168,7 +166,13 @@ class PlyStick(ApexStick):
         return f, K
 
     def commit(self) -> None:
-        """After the first step with contact: each ply's point over its centre, and anchors."""
+        """After the first step with contact: each ply's point over the punch's top, anchors.
+
+        The place held is the centroid of the punch's top: the region within
+        :data:`TOP_CAP_MM` of its highest point, sampled on a 1 mm grid over the sheet's
+        plane (so it is the tool's, not the net's: it does not move as the blank is moved,
+        turned or held harder; two equal tops, as a double dome's, give the point between).
+        """
         from fenicsx_drape.fe.plies import _bilinear, _corners
 
         if self.chosen or self._trial is None:
@@ -177,13 +181,26 @@ class PlyStick(ApexStick):
         mine = np.flatnonzero(self.owned)
         phi = self.tool.gap(x[mine], t).phi if len(mine) else np.zeros(0)
         w = np.maximum(-phi, 0.0)
-        sums = np.append(w @ x[mine], w.sum()) if len(mine) else np.zeros(4)
-        total = self.comm.allreduce(sums, op=MPI.SUM) if self.comm is not None else sums
-        if not total[3] > 0.0:
+        sums = np.array([w.sum(), w @ x[mine, 2]]) if len(mine) else np.zeros(2)
+        box = (np.concatenate([-self.X[mine, :2].min(axis=0), self.X[mine, :2].max(axis=0)])
+               if len(mine) else np.full(4, -np.inf))
+        if self.comm is not None:
+            sums = self.comm.allreduce(sums, op=MPI.SUM)
+            box = self.comm.allreduce(box, op=MPI.MAX)
+        if not sums[0] > 0.0:
             return  # no contact yet
         self.chosen = True
-        centre = total[:3] / total[3]
-        self.P = np.eye(3) - np.outer(*[self._contact_normal(x[mine], t)] * 2)
+        lo, hi = -box[:2], box[2:]
+        n = np.minimum(np.ceil((hi - lo) / 1.0).astype(int) + 1, 600)
+        gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], n[0]), np.linspace(lo[1], hi[1], n[1]))
+        points = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, sums[1] / sums[0])])
+        g = self.tool.gap(points, t)
+        depth = -g.phi
+        w = np.maximum(depth - (depth.max() - TOP_CAP_MM), 0.0)
+        centre = w @ points / w.sum()
+        n_c = w @ g.normal
+        n_c /= np.linalg.norm(n_c)
+        self.P = np.eye(3) - np.outer(n_c, n_c)
         nodes, weights = [], []
         for ply in self.plies:  # the point of each ply over the centre, in the flat stack
             grid = ply.grid
