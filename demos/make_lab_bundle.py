@@ -106,6 +106,38 @@ def stl_case(folder: Path) -> Path:
     return folder / "case.toml"
 
 
+DOUBLE_DOME = ROOT / "meshes" / "double_dome"
+
+
+def stack_stl_case(folder: Path, angles=(0.0, 45.0), cell_mm: float = 20.0,
+                   interply: str = "mu_ply = 0.2") -> Path:
+    """A lab's stack case: the double dome's whole blank as a stack, its punch and die as STL.
+
+    The punch and die are the shipped double dome's surfaces (Gmsh, 3 mm), the die at the
+    stack's gap, written as binary STL; the holder stays the plate of ``holder.geo``. One
+    ``[[ply]]`` of 0.3 mm per angle, ``interply`` the ``[interply]`` table's text.
+    """
+    from fenicsx_drape.forming.case.format import build_tools, load_case
+
+    folder.mkdir(parents=True, exist_ok=True)
+    source = DOUBLE_DOME / "case.toml"
+    built = build_tools(load_case(source, offset_mm=0.3 * len(angles)))
+    text = source.read_text()
+    for name in ("punch", "die"):
+        surface = built[name].surface
+        write_stl(surface.points[surface.triangles], folder / f"{name}.stl")
+        start = text.index(f'name = "{name}"')
+        end = text.index("mesh_mm = 3.0", start) + len("mesh_mm = 3.0")
+        text = (text[:start] + f'name = "{name}"\nrole = "{name}"\ngeometry = "{name}.stl"'
+                + text[end:])
+    (folder / "holder.geo").write_text((DOUBLE_DOME / "holder.geo").read_text())
+    text = text.replace('symmetry = ["x", "y"]', "symmetry = []").replace(
+        "cell_mm = 10.0", f"cell_mm = {cell_mm:g}")
+    text += "".join(f"\n[[ply]]\nangle_deg = {a:g}\nthickness_mm = 0.3\n" for a in angles)
+    (folder / "case.toml").write_text(text + f"\n[interply]\n{interply}\n")
+    return folder / "case.toml"
+
+
 def make(out: Path, seed: int = SEED, measurements=None, truth_model=None, stl: bool = True,
          **overrides) -> Path:
     """Form the truth and write the lab bundle at ``out`` (the module doc).

@@ -263,9 +263,8 @@ class _Surface:
         """The point of the surface nearest each point ``xa`` (p, 3), from cells and (ξ, η).
 
         Gauss-Newton in the cell, then a step to the neighbouring cell while (ξ, η) leaves
-        [0, 1]² (up to ``walks`` cells). Returns the cells, (ξ, η) and whether the point
-        lies over the ply: (ξ, η) within half a cell of the last cell, which is clamped to
-        [0, 1]² (a node beside the ply's edge keeps the edge's point).
+        [0, 1]² (up to ``walks`` cells). Returns the cells and (ξ, η), outside [0, 1]² where
+        the point lies beyond the ply's edge (:func:`overlap`).
         """
         grid = self.grid
         cell, q = cell.copy(), q.copy()
@@ -292,8 +291,57 @@ class _Surface:
             s[moved] -= (new - c)[moved]
             cell[idx], q[idx] = new, s
             todo[idx[~moved]] = False
-        inside = ((q > -0.5) & (q < 1.5)).all(axis=1) & grid.cells[cell[:, 0], cell[:, 1]]
-        return cell, np.clip(q, 0.0, 1.0), inside
+        return cell, q
+
+
+def overlap(grid: TrussGrid, cell: np.ndarray, q: np.ndarray,
+            sides: np.ndarray | None = None) -> np.ndarray:
+    """The share of each upper node's area that lies over the ply below (p,), in [0, 1].
+
+    A node at (ξ, η) of a cell of the lower ply's net has its area from ξ − l to ξ + r (and
+    alike in η; ``sides`` (p, 4) the node's (l_ξ, r_ξ, l_η, r_η) in cells: ½ where its own ply
+    has cells on that side, else 0; default ½ each, a node inside its ply). Beyond the lower
+    ply's edge (a side of the cell with no cell beyond it, other than a symmetry plane) that
+    part is not over the ply. So a node fades out of the contact over a cell as it slides
+    off the ply, and the shares of a sliding ply's nodes add up to the area over the ply
+    below, as under a pull-out's plates.
+    """
+    i, j = cell[:, 0], cell[:, 1]
+    c = np.pad(grid.cells, 1)  # cell (i, j) at [i + 1, j + 1]; none beyond the net
+    planes = grid.planes
+    if "x" in planes:
+        c[0, :] = c[1, :]
+    if "y" in planes:
+        c[:, 0] = c[:, 1]
+    sides = np.full((len(cell), 4), 0.5) if sides is None else sides
+    ω = np.ones(len(cell))
+    for k, before, after in ((0, c[i, j + 1], c[i + 2, j + 1]), (1, c[i + 1, j], c[i + 1, j + 2])):
+        left, right = q[:, k] - sides[:, 2 * k], q[:, k] + sides[:, 2 * k + 1]
+        width = right - left
+        lo = np.where(before, left, np.maximum(left, 0.0))  # cut at the lower ply's edges
+        hi = np.where(after, right, np.minimum(right, 1.0))
+        ω = ω * np.clip(hi - lo, 0.0, None) / np.where(width > 0, width, 1.0)
+    return ω * grid.cells[i, j]
+
+
+def _sides(upper: TrussGrid, lower: TrussGrid) -> np.ndarray:
+    """Each node of ``upper``: how far (cells) its area reaches along ``lower``'s ±ξ, ±η.
+
+    ½ where the upper ply has cells on that side, else 0, when the two nets are parallel;
+    ½ every way otherwise (the area of a turned net is not a box of the lower net's).
+    """
+    n = len(upper.nodes)
+    if abs(upper.rotation_deg - lower.rotation_deg) > 1e-9:
+        return np.full((n, 4), 0.5)
+    c = np.pad(upper.cells, 1)
+    planes = upper.planes
+    if "x" in planes:
+        c[0, :] = c[1, :]
+    if "y" in planes:
+        c[:, 0] = c[:, 1]
+    i, j = upper.ij.T
+    return 0.5 * np.column_stack([c[i, j] | c[i, j + 1], c[i + 1, j] | c[i + 1, j + 1],
+                                  c[i, j] | c[i + 1, j], c[i, j + 1] | c[i + 1, j + 1]])
 
 
 class PlyContact:
@@ -364,15 +412,16 @@ class PlyContact:
             ij = ply.grid.ij
             lattice[ij[:, 0], ij[:, 1]] = idx
             self._lattice.append(lattice)
-        a, cell, q, active, area, h, face = [], [], [], [], [], [], []
+        a, cell, q, active, area, h, face, side = [], [], [], [], [], [], [], []
         for k in range(1, len(self.plies)):
             upper, lower = self.plies[k], self.plies[k - 1]
-            corners, _, lo = _partners(lower.grid, upper.grid.nodes[:, :2])
+            _, _, lo = _partners(lower.grid, upper.grid.nodes[:, :2])
             ij = lower.grid.grid_coordinates(upper.grid.nodes[:, :2])
             a.append(local[k])
             cell.append(lo)
-            q.append(np.clip(ij - lo, 0.0, 1.0))
-            active.append(corners[:, 0] >= 0)
+            q.append(ij - lo)
+            side.append(_sides(upper.grid, lower.grid))
+            active.append(overlap(lower.grid, lo, ij - lo, side[-1]))
             area.append(node_areas(upper.grid))
             h.append(np.full(len(local[k]), upper.z_mm - lower.z_mm))
             face.append(np.full(len(local[k]), k - 1))
@@ -383,7 +432,9 @@ class PlyContact:
         self.a = joined(a, np.zeros(0, np.int64))
         self.cell = joined(cell, np.zeros((0, 2), int))  # partner's cell (i, j) on the ply below
         self.q = joined(q, np.zeros((0, 2)))  # and its local coordinates (ξ, η) there
-        self.active = joined(active, np.zeros(0, bool))
+        self.overlap = joined(active, np.zeros(0))  # the share of a's area over the ply below
+        self.sides = joined(side, np.zeros((0, 4)))  # how far a's area reaches (overlap)
+        self.active = self.overlap > 0.0
         self.area = joined(area, np.zeros(0))
         self.h = joined(h, np.zeros(0))
         self.interface = joined(face, np.zeros(0, int))  # 0 between plies 1 and 2, ...
@@ -429,12 +480,13 @@ class PlyContact:
             i, j = self.cell[on].T
             self.J[on] = np.column_stack([lattice[i, j], lattice[i + 1, j],
                                           lattice[i + 1, j + 1], lattice[i, j + 1]])
-            self.w[on] = _bilinear(*self.q[on].T)
-            S, Su, Sv, bil = _Surface(grid, lattice, x).at(self.cell[on], self.q[on])
+            q = np.clip(self.q[on], 0.0, 1.0)  # beyond the edge: the edge's point
+            self.w[on] = _bilinear(*q.T)
+            S, Su, Sv, bil = _Surface(grid, lattice, x).at(self.cell[on], q)
             self.delta[on] = S - bil
             self.n[on] = _unit(np.cross(Su, Sv))
             if before is not None:  # the same points of the ply below a step earlier
-                _, Su, Sv, _ = _Surface(grid, lattice, before).at(self.cell[on], self.q[on])
+                _, Su, Sv, _ = _Surface(grid, lattice, before).at(self.cell[on], q)
                 self.n_rate[on] = self.n[on] - _unit(np.cross(Su, Sv))
         self._on = np.flatnonzero(self.active)
         self._build_pattern()
@@ -488,9 +540,12 @@ class PlyContact:
             on = np.flatnonzero(self.interface == k - 1)
             if not len(on):
                 continue
-            surface = _Surface(self.plies[k - 1].grid, self._lattice[k - 1], x)
-            self.cell[on], self.q[on], self.active[on] = surface.project(
-                x[self.a[on]], self.cell[on], self.q[on])
+            grid = self.plies[k - 1].grid
+            surface = _Surface(grid, self._lattice[k - 1], x)
+            cell, q = surface.project(x[self.a[on]], self.cell[on], self.q[on])
+            self.cell[on], self.q[on] = cell, q
+            self.overlap[on] = overlap(grid, cell, q, self.sides[on])
+        self.active = self.overlap > 0.0
         fresh = self.active & ~was
         self.state[fresh] = 0.0
         self.slip_mm[fresh] = 0.0
@@ -509,7 +564,8 @@ class PlyContact:
             self.f = f if self.comm is None else f[self._local_global]
             return self.f, np.zeros((local, 3, 3))
         a, J, w = self.a[on], self.J[on], self.w[on]
-        area, h = self.area[on], self.h[on]
+        ω, h = self.overlap[on], self.h[on]
+        area = self.area[on] * ω  # the node's area over the ply below
         # The normal over the step: the last step's, turned on at the rate it turned then
         # (a normal lagged by a step pushed plies that wrap a tool along each other).
         n = self.n[on] + (dt / self._dt_last if self._dt_last else 0.0) * self.n_rate[on]
@@ -520,7 +576,8 @@ class PlyContact:
         # Touching plies (g ≤ 0, and within 1e-6 of h above: the flat stack starts so) keep
         # the penalty's stiffness, so a stack that only just touches is not singular.
         touch = np.ones(p_count, bool) if bonded else g < 1e-6 * h
-        f_n = np.where(touch, -self.k_n * np.minimum(g, 0.0) if not bonded else -self.k_n * g, 0.0)
+        k_n = self.k_n * ω  # a penalty per area: the pressure does not grow as ω fades
+        f_n = np.where(touch, -k_n * np.minimum(g, 0.0) if not bonded else -k_n * g, 0.0)
         p = np.maximum(f_n, 0.0) / area
         P = np.eye(3) - np.einsum("pi,pj->pij", n, n)
         s = np.einsum("pij,pj->pi", P, d - self.d0[on])
@@ -530,7 +587,7 @@ class PlyContact:
         out = self.law.traction(s, p, dt, state)
         f_a = f_n[:, None] * n - area[:, None] * out.tau
         # G = −∂f_a/∂d: penalty, friction through s and through the pressure.
-        k_touch = np.where(touch, self.k_n, 0.0)[:, None, None]
+        k_touch = np.where(touch, k_n, 0.0)[:, None, None]
         nn_T = np.einsum("pi,pj->pij", n, n)
         pressed = (f_n > 0.0)[:, None, None]
         G = (k_touch * nn_T + area[:, None, None] * np.einsum("pik,pkj->pij", out.dtau_ds, P)
