@@ -451,6 +451,16 @@ class PlyContact:
         self._partner(self.X)
         self.d0 = self._gap_vector(self.X)
         self._x_committed = self.X
+        # The stack moving as one: each node of ply 2, 3, ... on ply 1 (stack_solver).
+        self._first = local[0]
+        self._upper = np.concatenate(local[1:]) if len(local) > 1 else np.zeros(0, np.int64)
+        first = self.plies[0].grid
+        upper_xy = np.concatenate([p.grid.nodes[:, :2] for p in self.plies[1:]]) \
+            if len(local) > 1 else np.zeros((0, 2))
+        _, _, lo = _partners(first, upper_xy)
+        self._to_first_cell = lo
+        self._to_first_q = first.grid_coordinates(upper_xy) - lo
+        self._map_to_first(self.X)
 
     def _gather(self, x: np.ndarray) -> np.ndarray:
         """The owned rows of ``x`` (n, 3) of every rank, in global node order (collective)."""
@@ -627,6 +637,36 @@ class PlyContact:
         # The slip carries over the new partner point, normal and correction.
         self.d0 = self._gap_vector(x) - np.where(self.active[:, None], self.slip_mm, 0.0)
         self._x_committed = x
+        self._map_to_first(x)
+
+    def first_ply_nodes(self) -> np.ndarray:
+        """The global node indices of ply 1, in its grid's order."""
+        return self._first
+
+    def first_ply_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every node of ply 2, 3, ...: its global index, and the point of ply 1 under it.
+
+        Returns the nodes (m,), the corners of ply 1's cell under each (m, 4, global node
+        indices) and their bilinear weights (m, 4), at the last converged step: the stack
+        moving as one, for the solver (:mod:`~fenicsx_drape.fe.stack_solver`).
+        """
+        return self._upper, self._to_first_J, self._to_first_w
+
+    def _map_to_first(self, x: np.ndarray) -> None:
+        """Project the nodes of plies 2, 3, ... on ply 1's surface at positions ``x``."""
+        grid, lattice = self.plies[0].grid, self._lattice[0]
+        if not len(self._upper):
+            return
+        cell, q = _Surface(grid, lattice, x).project(x[self._upper], self._to_first_cell,
+                                                     self._to_first_q)
+        changed = not np.array_equal(cell, self._to_first_cell)
+        self._to_first_cell, self._to_first_q = cell, q
+        i, j = cell.T
+        J = np.column_stack([lattice[i, j], lattice[i + 1, j], lattice[i + 1, j + 1],
+                             lattice[i, j + 1]])
+        self._to_first_J, self._to_first_w = J, _bilinear(*np.clip(q, 0.0, 1.0).T)
+        if changed or not hasattr(self, "map_version"):
+            self.map_version = getattr(self, "map_version", -1) + 1
 
     def owned_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """The active pairs whose node a this rank owns: a's local index, and the pairs' mask.
