@@ -145,9 +145,10 @@ class SolverOptions:
     # nodes apart lumped on the diagonal: BENDING_PRECONDITIONER); "auto" chooses between the
     # last and "full" by the sheet's size (SPLIT_FROM_NODES).
     bending_jacobian: str = "auto"
-    # A stack of plies: "plies" solves with GMRES preconditioned by each ply's own factor and
-    # the stack moving as one (fe/stack_solver.py); "direct" factors the whole stack.
-    stack_solver: str = "plies"
+    # A stack of plies: "direct" factors the whole stack (its Jacobian); "plies" solves with
+    # GMRES preconditioned by each ply's own factor and the stack moving as one
+    # (fe/stack_solver.py: fewer flops, more time, docs/laminates-internals.md).
+    stack_solver: str = "direct"
     # Extra SNES/KSP/PC options (those of the command line, fe.newton.set_petsc_options, win).
     petsc_options: dict = dataclasses.field(default_factory=dict)
 
