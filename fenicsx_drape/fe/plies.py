@@ -510,12 +510,17 @@ class PlyContact:
         """The blocks the active pairs couple, added to the pattern (which only grows).
 
         A pair couples its node and the partner's corners of nonzero weight with each other
-        (for identical nets, at first only the node under it: less fill).
+        (for identical nets, at first only the node under it: less fill). Unchanged pairs
+        keep the pattern as it is.
         """
         n, (first, end) = self._n, self.owned_range
         on = self._on
         nodes = np.column_stack([self.a[on], self.J[on]])  # (p, 5)
         live = np.column_stack([np.ones(len(on), bool), self.w[on] > 1e-12])
+        key = (nodes.tobytes(), live.tobytes())
+        if key == getattr(self, "_pattern_key", None):
+            return
+        self._pattern_key = key
         rows_live = live & (nodes >= first) & (nodes < end)  # a rank fills its own rows
         self._live = rows_live[:, :, None] & live[:, None, :]  # (p, 5, 5)
         rows = np.broadcast_to(nodes[:, :, None] - first, self._live.shape)[self._live]
