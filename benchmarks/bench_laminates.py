@@ -1,14 +1,17 @@
 """Stacks of plies against one ply: time, Newton and Krylov iterations, factorisation flops.
 
     ./drape exec python3 benchmarks/bench_laminates.py                       # the double dome
-    ./drape exec python3 benchmarks/bench_laminates.py --plies 1 2 4 8 --solver direct
+    ./drape exec python3 benchmarks/bench_laminates.py --plies 1 2 4 8 --solver plies
+    ./drape exec python3 benchmarks/bench_laminates.py --plies 1 2 4 8 --orderings
     ./drape exec python3 benchmarks/bench_laminates.py --case hemisphere --cell-mm 20
 
 The case at its own net (quarter model), one rank: the single ply, then stacks of two, four
 and eight plies, all at 0° (a turned ply breaks the quarter symmetry), the die's gap the
 stack's, the pairs following the plies (the default). ``--solver`` chooses the stack's linear
-solve (``SolverOptions.stack_solver``: ``plies``, GMRES preconditioned by each ply's factor and
-the stack moving as one, fe/stack_solver.py; ``direct``, one factorisation of the stack).
+solve (``SolverOptions.stack_solver``: ``direct``, the default, one factorisation of the stack;
+``plies``, GMRES preconditioned by each ply's factor and the stack moving as one,
+fe/stack_solver.py). ``--orderings`` factors each run's last Jacobian again with each of
+MUMPS's orderings and prints its flops and factor size.
 
 Every line: plies, nodes, wall and CPU time and their ratios to the single ply's (CPU is the
 steadier figure on a shared machine), steps, cut-backs, Newton iterations, Krylov iterations,
@@ -33,8 +36,35 @@ parser.add_argument("--case", default="double_dome")
 parser.add_argument("--cell-mm", type=float, default=None)
 parser.add_argument("--duration-s", type=float, default=None)
 parser.add_argument("--plies", type=int, nargs="+", default=[1, 2, 4, 8])
-parser.add_argument("--solver", default="plies", choices=["plies", "direct"])
+parser.add_argument("--solver", default="direct", choices=["plies", "direct"])
+parser.add_argument("--orderings", action="store_true",
+                    help="factor each stack's last Jacobian again with MUMPS's orderings")
 args = parser.parse_args()
+
+ORDERINGS = {"AMD": 0, "AMF": 2, "PORD": 4, "QAMD": 6}
+"""MUMPS's orderings (ICNTL(7)) in Debian's build (METIS and SCOTCH fall back to AMF)."""
+
+
+def ordering_flops(A) -> str:
+    """MUMPS's flops (RINFOG(3)) and its factor's entries (INFOG(29)) for each ordering."""
+    from petsc4py import PETSc
+
+    out = []
+    for name, code in ORDERINGS.items():
+        ksp = PETSc.KSP().create(A.getComm())
+        ksp.setOperators(A)
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType("lu")
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        F = pc.getFactorMatrix()
+        F.setMumpsIcntl(7, code)
+        ksp.setUp()
+        out.append(f"{name} {F.getMumpsRinfog(3) / 1e6:.1f} Mflop, "
+                   f"{F.getMumpsInfog(29) / 1e3:.0f} k entries")
+        ksp.destroy()
+    return "; ".join(out)
 
 
 def flops(problem) -> float:
@@ -77,3 +107,6 @@ for n in args.plies:
           f"cut-backs, {run.iterations} Newton ({run.iterations / run.steps:.2f} a step), "
           f"{krylov} Krylov; {flops(run.problem) / 1e6:.1f} Mflop a Jacobian's factors "
           f"({run.problem.bending_jacobian}); max shear per ply {shear} deg", flush=True)
+    if args.orderings:
+        print(f"    the last Jacobian's factor by ordering: {ordering_flops(run.problem._A)}",
+              flush=True)
