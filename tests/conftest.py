@@ -14,8 +14,10 @@ mpi4py is optional: the pure-NumPy tests also run on a host without MPI.
 
 import gc
 import os
+import resource
 import shutil
 import tempfile
+from collections import defaultdict
 
 import pytest
 
@@ -25,6 +27,9 @@ except ImportError:  # a host without MPI: one process
     MPI = None
 
 COMM_SIZE = MPI.COMM_WORLD.size if MPI is not None else 1
+
+# A time limit per test, a ledger of what ran and the tests that did not finish (tests/verdict.py).
+pytest_plugins = ("verdict",)
 
 
 # The longest tests, started first: pytest-xdist hands out the tests in this order and a
@@ -53,7 +58,9 @@ def pytest_collection_modifyitems(config, items):
 
 
 def pytest_configure(config):
-    """The commands' default run cache is the session's own, never the user's.
+    """Register :class:`CpuDurations` when asked (``--cpu-durations``).
+
+    The commands' default run cache is the session's own, never the user's.
 
     On one process the tests share one cache folder, made here and removed at the end (the
     xdist workers inherit it): a run one test formed is read back by another, as a user's
@@ -63,6 +70,8 @@ def pytest_configure(config):
 
     Make Hypothesis draw the same examples on every rank, and share no database file.
     """
+    if config.getoption("cpu_durations", None) is not None:
+        config.pluginmanager.register(CpuDurations(config.getoption("cpu_durations")))
     if COMM_SIZE > 1:
         os.environ["DRAPE_CACHE"] = "off"
     elif not hasattr(config, "workerinput"):  # this process starts the session
@@ -115,3 +124,59 @@ def tight_solver():
     from fenicsx_drape.fe.solver import SolverOptions
 
     return SolverOptions(snes_atol=1e-8, node_atol_N=1e-5)
+
+
+# --- CPU seconds per test (``--cpu-durations=N``) ----------------------------------------------
+
+
+def pytest_addoption(parser):
+    """``--cpu-durations=N``: the N tests that took the most CPU seconds, and the total."""
+    parser.addoption(
+        "--cpu-durations", type=int, default=None, metavar="N",
+        help="show the N tests that took the most CPU seconds (0: all) and the sum over the "
+             "tests (a test's process and the processes it waited for; on a shared machine "
+             "these compare where wall seconds do not)")
+
+
+def _cpu_seconds() -> float:
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+class CpuDurations:
+    """Each report carries the CPU seconds since the previous phase's report (``cpu_s`` in its
+    ``user_properties``, which pytest-xdist sends to the controller); the controller adds them
+    up per test."""
+
+    def __init__(self, count: int):
+        self.count = count
+        self.seconds = defaultdict(float)
+
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_runtest_logstart(self, nodeid, location):
+        self.mark = _cpu_seconds()
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_makereport(self, item, call):
+        outcome = yield
+        report, now = outcome.get_result(), _cpu_seconds()
+        mark = getattr(item, "_drape_cpu_mark", None)
+        if mark is None:
+            mark = self.mark
+        report.user_properties = [*report.user_properties, ("cpu_s", now - mark)]
+        item._drape_cpu_mark = now
+
+    def pytest_runtest_logreport(self, report):
+        self.seconds[report.nodeid] += sum(v for k, v in report.user_properties if k == "cpu_s")
+
+    def pytest_terminal_summary(self, terminalreporter):
+        if hasattr(terminalreporter.config, "workerinput"):
+            return
+        ranked = sorted(self.seconds.items(), key=lambda kv: -kv[1])
+        shown = ranked if self.count == 0 else ranked[:self.count]
+        write = terminalreporter.write_line
+        terminalreporter.section("CPU seconds per test")
+        for nodeid, seconds in shown:
+            write(f"{seconds:9.2f}  {nodeid}")
+        write(f"{sum(self.seconds.values()):9.1f}  in all ({len(self.seconds)} tests)")

@@ -1,0 +1,226 @@
+"""A verdict whatever stops the suite: a time limit per test, and a ledger of what ran.
+
+A pytest plugin (``tests/conftest.py`` loads it):
+
+- **A limit per test.** pytest-timeout reads the limit (``timeout`` in ``pyproject.toml``, a
+  test's ``@pytest.mark.timeout(s)``, ``--timeout``); this plugin sets its timers, in three
+  steps, because a test may be stuck where Python cannot interrupt it:
+
+  1. at the limit, SIGALRM fails the test where it is (its traceback shows where), and the
+     session goes on with the next test; the handler runs as soon as the main thread runs
+     Python again, so it stops a slow test, not one stuck in compiled code;
+  2. :data:`GRACE` seconds later, a thread of this process finds the test still running (stuck
+     in compiled code that let go of the GIL: an MPI collective that never completes, a wait
+     on a pool) and ends the process with exit status 1, after printing the test's name and
+     the stack of the main thread: pytest-xdist then reports the test as failed, names it and
+     starts a new worker; ``mpirun`` stops the other ranks;
+  3. another :data:`GRACE` seconds later, when compiled code holds the GIL, the C watchdog of
+     :mod:`faulthandler` prints the stacks and ends the process.
+
+  There is no dump of stacks while a test is only slow (pytest's ``faulthandler_timeout`` is
+  not used).
+
+- **A ledger** (``--ledger=PATH``; under ``mpirun`` one per rank, ``PATH.rank<r>``): one line
+  per event, written as it happens, so that it tells what ran even when the process is killed::
+
+      collected 1003
+      start tests/test_x.py::test_y
+      passed tests/test_x.py::test_y
+      end 0
+
+  ``tests/run_part.sh`` reads it into the one-line verdict of a part of ``make test``. Under
+  pytest-xdist the controller writes it (the workers send it their reports).
+
+- At the end of a session that was stopped, the tests that did not finish and the number not
+  started are printed after pytest's summary.
+"""
+
+from __future__ import annotations
+
+import faulthandler
+import os
+import signal
+import sys
+import threading
+import traceback
+
+import pytest
+
+#: The callers of a test, left out of the stack printed at step 2.
+INTERNALS = ("/_pytest/", "/pluggy/", "/execnet/", "/xdist/")
+
+#: Seconds between the steps of a test's time limit (above; ``DRAPE_TEST_GRACE_S`` for the
+#: test of this plugin).
+GRACE = float(os.environ.get("DRAPE_TEST_GRACE_S", 60))
+
+
+def _rank() -> tuple[int, int]:
+    """(rank, size) of ``MPI.COMM_WORLD`` when mpi4py is loaded; (0, 1) otherwise."""
+    try:
+        from mpi4py import MPI
+    except ImportError:
+        return 0, 1
+    return MPI.COMM_WORLD.rank, MPI.COMM_WORLD.size
+
+
+def pytest_addoption(parser):
+    """``--ledger=PATH``: write what runs, as it runs (the module's docstring)."""
+    parser.addoption("--ledger", default=None, metavar="PATH",
+                     help="write a line per test started and per test finished (with its "
+                          "outcome) to PATH, PATH.rank<r> under mpirun")
+
+
+def pytest_configure(config):
+    """Register the plugin's state for this session."""
+    config.pluginmanager.register(Verdict(config), "drape-verdict")
+
+
+class Verdict:
+    """The ledger, the tests that did not finish, and the timers of the time limit."""
+
+    def __init__(self, config):
+        self.config = config
+        self.worker = hasattr(config, "workerinput")  # an xdist worker: the controller writes
+        rank, size = _rank()
+        self.where = f" on rank {rank}" if size > 1 else ""
+        path = config.getoption("ledger", None)
+        if path and size > 1:
+            path = f"{path}.rank{rank}"
+        self.ledger = open(path, "w", buffering=1) if path and not self.worker else None
+        self.collected: int | None = None
+        self.running: dict[str, str] = {}  # started, not finished: nodeid -> outcome so far
+        self.finished = 0
+        # Written to from the watchdog while the terminal's streams may be captured.
+        self.stderr = os.dup(2)
+
+    def _write(self, line: str) -> None:
+        if self.ledger is not None:
+            self.ledger.write(line + "\n")
+
+    # --- the ledger --------------------------------------------------------------------------
+
+    def pytest_collection_finish(self, session):
+        if not self.worker and not hasattr(session.config, "workerinput"):
+            self.collected = len(session.items)
+            self._write(f"collected {self.collected}")
+
+    @pytest.hookimpl(optionalhook=True)
+    def pytest_xdist_node_collection_finished(self, node, ids):
+        if self.collected is None:
+            self.collected = len(ids)
+            self._write(f"collected {self.collected}")
+
+    def pytest_runtest_logstart(self, nodeid, location):
+        if nodeid not in self.running:
+            self.running[nodeid] = "passed"
+            self._write(f"start {nodeid}")
+
+    def pytest_runtest_logreport(self, report):
+        outcome = self.running.get(report.nodeid, "passed")
+        if report.when == "setup" and report.failed:
+            outcome = "error"
+        elif report.when == "setup" and report.skipped:
+            outcome = "skipped"
+        elif report.when == "call":
+            outcome = report.outcome
+            if hasattr(report, "wasxfail"):
+                outcome = "xfailed" if report.skipped else "xpassed"
+        elif report.when == "teardown" and report.failed and outcome == "passed":
+            outcome = "error"
+        elif report.when not in ("setup", "call", "teardown") and report.failed:
+            # pytest-xdist's report of a test whose worker died: no logfinish follows
+            self.running.pop(report.nodeid, None)
+            self.finished += 1
+            self._write(f"failed {report.nodeid}")
+            return
+        self.running[report.nodeid] = outcome
+
+    def pytest_runtest_logfinish(self, nodeid, location):
+        outcome = self.running.pop(nodeid, None)
+        if outcome is not None:
+            self.finished += 1
+            self._write(f"{outcome} {nodeid}")
+
+    @pytest.hookimpl(trylast=True)
+    def pytest_sessionfinish(self, session, exitstatus):
+        self._write(f"end {int(exitstatus)}")
+
+    def pytest_terminal_summary(self, terminalreporter):
+        """After a stop: the tests that did not finish and how many did not start."""
+        if self.worker:
+            return
+        started = self.finished + len(self.running)
+        unstarted = self.collected - started if self.collected is not None else 0
+        if not self.running and unstarted <= 0:
+            return
+        terminalreporter.section(f"did not finish{self.where}", sep="!", red=True)
+        for nodeid in self.running:
+            terminalreporter.write_line(f"DID NOT FINISH {nodeid}")
+        if unstarted > 0:
+            terminalreporter.write_line(f"{unstarted} of {self.collected} tests not started")
+
+    def pytest_unconfigure(self, config):
+        if self.ledger is not None:
+            self.ledger.close()
+        os.close(self.stderr)
+
+    # --- the time limit ----------------------------------------------------------------------
+
+    @pytest.hookimpl(optionalhook=True, tryfirst=True)
+    def pytest_timeout_set_timer(self, item, settings):
+        """Arm the three steps of the limit (the module's docstring) for one test."""
+        limit = settings.timeout
+        done = threading.Event()
+        main = threading.current_thread() is threading.main_thread()
+        if main:
+            def fail(signum, frame):
+                __tracebackhide__ = True
+                if not done.is_set():
+                    pytest.fail(f"Timeout: the test ran more than {limit:g} s (its limit) and "
+                                "was stopped here", pytrace=True)
+
+            signal.signal(signal.SIGALRM, fail)
+            signal.setitimer(signal.ITIMER_REAL, limit)
+        main_id = threading.main_thread().ident
+        watchdog = threading.Timer(limit + GRACE, self._stuck, (item.nodeid, limit, main_id))
+        watchdog.daemon = True
+        watchdog.name = f"time limit of {item.nodeid}"
+        watchdog.start()
+        faulthandler.dump_traceback_later(limit + 2 * GRACE, exit=True, file=self.stderr)
+
+        def cancel():
+            done.set()
+            if main:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+                signal.signal(signal.SIGALRM, signal.SIG_DFL)
+            watchdog.cancel()
+            faulthandler.cancel_dump_traceback_later()
+
+        item.cancel_timeout = cancel
+        return True
+
+    @pytest.hookimpl(optionalhook=True, tryfirst=True)
+    def pytest_timeout_cancel_timer(self, item):
+        """Disarm the test's limit (also called when its setup was skipped)."""
+        cancel = getattr(item, "cancel_timeout", None)
+        if cancel is not None:
+            cancel()
+        return True
+
+    def _stuck(self, nodeid: str, limit: float, main_id: int) -> None:
+        """Step 2: the test is still running; name it, show where, end the process."""
+        frame = sys._current_frames().get(main_id)
+        frames = traceback.extract_stack(frame) if frame is not None else []
+        callers = [k for k, f in enumerate(frames) if any(p in f.filename for p in INTERNALS)]
+        stack = "".join(traceback.format_list(frames[callers[-1] + 1 if callers else 0:]))
+        text = (f"\n{'+' * 30} Timeout{self.where} {'+' * 30}\n"
+                f"{nodeid} ran more than {limit:g} s (its limit) and did not stop "
+                f"{GRACE:g} s later: it is stuck in compiled code. Where the test is:\n{stack}"
+                f"Ending this process{self.where}.\n")
+        try:
+            os.write(self.stderr, text.encode())
+            self._write(f"stuck {nodeid}")
+            if self.ledger is not None:
+                self.ledger.flush()
+        finally:
+            os._exit(1)
