@@ -4,6 +4,9 @@
 - ``@pytest.mark.parallel``: the test concerns parallel behaviour; ``make test`` runs these again
   with ``mpirun -n 2`` (``python3 -m mpi4py -m pytest -m parallel``), and those not also marked
   ``slow`` with ``-n 3``.
+- ``@pytest.mark.compares_ranks`` (with ``parallel``): the test compares a run on every rank
+  with the same run on one process; skipped on one process, where it would compare a run with
+  itself.
 - After every test on several ranks, garbage is collected and the ranks meet, so that
   collective destructors of DOLFINx and PETSc objects run on all ranks together.
 - Forms are compiled by FFCx into its cache (``~/.cache/fenics``, or ``$XDG_CACHE_HOME/fenics``;
@@ -32,24 +35,39 @@ COMM_SIZE = MPI.COMM_WORLD.size if MPI is not None else 1
 pytest_plugins = ("verdict",)
 
 
-# The longest tests, started first: pytest-xdist hands out the tests in this order and a
-# free worker steals from the end of another's queue, so the suite does not end waiting on one.
-FIRST = ("tests/test_lab_user_path.py::test_the_readme_lab_command",
-         "tests/test_lab_user_path.py::test_shear_read_off_a_finer_net",
-         "tests/test_demo_laminates.py::")
+# The modules that take the most CPU time (``--cpu-durations``), the heaviest first. Under
+# ``make test`` each module runs whole on one pytest-xdist worker (``--dist loadfile``: its
+# module fixtures are made once, not again on every worker that gets one of its tests, nor
+# again after another module's test came in between) and the modules are handed out in this
+# order, then those with a test marked ``slow``, then the others: the suite does not end
+# waiting on a long module.
+HEAVY = ("tests/test_lab_user_path.py", "tests/test_demo_laminates.py",
+         "tests/test_forming_runs_scale.py", "tests/test_meshed_hemisphere.py",
+         "tests/test_forming_setup.py", "tests/test_fit_real.py", "tests/test_lab_diagnose.py",
+         "tests/test_stack_diagnosis.py", "tests/test_setup_diagnosis.py",
+         "tests/test_diagnose_unknown.py", "tests/test_diagnose_hidden.py",
+         "tests/test_fe_newton.py")
 
 
 def pytest_collection_modifyitems(config, items):
-    """Start the longest tests first (:data:`FIRST`, then the ones marked ``slow``); skip the
-    tests marked ``skip_in_parallel`` when running on more than one process."""
-    def rank(item) -> int:
-        first = [k for k, prefix in enumerate(FIRST) if item.nodeid.startswith(prefix)]
-        if first:
-            return first[0]
-        return len(FIRST) + ("slow" not in item.keywords)
+    """Order the modules (:data:`HEAVY` first, then those with a test marked ``slow``), each
+    module's tests together in file order; skip the tests marked ``skip_in_parallel`` when
+    running on more than one process."""
+    def module(item) -> str:
+        return item.nodeid.split("::")[0]
 
-    items.sort(key=rank)  # stable: file order within each rank
+    slow = {module(item) for item in items if "slow" in item.keywords}
+
+    def rank(item) -> int:
+        name = module(item)
+        return HEAVY.index(name) if name in HEAVY else len(HEAVY) + (name not in slow)
+
+    items.sort(key=rank)  # stable: file order within each rank, each module's tests together
     if COMM_SIZE == 1:
+        alone = pytest.mark.skip(reason="compares ranks: on one process a run with itself")
+        for item in items:
+            if "compares_ranks" in item.keywords:
+                item.add_marker(alone)
         return
     skip = pytest.mark.skip(reason=f"runs on one process only (here {COMM_SIZE})")
     for item in items:
