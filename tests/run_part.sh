@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # A part of `make test` and its line of the verdict, or the verdict of every part.
 #
-#   tests/run_part.sh NAME RESULTS -- COMMAND...   run COMMAND; "{ledger}" in it becomes the
-#       path of the part's ledger (pytest's --ledger, tests/verdict.py); add NAME's line to
-#       RESULTS/verdict. Without RESULTS (""), print that line at once. Exit status: COMMAND's
-#       (0 when pytest selected no test).
+#   tests/run_part.sh [--none-ok] NAME RESULTS -- COMMAND...   run COMMAND; "{ledger}" in it
+#       becomes the path of the part's ledger (pytest's --ledger, tests/verdict.py); add NAME's
+#       line to RESULTS/verdict. Without RESULTS (""), print that line at once. Exit status:
+#       COMMAND's; with --none-ok, pytest's 5 (no test selected) is not a failure.
 #   tests/run_part.sh --skip NAME RESULTS REASON   a part that cannot run here (not a failure)
 #   tests/run_part.sh --verdict RESULTS            print every part's line and the verdict;
 #       exit status 1 when a part failed. RESULTS is removed when every part passed.
@@ -13,7 +13,8 @@
 # the part stopped (a test over its limit, a process that ended, the part's own time limit).
 set -uo pipefail
 
-# One ledger: "N passed, M failed (...), did not finish: ..., K not started".
+# One ledger: "N passed, M failed (...); did not finish: ...; K of L not started" (empty when
+# no test ran).
 summarise() {
     awk '
     function names(list, n,   text, k) {
@@ -34,20 +35,21 @@ summarise() {
         n = split("passed failed error skipped xfailed xpassed", order, " ")
         for (k = 1; k <= n; k++)
             if (count[order[k]]) text = text (text ? ", " : "") count[order[k]] " " order[k]
-        if (text == "") text = "no test finished"
         if (nfailed) text = text " (" names(failed, nfailed) ")"
         for (id in running) unfinished[++nunfinished] = id
         for (k = 1; k <= nstuck; k++) unfinished[++nunfinished] = stuck[k] " (over its limit)"
-        if (nunfinished) text = text "; did not finish: " names(unfinished, nunfinished)
+        if (nunfinished) text = text (text ? "; " : "") "did not finish: " \
+            names(unfinished, nunfinished)
         if (collected != "" && collected - started > 0)
-            text = text "; " (collected - started) " of " collected " not started"
-        print text
+            text = text (text ? "; " : "") (collected - started) " of " collected " not started"
+        print text  # empty: no test ran
     }' "$1"
 }
 
 # The line of a part: from its ledgers (one, or one per MPI rank) and the command's status.
 part_line() {
-    local name=$1 results=$2 status=$3 seconds=$4 text="" ledger verdict=ok found=()
+    local name=$1 results=$2 status=$3 seconds=$4 none_ok=${5-} text="" ledger verdict=ok
+    local found=()
     for ledger in "$results/$name.ledger" "$results/$name.ledger".rank*; do
         [[ -f $ledger ]] && found+=("$ledger")
     done
@@ -60,7 +62,7 @@ part_line() {
             [[ $(summarise "$ledger") == "$first" ]] || same=0
         done
         if [[ $same -eq 1 ]]; then
-            text="$first (each of ${#found[@]} ranks)"
+            text="${first:+$first (each of ${#found[@]} ranks)}"
         else
             for ledger in "${found[@]}"; do
                 each=$(summarise "$ledger")
@@ -70,10 +72,10 @@ part_line() {
     fi
     case $status in
         0) ;;
-        5) text="no test selected" ;;
+        5) text="no test selected"; [[ -n $none_ok ]] || verdict=FAILED ;;
+        1) verdict=FAILED ;;
         124 | 137) verdict=FAILED; text+="${text:+; }stopped by the part's time limit" ;;
-        *) verdict=FAILED
-           [[ -n $text ]] || text="exit status $status (its output above)" ;;
+        *) verdict=FAILED; text+="${text:+; }exit status $status (the output above says why)" ;;
     esac
     [[ -n $text ]] || text="passed"
     printf '%s\t%s\t%s\t%s\n' "$name" "$verdict" "$(clock "$seconds")" "$text"
@@ -110,6 +112,8 @@ case ${1-} in
         exit 0 ;;
 esac
 
+none_ok=""
+if [[ ${1-} == --none-ok ]]; then none_ok=1; shift; fi
 name=$1 results=$2
 shift 2
 [[ ${1-} == -- ]] && shift
@@ -123,11 +127,11 @@ for arg in "$@"; do cmd+=("${arg//\{ledger\}/$results/$name.ledger}"); done
 start=$SECONDS
 "${cmd[@]}"
 status=$?
-part_line "$name" "$results" "$status" $(( SECONDS - start )) >>"$results/verdict"
+part_line "$name" "$results" "$status" $(( SECONDS - start )) "$none_ok" >>"$results/verdict"
 if [[ -n $alone ]]; then
     echo
     show "$results/verdict"
     rm -rf "$results"
 fi
-[[ $status -eq 5 ]] && exit 0
+[[ $status -eq 5 && -n $none_ok ]] && exit 0
 exit "$status"

@@ -77,7 +77,7 @@ def test_last():
 '''
 
 
-def part(tmp_path, name, *command, args=(), select=None):
+def part(tmp_path, name, *command, args=(), select=None, options=()):
     """Run ``run_part.sh NAME`` on pytest in ``tmp_path``: (pytest's output, the part's line)."""
     (tmp_path / "pytest.ini").write_text("[pytest]\n")
     results = tmp_path / "results"
@@ -89,7 +89,7 @@ def part(tmp_path, name, *command, args=(), select=None):
     pytest_args = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                    "-p", "verdict", "--ledger={ledger}"]
     pytest_args += [*args, *(["-k", select] if select else [])]
-    run = subprocess.run([str(PART), name, str(results), "--", *command, *pytest_args],
+    run = subprocess.run([str(PART), *options, name, str(results), "--", *command, *pytest_args],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     line = (results / "verdict").read_text().rstrip("\n").split("\t")
     return run.stdout + run.stderr, line
@@ -118,6 +118,14 @@ def test_a_part_that_passes(tmp_path, args):
     (tmp_path / "test_hangs.py").write_text(HANGS)
     _, (_, verdict, _, text) = part(tmp_path, "serial", args=args, select="first or last")
     assert (verdict, text) == ("ok", "2 passed")
+
+
+@pytest.mark.parametrize(("options", "verdict"), [((), "FAILED"), (("--none-ok",), "ok")])
+def test_a_part_that_selects_no_test_fails_unless_allowed(tmp_path, options, verdict):
+    """The one-process part must run tests; an MPI part's marker may select none."""
+    (tmp_path / "test_hangs.py").write_text(HANGS)
+    _, line = part(tmp_path, "mpi-3", select="no_such_test", options=options)
+    assert line[1:2] + line[3:] == [verdict, "no test selected"]
 
 
 def test_a_process_stuck_holding_the_gil_still_ends_with_a_verdict(tmp_path):
