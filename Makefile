@@ -34,9 +34,11 @@ test-fast:
 	@$(PART) fast "$(RESULTS)" -- $(DRAPE) exec $(LIMIT) python3 -m pytest $(PYTEST_ARGS) \
 	  $(XDIST) -m "not slow and not bench"
 
-# The heavy forming tests (marked bench): the full-size runs the suite checks on smaller ones.
+# The heavy forming tests (marked bench): the full-size runs the suite checks on smaller ones,
+# an hour each at most.
 bench:
-	@$(PART) bench "$(RESULTS)" -- $(DRAPE) exec python3 -m pytest $(PYTEST_ARGS) -m bench
+	@$(PART) bench "$(RESULTS)" -- $(DRAPE) exec python3 -m pytest $(PYTEST_ARGS) \
+	  --timeout=3600 -m bench
 
 # The parallel tests on 2 ranks, the quick ones again on 3 (an odd partition; 3 ranks on two
 # cores take twice as long, so the slow forming comparisons run on 2 only, and all of them with

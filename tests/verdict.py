@@ -18,7 +18,11 @@ A pytest plugin (``tests/conftest.py`` loads it):
      :mod:`faulthandler` prints the stacks and ends the process.
 
   There is no dump of stacks while a test is only slow (pytest's ``faulthandler_timeout`` is
-  not used).
+  not used). pytest-timeout's own methods each do half: ``signal`` never ends a test stuck in
+  compiled code, ``thread`` ends the process at the limit even when the test is only slow,
+  after printing every thread's stack. pytest-xdist runs the tests in each worker's main
+  thread, where SIGALRM can be used; under ``mpirun`` a rank whose test failed at the limit
+  goes on while the others may wait for it in a collective: those end at step 2.
 
 - **A ledger** (``--ledger=PATH``; under ``mpirun`` one per rank, ``PATH.rank<r>``): one line
   per event, written as it happens, so that it tells what ran even when the process is killed::
