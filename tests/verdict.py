@@ -3,26 +3,33 @@
 A pytest plugin (``tests/conftest.py`` loads it):
 
 - **A limit per test.** pytest-timeout reads the limit (``timeout`` in ``pyproject.toml``, a
-  test's ``@pytest.mark.timeout(s)``, ``--timeout``); this plugin sets its timers, in three
-  steps, because a test may be stuck where Python cannot interrupt it:
+  test's ``@pytest.mark.timeout(s)``, ``--timeout``); this plugin counts it, in CPU seconds of
+  the test's process (and of the processes it waited for), so that a test on a machine busy
+  with other work is not stopped for being slow there; a test that waits without computing (a
+  lock, a pool whose worker died) is stopped after :data:`WALL_FACTOR` times the limit in
+  wall seconds. A thread of the test's process watches both, and stops the test in three
+  steps, because it may be stuck where Python cannot interrupt it:
 
   1. at the limit, SIGALRM fails the test where it is (its traceback shows where), and the
      session goes on with the next test; the handler runs as soon as the main thread runs
-     Python again, so it stops a slow test, not one stuck in compiled code;
-  2. :data:`GRACE` seconds later, a thread of this process finds the test still running (stuck
-     in compiled code that let go of the GIL: an MPI collective that never completes, a wait
-     on a pool) and ends the process with exit status 1, after printing the test's name and
-     the stack of the main thread: pytest-xdist then reports the test as failed, names it and
-     starts a new worker; ``mpirun`` stops the other ranks;
-  3. another :data:`GRACE` seconds later, when compiled code holds the GIL, the C watchdog of
-     :mod:`faulthandler` prints the stacks and ends the process.
+     Python again;
+  2. :data:`GRACE` seconds later, if the test still runs (stuck in compiled code that let go
+     of the GIL, such as an MPI collective that never completes, or code that caught the
+     failure and went on, as a forming run's step cut-back does), the thread prints the
+     test's name and the stack of the main thread and ends the process with exit status 1:
+     pytest-xdist then reports the test as failed, names it and starts a new worker;
+     ``mpirun`` stops the other ranks;
+  3. when compiled code holds the GIL, no thread of Python runs: the C watchdog of
+     :mod:`faulthandler` prints the stacks and ends the process, :data:`GRACE` seconds after
+     the limit in wall seconds and step 2 would have.
 
   There is no dump of stacks while a test is only slow (pytest's ``faulthandler_timeout`` is
   not used). pytest-timeout's own methods each do half: ``signal`` never ends a test stuck in
   compiled code, ``thread`` ends the process at the limit even when the test is only slow,
-  after printing every thread's stack. pytest-xdist runs the tests in each worker's main
-  thread, where SIGALRM can be used; under ``mpirun`` a rank whose test failed at the limit
-  goes on while the others may wait for it in a collective: those end at step 2.
+  after printing every thread's stack; both count wall seconds. pytest-xdist runs the tests
+  in each worker's main thread, where SIGALRM can be used; under ``mpirun`` a rank whose test
+  failed at the limit goes on while the others may wait for it in a collective: those end at
+  step 2 (a rank waiting in a collective spins, so its CPU seconds run on).
 
 - **A ledger** (``--ledger=PATH``; under ``mpirun`` one per rank, ``PATH.rank<r>``): one line
   per event, written as it happens, so that it tells what ran even when the process is killed::
@@ -43,9 +50,11 @@ from __future__ import annotations
 
 import faulthandler
 import os
+import resource
 import signal
 import sys
 import threading
+import time
 import traceback
 
 import pytest
@@ -56,6 +65,17 @@ INTERNALS = ("/_pytest/", "/pluggy/", "/execnet/", "/xdist/")
 #: Seconds between the steps of a test's time limit (above; ``DRAPE_TEST_GRACE_S`` for the
 #: test of this plugin).
 GRACE = float(os.environ.get("DRAPE_TEST_GRACE_S", 60))
+
+#: A test that waits without computing is stopped after this many times its limit in seconds
+#: of wall time.
+WALL_FACTOR = 5.0
+
+
+def _cpu_seconds() -> float:
+    """CPU seconds of this process and of the processes it waited for."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def _rank() -> tuple[int, int]:
@@ -172,32 +192,45 @@ class Verdict:
 
     @pytest.hookimpl(optionalhook=True, tryfirst=True)
     def pytest_timeout_set_timer(self, item, settings):
-        """Arm the three steps of the limit (the module's docstring) for one test."""
-        limit = settings.timeout
+        """Watch one test's limit (the module's docstring)."""
+        limit, wall_limit = settings.timeout, WALL_FACTOR * settings.timeout
         done = threading.Event()
         main = threading.current_thread() is threading.main_thread()
+        main_id = threading.main_thread().ident
+        why = []  # what the test ran over, once it has
+
         if main:
             def fail(signum, frame):
                 __tracebackhide__ = True
-                if not done.is_set():
-                    pytest.fail(f"Timeout: the test ran more than {limit:g} s (its limit) and "
-                                "was stopped here", pytrace=True)
+                if why and not done.is_set():  # not a signal meant for the test before
+                    pytest.fail(f"Timeout: the test {why[0]} (its limit) and was stopped here",
+                                pytrace=True)
 
             signal.signal(signal.SIGALRM, fail)
-            signal.setitimer(signal.ITIMER_REAL, limit)
-        main_id = threading.main_thread().ident
-        watchdog = threading.Timer(limit + GRACE, self._stuck, (item.nodeid, limit, main_id))
-        watchdog.daemon = True
-        watchdog.name = f"time limit of {item.nodeid}"
+
+        def watch():
+            cpu0, wall0 = _cpu_seconds(), time.monotonic()
+            while not done.wait(min(1.0, limit / 10)):
+                cpu, wall = _cpu_seconds() - cpu0, time.monotonic() - wall0
+                if not why and (cpu > limit or wall > wall_limit):
+                    why.append(f"took more than {limit:g} CPU seconds" if cpu > limit else
+                               f"waited more than {wall_limit:g} s")
+                    stopped = time.monotonic()
+                    if main:
+                        signal.pthread_kill(main_id, signal.SIGALRM)
+                elif why and time.monotonic() - stopped > GRACE and not done.is_set():
+                    self._stuck(item.nodeid, why[0], main_id)
+
+        watchdog = threading.Thread(target=watch, name=f"time limit of {item.nodeid}",
+                                    daemon=True)
         watchdog.start()
-        faulthandler.dump_traceback_later(limit + 2 * GRACE, exit=True, file=self.stderr)
+        faulthandler.dump_traceback_later(wall_limit + 2 * GRACE, exit=True, file=self.stderr)
 
         def cancel():
             done.set()
             if main:
-                signal.setitimer(signal.ITIMER_REAL, 0)
                 signal.signal(signal.SIGALRM, signal.SIG_DFL)
-            watchdog.cancel()
+            watchdog.join()
             faulthandler.cancel_dump_traceback_later()
 
         item.cancel_timeout = cancel
@@ -205,22 +238,22 @@ class Verdict:
 
     @pytest.hookimpl(optionalhook=True, tryfirst=True)
     def pytest_timeout_cancel_timer(self, item):
-        """Disarm the test's limit (also called when its setup was skipped)."""
+        """Stop watching the test's limit (also called when its setup was skipped)."""
         cancel = getattr(item, "cancel_timeout", None)
         if cancel is not None:
             cancel()
         return True
 
-    def _stuck(self, nodeid: str, limit: float, main_id: int) -> None:
-        """Step 2: the test is still running; name it, show where, end the process."""
+    def _stuck(self, nodeid: str, why: str, main_id: int) -> None:
+        """Step 2: the test still runs; name it, show where, end the process."""
         frame = sys._current_frames().get(main_id)
         frames = traceback.extract_stack(frame) if frame is not None else []
         callers = [k for k, f in enumerate(frames) if any(p in f.filename for p in INTERNALS)]
         stack = "".join(traceback.format_list(frames[callers[-1] + 1 if callers else 0:]))
         text = (f"\n{'+' * 30} Timeout{self.where} {'+' * 30}\n"
-                f"{nodeid} ran more than {limit:g} s (its limit) and did not stop "
-                f"{GRACE:g} s later: it is stuck in compiled code. Where the test is:\n{stack}"
-                f"Ending this process{self.where}.\n")
+                f"{nodeid} {why} (its limit) and still ran {GRACE:g} s after it was failed "
+                "there (in compiled code, or its failure was caught). Where the test is:\n"
+                f"{stack}Ending this process{self.where}.\n")
         try:
             os.write(self.stderr, text.encode())
             self._write(f"stuck {nodeid}")
