@@ -17,7 +17,6 @@ mpi4py is optional: the pure-NumPy tests also run on a host without MPI.
 
 import gc
 import os
-import resource
 import shutil
 import tempfile
 from collections import defaultdict
@@ -156,29 +155,26 @@ def pytest_addoption(parser):
              "these compare where wall seconds do not)")
 
 
-def _cpu_seconds() -> float:
-    own = resource.getrusage(resource.RUSAGE_SELF)
-    children = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
-
-
 class CpuDurations:
     """Each report carries the CPU seconds since the previous phase's report (``cpu_s`` in its
     ``user_properties``, which pytest-xdist sends to the controller); the controller adds them
     up per test."""
 
     def __init__(self, count: int):
+        from verdict import cpu_seconds  # loaded as a plugin by then (its asserts rewritten)
+
+        self.cpu_seconds = cpu_seconds
         self.count = count
         self.seconds = defaultdict(float)
 
     @pytest.hookimpl(tryfirst=True)
     def pytest_runtest_logstart(self, nodeid, location):
-        self.mark = _cpu_seconds()
+        self.mark = self.cpu_seconds()
 
     @pytest.hookimpl(hookwrapper=True)
     def pytest_runtest_makereport(self, item, call):
         outcome = yield
-        report, now = outcome.get_result(), _cpu_seconds()
+        report, now = outcome.get_result(), self.cpu_seconds()
         mark = getattr(item, "_drape_cpu_mark", None)
         if mark is None:
             mark = self.mark

@@ -71,7 +71,7 @@ GRACE = float(os.environ.get("DRAPE_TEST_GRACE_S", 60))
 WALL_FACTOR = 5.0
 
 
-def _cpu_seconds() -> float:
+def cpu_seconds() -> float:
     """CPU seconds of this process and of the processes it waited for."""
     own = resource.getrusage(resource.RUSAGE_SELF)
     children = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -209,9 +209,9 @@ class Verdict:
             signal.signal(signal.SIGALRM, fail)
 
         def watch():
-            cpu0, wall0 = _cpu_seconds(), time.monotonic()
+            cpu0, wall0 = cpu_seconds(), time.monotonic()
             while not done.wait(min(1.0, limit / 10)):
-                cpu, wall = _cpu_seconds() - cpu0, time.monotonic() - wall0
+                cpu, wall = cpu_seconds() - cpu0, time.monotonic() - wall0
                 if not why and (cpu > limit or wall > wall_limit):
                     why.append(f"took more than {limit:g} CPU seconds" if cpu > limit else
                                f"waited more than {wall_limit:g} s")
