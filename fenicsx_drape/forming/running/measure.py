@@ -8,10 +8,20 @@ so that
   shear angle was read) is found with a k-d tree on the triangles' centres and a vectorised
   point-to-triangle projection (:func:`closest_points`), with its material (flat) position
   by the barycentric coordinates;
-- the **shear angle at a material point** (flat x0, y0) is interpolated within its cell
-  (bilinear in the cell of the nodal shear field, not the nearest node:
-  :func:`shear_at_flat`), and at a formed point it is that of the closest point's material
-  position (:func:`shear_at_formed`);
+- the **shear angle at a material point** (flat x0, y0; :func:`shear_at_flat`) is the local
+  angle between the tows there, as a lab reads it: at a cell's centre, that cell's own angle
+  (90° minus the angle between its mean warp and weft tow vectors, from its own four nodes:
+  :meth:`~fenicsx_drape.forming.running.post.FormedGrid.shear_deg`, positive when the angle
+  between the tows' +x and +y directions closes, the spec's sign); between centres, bilinear
+  in the cells' own angles on the lattice of cell centres; within half a cell of the blank's
+  edge (beyond the outermost centres), the edge cells' angles carried to the edge (constant
+  across). At a point of a clipped net's ragged edge, the centres of absent cells drop out
+  and the others' weights are rescaled. On a symmetric part the mirrored cells count (the
+  signed angle changes sign across a symmetry plane: 0 on it). At a node this is the mean of
+  the cells around it (:meth:`~fenicsx_drape.forming.running.post.FormedGrid.shear_nodes`,
+  the grid table's ``shear_deg``), so grids and shear points share one definition; on a
+  homogeneously sheared sheet every point has the exact angle. At a formed point, it is that
+  of the closest point's material position (:func:`shear_at_formed`);
 - the **blank's edge after forming** is the chain of the triangulation's boundary edges
   (:func:`edge_segments`), with the distance of a point to it and the model's **draw-in**
   there (inward in-plane displacement of the edge's material point, as
@@ -158,15 +168,42 @@ def coverage(mesh: SheetMesh, points: np.ndarray, reach_mm: float | None = None)
 
 
 def shear_at_flat(grid: FormedGrid, flat_mm: np.ndarray) -> np.ndarray:
-    """The model's shear angle (deg) at material points (m, 2): bilinear within the cell.
+    """The model's shear angle (deg) at material points (m, 2), as a lab reads it.
 
-    The cells' shear (:meth:`~fenicsx_drape.forming.running.post.FormedGrid.shear_nodes`, averaged
-    to the nodes) interpolated in the cell holding each point; NaN off the blank.
+    Each cell's own angle at its centre, bilinear between the centres (the module doc); NaN
+    for a point off the blank (outside the net or in an absent cell of a clipped net).
     """
     g = grid.full()
-    field = np.repeat(g.shear_nodes()[..., None], 3, axis=-1)
-    return FormedGrid(g.X, field, False).sample(np.asarray(flat_mm, float)[:, :2],
-                                                outside="nan")[:, 0]
+    γ = g.shear_deg()  # (n_i − 1, n_j − 1): each cell's own angle, NaN for absent cells
+    p = np.asarray(flat_mm, float)[:, :2]
+    origin, Δ, R = g.tow_frame()
+    s = ((p - origin) @ R) / Δ  # lattice coordinates of the nodes: cell k spans [k, k + 1]
+    n = np.array(γ.shape)
+    present = np.isfinite(γ)
+    # On the blank: a present cell holds the point (one on a cell's side may have its
+    # present cell on either side of it).
+    on = np.zeros(len(p), bool)
+    for shift in (-1e-9, 1e-9):
+        for other in (-1e-9, 1e-9):
+            k = np.floor(s + np.array([shift, other])).astype(int)
+            inside = np.all((k >= 0) & (k < n), axis=1)
+            kc = np.clip(k, 0, n - 1)
+            on |= inside & present[kc[:, 0], kc[:, 1]]
+    # Bilinear on the lattice of centres (centre k at k + ½), clamped to the outermost ones.
+    c = np.clip(s - 0.5, 0.0, n - 1.0)
+    k0 = np.clip(np.floor(c).astype(int), 0, np.maximum(n - 2, 0))
+    t = c - k0
+    value, weight = np.zeros(len(p)), np.zeros(len(p))
+    for di in (0, 1):
+        for dj in (0, 1):
+            i = np.minimum(k0[:, 0] + di, n[0] - 1)
+            j = np.minimum(k0[:, 1] + dj, n[1] - 1)
+            w = (t[:, 0] if di else 1.0 - t[:, 0]) * (t[:, 1] if dj else 1.0 - t[:, 1])
+            ok = present[i, j]
+            value += np.where(ok, w * np.where(ok, γ[i, j], 0.0), 0.0)
+            weight += np.where(ok, w, 0.0)
+    out = np.divide(value, weight, out=np.full(len(p), np.nan), where=weight > 0)
+    return np.where(on, out, np.nan)
 
 
 def shear_at_formed(grid: FormedGrid, points: np.ndarray,
