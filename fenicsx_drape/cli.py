@@ -32,6 +32,7 @@ COMMANDS: dict[str, str] = {
     "diagnose": "find which physical effect a model is missing (REPORT.json contract)",
     "history": "the ledger of model versions and their errors",
     "form": "run a forming case (case.toml, or hemisphere): fields, pictures, a bundle",
+    "probe": "the model's shear, positions and draw-in at a lab's points, from drape form",
     "drape": "kinematic (pin-jointed net) drape of a case's formed surface",
     "mesh": "build a truss mesh of the woven sheet with Gmsh and write it",
 }
