@@ -334,11 +334,18 @@ def net_fit(case: FormingCase, grid: FormedGrid) -> dict[str, Any]:
     the net's cells cover, and ``note`` when the cell changed or a rectangle's side was
     clipped: by how much, and which cells would keep the whole blank). The ragged edge of a
     turned ply or an outline is the net's by design and gets no note.
+
+    Args:
+        case: The case.
+        grid: The formed sheet (a stack: every ply in ``grid.plies``; the figures are of the
+            first ply whose tows lie along the blank's sides, else of ``grid``).
     """
-    full = grid.full()
+    asked = float(case.blank.cell_mm)
+    grids = list(grid.plies) or [grid]
+    blanks = case.ply_blanks() if len(grids) > 1 else [case.blank]
+    k = next((k for k, b in enumerate(blanks) if b.ply_angle_deg == 0.0), len(grids) - 1)
+    full, b = grids[k].full(), blanks[k]
     Δ = full.cell_mm
-    b = case.blank
-    asked = float(b.cell_mm)
     cells = int(np.isfinite(full.shear_deg()).sum())
     share = cells * Δ * Δ / b.area_mm2
     net: dict[str, Any] = {"cell_asked_mm": asked, "area_share": share}
@@ -354,13 +361,15 @@ def net_fit(case: FormingCase, grid: FormedGrid) -> dict[str, Any]:
         if changed:
             notes.append(f"the net is fitted to the blank: cell {Δ:g} mm, not the {asked:g} mm "
                          f"asked, so that {n_x} whole cells span its {a_x:g} mm along x")
-        if span[1] < a_y - 1e-6 * a_y:
+        clipped = span[1] < a_y - 1e-6 * a_y
+        if clipped:
             left = 0.5 * (a_y - span[1])
-            notes.append(f"{'its' if notes else 'the net'} {round(span[1] / Δ)} cells "
+            whose = "its" if notes else "the net's"
+            notes.append(f"{whose} {round(span[1] / Δ)} cells "
                          f"span {span[1]:g} mm of the blank's {a_y:g} mm along y: {left:g} mm "
                          f"of the blank left out at each side (y = ±{a_y / 2:g} mm), "
                          f"{100 * share:.1f} % of its area modelled")
-        if notes:
+        if clipped:
             fits = whole_blank_cells(0.5 * a_x, 0.5 * a_y, asked)
             if fits:
                 notes.append("a cell of " + " or ".join(f"{v:.4g} mm" for v in fits)
