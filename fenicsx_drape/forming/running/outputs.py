@@ -462,7 +462,8 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
 
             net, kinematic = _kinematic_beside(case, run, out if pictures else None)
             result.update(kinematic)
-            result.update(write_tool_forces(run, out, case.name, pictures=pictures))
+            result.update(write_tool_forces(run, out, run_title(case, result),
+                                            pictures=pictures))
             Δ = result["cell_mm"]
             note = (f"simulated by fenicsx_drape (drape form): case {case.name!r}, cell "
                     f"{Δ:g} mm, symmetry {list(case.planes) or 'none'}")
@@ -481,14 +482,16 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
             write_run_bundle(run, out / "bundle", μ, grid_mm=grid_mm, lab_lines=lab_lines,
                              comment=note)
             if pictures:
+                what = run_title(case, result)  # the run's conditions, as the run had them
                 plot_shear(run.grid, out / "shear.png",
-                           f"{case.name}: shear angle (max {result['max_shear_deg']:.1f}°)")
-                plot_wrinkling(run.grid, out / "wrinkling.png")
+                           f"{what}: shear angle (max {result['max_shear_deg']:.1f}°)")
+                plot_wrinkling(run.grid, out / "wrinkling.png", _wrinkling_title(what, result))
                 for k, (g, ply) in enumerate(zip(run.plies, result.get("plies", [])), 1):
                     plot_shear(g, out / f"shear_ply{k}.png",
-                               f"{case.name}: ply {k} at {ply['angle_deg']:g}°, shear angle "
+                               f"{what}: ply {k} at {ply['angle_deg']:g}°, shear angle "
                                f"(max {ply['max_shear_deg']:.1f}°)")
-                    plot_wrinkling(g, out / f"wrinkling_ply{k}.png")
+                    plot_wrinkling(g, out / f"wrinkling_ply{k}.png",
+                                   _wrinkling_title(f"{what}: ply {k}", ply))
                 if run.plies:
                     faces = [dict(face, name=face["interface"]) for face in interply_maps(run)]
                     plot_interply(faces, out / "interply.png",
@@ -510,6 +513,24 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
                              solver=_plain(vars(run.problem.options)))
     comm.Barrier()
     return run, result
+
+
+def run_title(case: FormingCase, result: dict) -> str:
+    """The run as its pictures' titles name it: case, net's cell, where it stopped.
+
+    The case's name, the net's own cell (``result["cell_mm"]``) and, for a run that stopped
+    short of the full travel, where.
+    """
+    text = f"{case.name}, {result.get('cell_mm', case.blank.cell_mm):g} mm cells"
+    if result.get("stopped"):
+        text += (f", stopped at {result['travel_mm']:.3g} of {result['full_travel_mm']:.3g} mm "
+                 "of travel")
+    return text
+
+
+def _wrinkling_title(what: str, numbers: dict) -> str:
+    return (f"{what}: wrinkled tows (min {numbers['min_wrinkling_strain']:.3f}, total "
+            f"{100 * numbers['total_wrinkling_strain']:.2f} %)")
 
 
 def write_tool_forces(run: FormingRun, out: str | os.PathLike, part: str, *,
