@@ -8,14 +8,18 @@ Example::
     ./drape --np 2 form hemisphere --out results/full --full --cell-mm 5
     ./drape form hemisphere --out results/ply3 --full --ply-angle-deg 3
     ./drape form meshes/double_dome/case.toml --out out --blank-offset-mm 8 0 --tool-offset-mm 0 2
+    ./drape form double_dome --out out --lab-lines      # the bundle with shear lines and edge
 
 ``hemisphere`` is the paper's, ``meshes/hemisphere/case.toml``, formed like any case (and
 ``double_dome``, ``square_box``: every folder of ``meshes/`` with a ``case.toml``). The
 outputs are listed in :mod:`fenicsx_drape.forming.running.outputs`; the same is one call in Python:
 ``form_case(out, load_case("hemisphere", cell_mm=5))``. Options given on the command line
 override the case file's values (:func:`~fenicsx_drape.forming.case.format.with_overrides`) before
-the case is checked. A set-up that breaks a symmetry plane of the case (a turned ply, an
-offset blank or punch) is formed without that plane, and the command says so.
+the case is checked. A net fitted to the blank (a cell other than the one asked, or a side
+left partly out) is said in a note; the paper's numbers are printed only for a run under the
+paper's conditions (any other run on its tools says what differs). A set-up that breaks a
+symmetry plane of the case (a turned ply, an offset blank or punch) is formed without that
+plane, and the command says so.
 """
 
 from __future__ import annotations

@@ -134,7 +134,7 @@ def plot_paths(grids: Mapping[str, FormedGrid], path: str | os.PathLike,
         ax.grid(alpha=0.3)
         ax.legend()
     if title:
-        fig.suptitle(title)
+        fig.suptitle(title, fontsize=10)
     return save_figure(fig, path)
 
 
