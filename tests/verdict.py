@@ -171,7 +171,7 @@ class Verdict:
 
     def pytest_terminal_summary(self, terminalreporter):
         """After a stop: the tests that did not finish and how many did not start."""
-        if self.worker:
+        if self.worker or self.config.option.collectonly:
             return
         started = self.finished + len(self.running)
         unstarted = self.collected - started if self.collected is not None else 0
