@@ -87,8 +87,8 @@ def part(tmp_path, name, *command, args=(), select=None, options=()):
     results.mkdir(exist_ok=True)
     env = dict(os.environ, DRAPE_TEST_GRACE_S="0.5", PYTHONPATH=f"{TESTS}{os.pathsep}"
                + os.environ.get("PYTHONPATH", ""))
-    env.pop("PYTEST_XDIST_WORKER", None)
-    env.pop("PYTEST_XDIST_WORKER_COUNT", None)
+    for variable in ("PYTEST_XDIST_WORKER", "PYTEST_XDIST_WORKER_COUNT", "PYTEST_ADDOPTS"):
+        env.pop(variable, None)  # the session running this test's, not the one it starts
     pytest_args = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                    "-p", "verdict", "--ledger={ledger}"]
     pytest_args += [*args, *(["-k", select] if select else [])]
