@@ -151,8 +151,9 @@ def test_the_part_limit_interrupts_with_pytest_summary(tmp_path):
     (tmp_path / "test_hangs.py").write_text(HANGS.replace("@pytest.mark.timeout(0.4)\n", "")
                                             .replace("sum(range(1000))", "time.sleep(1)")
                                             .replace("import ctypes", "import ctypes\nimport time"))
+    # 12 s: pytest starts (a few seconds on a busy machine) and the slow test is under way
     output, (_, verdict, _, text) = part(
-        tmp_path, "serial", "timeout", "--foreground", "-s", "INT", "-k", "30", "4",
+        tmp_path, "serial", "timeout", "--foreground", "-s", "INT", "-k", "30", "12",
         select="first or slow or last")
     assert "DID NOT FINISH test_hangs.py::test_slow_in_python" in output
     assert "1 of 3 tests not started" in output
