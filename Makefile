@@ -49,10 +49,10 @@ PARALLEL3 := parallel and not slow
 MPIRUN := mpirun --mca mpi_yield_when_idle 1
 test-parallel:
 	@rc=0; \
-	$(PART) --none-ok mpi-2 "$(RESULTS)" -- $(DRAPE) exec $(LIMIT) $(MPIRUN) -n 2 python3 -m mpi4py \
-	  -m pytest $(PYTEST_ARGS) -m "parallel" || rc=1; \
-	$(PART) --none-ok mpi-3 "$(RESULTS)" -- $(DRAPE) exec $(LIMIT) $(MPIRUN) -n 3 python3 -m mpi4py \
-	  -m pytest $(PYTEST_ARGS) -m "$(PARALLEL3)" || rc=1; \
+	$(PART) --none-ok mpi-2 "$(RESULTS)" -- $(DRAPE) exec $(LIMIT) $(MPIRUN) -n 2 \
+	  python3 -m mpi4py -m pytest $(PYTEST_ARGS) -m "parallel" || rc=1; \
+	$(PART) --none-ok mpi-3 "$(RESULTS)" -- $(DRAPE) exec $(LIMIT) $(MPIRUN) -n 3 \
+	  python3 -m mpi4py -m pytest $(PYTEST_ARGS) -m "$(PARALLEL3)" || rc=1; \
 	exit $$rc
 
 # The launcher's own test runs where the launcher does: on the host (in the image it cannot

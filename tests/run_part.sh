@@ -124,6 +124,7 @@ if [[ -z $results ]]; then
 fi
 cmd=()
 for arg in "$@"; do cmd+=("${arg//\{ledger\}/$results/$name.ledger}"); done
+echo "== $name: ${cmd[*]}"
 start=$SECONDS
 "${cmd[@]}"
 status=$?
