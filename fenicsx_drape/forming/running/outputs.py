@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.case.format import FormingCase, case_dict, write_case
+from fenicsx_drape.forming.case import FormingCase, case_dict, write_case
 from fenicsx_drape.forming.running.plots import (
     plot_interply,
     plot_paths,
@@ -198,7 +198,7 @@ def case_bundle(run: FormingRun, friction: float, grid_mm: float = 10.0,
 
     The test's keys (``duration_s``, ``holder_force_N``, ``travel_mm``, ``grid_mm``) repeat
     the case's values; ``case_file`` is relative to the bundle folder (write the case there
-    with :func:`~fenicsx_drape.forming.case.format.write_case`). μ is the condition
+    with :func:`~fenicsx_drape.forming.case.writing.write_case`). μ is the condition
     ``friction_coefficient``.
     """
     case = run.case
@@ -225,7 +225,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
 
     Args:
         out_dir: Output folder (created).
-        case: The forming case (:func:`~fenicsx_drape.forming.case.format.load_case`).
+        case: The forming case (:func:`~fenicsx_drape.forming.case.reading.load_case`).
         model: The material model (default: the case's, else the paper's).
         options: Solver options of the truss.
         tools: Built tools by name replacing the case's (see :func:`run_case`).
@@ -444,7 +444,7 @@ def write_case_tools(run: FormingRun, folder: str | os.PathLike) -> list[Path]:
     """
     import meshio
 
-    from fenicsx_drape.forming.case.format import _builtin_tools
+    from fenicsx_drape.forming.case.spec import _builtin_tools
     from fenicsx_drape.provenance import atomic_write_bytes
 
     folder = Path(folder)

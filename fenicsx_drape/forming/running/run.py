@@ -1,10 +1,10 @@
 """Run any forming case: the blank's truss, the tools, the holder, the load steps.
 
-:func:`run_case` sets a :class:`~fenicsx_drape.forming.case.format.FormingCase` up on the FE
+:func:`run_case` sets a :class:`~fenicsx_drape.forming.case.spec.FormingCase` up on the FE
 core and steps it to the end of its motion (the paper's hemisphere is the case
 ``meshes/hemisphere/case.toml``). The terms of the model, for any case:
 
-- the blank's structured net (:meth:`~fenicsx_drape.forming.case.format.BlankSpec.grid`), with the
+- the blank's structured net (:meth:`~fenicsx_drape.forming.case.spec.BlankSpec.grid`), with the
   symmetry conditions u_x = 0 on x = 0 and/or u_y = 0 on y = 0 of a half or quarter model,
   and u_x = u_y = 0 at the net's node at ``origin_mm`` when the blank holds it
   (``hold_origin``: a part symmetric in both planes modelled without them);
@@ -20,9 +20,10 @@ core and steps it to the end of its motion (the paper's hemisphere is the case
   (:mod:`~fenicsx_drape.forming.terms.stabilisation`) along the nearest tool's normal.
 
 Before anything is built the run's length is checked (load steps, nodes, time:
-:func:`~fenicsx_drape.forming.case.format.check_run_size`), and before the first step where
-the blank and the tools are (:mod:`~fenicsx_drape.forming.running.geometry`); the progress
-lines give the estimate, then the time left at the rate so far.
+:func:`~fenicsx_drape.forming.case.size.check_run_size`; the estimate is the first progress
+line), and before the first step where the blank and the tools are
+(:mod:`~fenicsx_drape.forming.running.geometry`); the progress lines then give the time left
+at the rate so far.
 
 Load steps move the fastest tool ``step_mm``; a step whose Newton solve fails is halved, and
 steps grow back (×1.5, up to ``step_mm``) after solves of at most 15 iterations. A step has
@@ -41,20 +42,17 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from fenicsx_drape.errors import InputFileError as CaseError
 from fenicsx_drape.errors import SolverError
-from fenicsx_drape.forming.case.format import (
-    CaseError,
-    FormingCase,
-    build_tools,
-    case_key,
-    check_run_size,
-)
+from fenicsx_drape.forming.case import FormingCase, case_key, check_run_size
+from fenicsx_drape.forming.case.size import size_text
 from fenicsx_drape.forming.running.geometry import geometry_problems
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.terms.contact import PenaltyContact
 from fenicsx_drape.forming.terms.holder import BlankHolder, StackHolder
 from fenicsx_drape.forming.terms.stabilisation import ExtrapolationSpring
 from fenicsx_drape.forming.terms.stick import ApexStick
+from fenicsx_drape.forming.tools.build import build_tools
 
 CONTACT_ROLES = ("punch", "die", "surface")
 # The geometry checks of the cases formed in this process, by content (the latest few): a
@@ -123,7 +121,7 @@ def case_model(case: FormingCase):
     if path is None:
         model = default_model()
         return model.with_effects("interply_friction") if case.stack else model
-    return load_model(path, origin=case.origin)
+    return load_model(path, origin=_model_origin(case))
 
 
 def _stack_model_path(case: FormingCase):
@@ -146,9 +144,14 @@ def ply_models(case: FormingCase) -> list | None:
     if not case.stack:
         return None
     common = _stack_model_path(case)
-    models = [load_model(p.model, origin=case.origin) if p.model not in (None, common) else None
-              for p in case.plies]
+    models = [load_model(p.model, origin=_model_origin(case))
+              if p.model not in (None, common) else None for p in case.plies]
     return models if any(models) else None
+
+
+def _model_origin(case: FormingCase) -> str:
+    """Where a model a case names comes from: data, whose plugins run only when trusted."""
+    return case.origin or f"the case {case.path or case.name}"
 
 
 def tool_friction(model) -> float:
@@ -200,7 +203,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
     """Form a case: build the blank's truss, tools and terms, then step to the end.
 
     Args:
-        case: The forming case (:func:`~fenicsx_drape.forming.case.format.load_case`).
+        case: The forming case (:func:`~fenicsx_drape.forming.case.reading.load_case`).
         model: The material :class:`~fenicsx_drape.model.Model` (default: the case's
             ``model``, else the paper's); the holder's ``mu``, if given, replaces its μ.
         options: :class:`~fenicsx_drape.fe.solver.SolverOptions` of the truss (default: the
@@ -225,7 +228,9 @@ def run_case(case: FormingCase, model=None, options=None, *,
     from fenicsx_drape.fe.stepping import RunReport
     from fenicsx_drape.limits import duration_text
 
-    size = check_run_size(case)  # a run past the step limit stops before anything is built
+    size = check_run_size(case)  # a run past the limits stops before anything is built
+    if progress is not None and (comm or MPI.COMM_WORLD).rank == 0:  # before any work
+        progress(size_text(case, size))
     model = model or case_model(case)
     if case.holder is not None and case.holder.mu is not None:
         model = model.with_parameters(mu=case.holder.mu)
@@ -303,11 +308,6 @@ def run_case(case: FormingCase, model=None, options=None, *,
             raise CaseError([f"case {case.name!r}: hold_origin: no node of the net at "
                              f"origin_mm = {list(case.blank.origin_mm)} (inside the blank)"])
         problem.fix(origin, (0, 1))
-
-    if progress is not None and comm.rank == 0:
-        progress(f"{case.name}: about {size['steps']:.0f} load steps ({size['travel_mm']:g} mm "
-                 f"at {case.step_mm:g} mm) on {size['nodes']:.0f} nodes, about "
-                 f"{duration_text(size['seconds'])} (estimate)")
 
     def report(step) -> None:
         if progress is not None and comm.rank == 0:

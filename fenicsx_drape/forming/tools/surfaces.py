@@ -937,7 +937,7 @@ def write_msh(surface: TriangleSurface, path: str | os.PathLike) -> Path:
 def sample_curve_loop(path: Path, spacing_mm: float) -> tuple[tuple[float, float], ...]:
     """The closed curve loop of a Gmsh file as a polygon, in this process.
 
-    See :func:`~fenicsx_drape.forming.case.format.sample_outline` (which checks a script first and
+    See :func:`~fenicsx_drape.forming.case.reading.sample_outline` (which checks a script first and
     runs this in a child process).
     """
     import gmsh
