@@ -20,7 +20,7 @@ node-steps (``DRAPE_MAX_NODE_STEPS``: nodes × plies × steps, the work) the run
 once with the numbers (:func:`check_steps`).
 
 A measured table's size is checked before it is read (:func:`check_table_size`): its bytes
-(a file larger than :data:`BYTES_PER_ROW` × the row limit is refused unread) and its lines,
+(a file larger than :data:`BYTES_PER_ROW` × the line limit is refused unread) and its lines,
 counted in blocks without holding the file, against :data:`MAX_TABLE_ROWS`
 (``DRAPE_MAX_TABLE_ROWS``); any input file read whole (a case, a bundle, a model) against
 :data:`MAX_FILE_BYTES` (:func:`check_file_size`).
@@ -55,7 +55,7 @@ MAX_STEPS = 5000  # load steps of one forming run (the shipped cases: 25-80)
 # Node-steps (nodes × plies × steps) of one forming run: the shipped cases take up to 7.5e5
 # (the full hemisphere at 2.5 mm cells); 2e7 is about 1.2 h on one rank (run_seconds).
 MAX_NODE_STEPS = 2e7
-MAX_TABLE_ROWS = 1_000_000  # rows of one measured table (a coupon test at 100 Hz: 10 min)
+MAX_TABLE_ROWS = 1_000_000  # lines of one measured table (a coupon test at 100 Hz: 2.8 h)
 BYTES_PER_ROW = 200  # a table's file larger than this × the row limit is refused unread
 MAX_FILE_BYTES = 50e6  # a case, bundle.toml or MODEL.toml is read whole: a few kB in use
 # Wall time of a load step: a floor and a cost per sheet node, from the hemisphere's runs
@@ -227,13 +227,13 @@ def check_file_size(path: str | os.PathLike, what: str, limit: float = MAX_FILE_
 
 
 def check_table_size(path: str | os.PathLike, what: str = "table") -> int:
-    """Refuse a table beyond :func:`max_table_rows` rows before it is read; its lines.
+    """Refuse a table beyond :func:`max_table_rows` lines before it is read; its lines.
 
-    The file's size first (beyond :data:`BYTES_PER_ROW` × the row limit it is not opened),
-    then its lines counted in blocks of 1 MB (no more memory than a block).
+    The file's size first (beyond :data:`BYTES_PER_ROW` × the limit it is not opened), then
+    its lines counted in blocks of 1 MB (no more memory than a block).
 
     Raises:
-        DrapeInputError: naming the file, its rows (or size) and the limit.
+        DrapeInputError: naming the file, its lines (or size) and the limit.
     """
     limit = max_table_rows()
     how = ("DRAPE_MAX_TABLE_ROWS" if os.environ.get("DRAPE_MAX_TABLE_ROWS") else
@@ -241,15 +241,15 @@ def check_table_size(path: str | os.PathLike, what: str = "table") -> int:
     size = Path(path).stat().st_size
     if size > BYTES_PER_ROW * limit:
         raise DrapeInputError(f"{path}: the {what} is {size / 1e6:.3g} MB, more than a table of "
-                              f"{limit:.3g} rows can be ({BYTES_PER_ROW} bytes a row; the limit "
-                              f"is {how}): not read")
+                              f"{limit:.3g} lines can be ({BYTES_PER_ROW} bytes a line; the "
+                              f"limit is {how}): not read")
     lines = 0
     with open(path, "rb") as f:
         while block := f.read(1 << 20):
             lines += block.count(b"\n")
-            if lines > limit + 100:  # the header and comments aside
-                raise DrapeInputError(f"{path}: the {what} has more than {limit:.3g} rows "
-                                      f"(the limit: {how}): not read")
+            if lines > limit:
+                raise DrapeInputError(f"{path}: the {what} has more than {limit:.3g} lines "
+                                      f"(the limit is {how}): not read")
     return lines
 
 

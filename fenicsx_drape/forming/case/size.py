@@ -111,8 +111,11 @@ def stack_fit(thickness_mm: Sequence[float], gap_mm: float, between: str
     total = sum(t)
     span = total - (t[0] + t[-1]) / 2 if len(t) > 1 else 0.0
     gap = float(gap_mm)
-    plies = f"{len(t)} plies: {plies_text(t)}, {total:g} mm thick" if len(t) > 1 else \
-        f"a ply of {t[0]:g} mm"
+    if len(t) == 1:
+        plies = f"a ply of {t[0]:g} mm"
+    else:
+        plies = ((f"{len(t)} plies: " if len(t) <= 4 else "")
+                 + f"{plies_text(t)}, {total:g} mm thick")
     if span > gap * (1 + GAP_TOLERANCE) + 1e-12:
         return [f"the stack ({plies}) cannot fit between {between}: the plies' mid-planes "
                 f"span {span:g} mm, more than the gap of {gap:g} mm the tools leave at the end "

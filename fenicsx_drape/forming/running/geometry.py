@@ -70,7 +70,9 @@ def geometry_problems(case, tools: dict, nodes: np.ndarray) -> tuple[list[str], 
                 continue
             first = next(k for k in range(1, len(heights)) if depth(k) > WRONG_SIDE_MM)
             z, thickness = heights[first]
-            errors.append(f"plies {first + 1} to {len(heights)} of the stack start inside the "
+            which = (f"ply {first + 1} of the stack starts" if first + 1 == len(heights) else
+                     f"plies {first + 1} to {len(heights)} of the stack start")
+            errors.append(f"{which} inside the "
                           f"{spec.role} {spec.name!r} (ply {first + 1}, {thickness:g} mm "
                           f"thick, lies with its mid-plane {z:g} mm above ply 1's; the top "
                           f"ply up to {depth(-1):.3g} mm deep): the stack does not fit where "

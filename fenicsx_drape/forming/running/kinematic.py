@@ -622,7 +622,7 @@ def case_surface(case, tools: dict | None = None, *, time_s: float | None = None
         if names:
             break
     else:
-        raise ParameterError(f"kinematic drape: case {case.name!r} has no tool with its sheet "
+        raise ParameterError(f"{case.path or case.name}: kinematic drape: no tool with its sheet "
                              "side +z or -z to drape on")
     if tools is None:
         tools = build_tools(case, skip=tuple(t.name for t in case.tools if t.name not in names))

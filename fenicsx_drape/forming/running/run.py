@@ -46,6 +46,7 @@ from fenicsx_drape.errors import InputFileError as CaseError
 from fenicsx_drape.errors import SolverError
 from fenicsx_drape.forming.case import FormingCase, case_key, check_run_size
 from fenicsx_drape.forming.case.size import size_text
+from fenicsx_drape.forming.case.spec import where
 from fenicsx_drape.forming.running.geometry import geometry_problems
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.terms.contact import PenaltyContact
@@ -237,14 +238,15 @@ def run_case(case: FormingCase, model=None, options=None, *,
     given = dict(tools or {})
     for name in given:
         if name not in {t.name for t in case.tools}:
-            raise CaseError([f"run_case: tool {name!r} is not a tool of case {case.name!r}"])
+            raise CaseError([f"{where(case)}: run_case: tool {name!r} is not a tool of the case "
+                             f"({', '.join(t.name for t in case.tools)})"])
     built = {**build_tools(case, skip=tuple(given)), **given}
     built = {t.name: built[t.name] for t in case.tools}  # in the case's order
     errors, warns = _checked_geometry(case, built, known=not given)
     if errors:  # before the first step, in the user's terms
-        raise CaseError([f"case {case.path or case.name}: {e}" for e in errors])
+        raise CaseError([f"{where(case)}: {e}" for e in errors])
     for text in warns:
-        warnings.warn(f"case {case.path or case.name}: {text}", stacklevel=2)
+        warnings.warn(f"{where(case)}: {text}", stacklevel=2)
     holder_surface = built[case.holder.tool] if case.holder is not None else None
     μ_t = tool_friction(model)
     if options is None:
@@ -305,7 +307,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
     if case.blank.hold_origin:
         origin = np.hypot(*(problem.X[:, :2] - case.blank.origin_mm).T) <= 1e-6 * grid.cell_mm
         if comm.allreduce(int(origin[: problem.num_owned].sum())) != len(plies or [0]):
-            raise CaseError([f"case {case.name!r}: hold_origin: no node of the net at "
+            raise CaseError([f"{where(case)}: hold_origin: no node of the net at "
                              f"origin_mm = {list(case.blank.origin_mm)} (inside the blank)"])
         problem.fix(origin, (0, 1))
 
@@ -344,7 +346,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
         stopped = str(error)
     if contact and stopped is None and not comm.allreduce(touched, op=MPI.LOR):
         names = ", ".join(repr(t.name) for t in case.tools if t.role in CONTACT_ROLES)
-        warnings.warn(f"case {case.name!r}: no node of the blank touched {names} in "
+        warnings.warn(f"{where(case)}: no node of the blank touched {names} in "
                       f"{case.travel_mm(problem.t):g} mm of travel; check the tools' start "
                       "positions and motions", stacklevel=2)
     both = planes == ("x", "y")
