@@ -361,3 +361,24 @@ def test_a_triangle_of_no_area_on_an_inner_edge_is_ignored():
     surface = TriangleSurface(square, triangles)
     assert len(surface.triangles) == 2 and len(surface.points) == 4
     assert np.isclose(surface.face_normals[:, 2], 1.0).all()
+
+
+# --------------------------------------------------------------------------------------------
+# 7. The battery script runs and classes its rows
+
+
+def test_the_battery_script_classes_its_rows(tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("hostile_battery",
+                                                  ROOT / "benchmarks" / "hostile_battery.py")
+    battery = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(battery)
+    rows = {r.name: r for r in battery.rows()}
+    assert len(rows) == len(battery.rows()) >= 50  # names unique
+    assert {r.expect for r in rows.values()} <= {"refused", "warned", "accepted", "interrupted"}
+    got, line, _ = battery.run_row(rows["misspelt-case-key"], tmp_path / "a")
+    assert got == "refused" and "did you mean `duration_s`?" in line
+    # A row whose message is not the one expected is not counted as refused.
+    wrong = dataclasses.replace(rows["negative-duration"], fragment="something else")
+    assert battery.run_row(wrong, tmp_path / "b")[0] == "refused (other message)"
