@@ -314,7 +314,8 @@ def rows() -> list[Row]:
         "[[ply]] 2 'model': ply.toml has plugins")
     row("net-1e10-nodes", "case", "refused", lambda f: form(case(f, cell_mm=1e-3)),
         "the sheet's net would have about 1e+10 nodes")
-    row("tool-mesh-1e15-triangles", "case", "refused", lambda f: form(case(f, mesh_mm=1e-6)),
+    row("tool-mesh-1e15-triangles", "case", "refused",
+        lambda f: form(_edit(case(f), "mesh_mm = 40.0", "mesh_mm = 1e-6")),
         "triangles, more than the limit")
     row("40000-steps", "case", "refused", lambda f: form("double_dome", "--step-mm", "0.001"),
         "the run would take 40000 load steps")
@@ -361,7 +362,7 @@ def rows() -> list[Row]:
         "1 degenerate triangle(s) (no area)", timeout_s=300.0)
     row("own-python-geometry", "case", "accepted",
         lambda f: form(case(f, punch="punch.py", punch_parameters="parameters = { radius_mm = "
-                            "60.0 }\n", punch_z0=-61.0)),
+                            "60.0 }\n", punch_z0=-1.0, punch_z1=19.0)),
         check=lambda f, _: None if (f / MARKER).exists() else "the case's own .py did not run",
         timeout_s=300.0)
     row("hemisphere-coarse", "case", "accepted",
@@ -448,7 +449,7 @@ def rows() -> list[Row]:
         "(separated by semicolons? the columns are separated by commas)")
     row("table-10-million-rows", "table", "refused",
         lambda f: (coupon_bundle(f), _ten_million_rows(f / "tensile.csv"), compare(f))[-1],
-        "tensile.csv: test 'tensile': the table has more than 1e+06 lines", timeout_s=300.0)
+        "more than a table of 1e+06 lines can be", timeout_s=300.0)
     row("quoted-cells", "table", "accepted",
         lambda f: compare(coupon_bundle(f, _quoted(TENSILE)), "--out", str(f / "out")),
         check=same_compare_as_clean(lambda g: coupon_bundle(g)), timeout_s=300.0)

@@ -113,7 +113,8 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
             if t.builtin:
                 _builtin_tools(t)
     except DrapeInputError as err:
-        raise InputFileError([f"{at}: with overrides {overrides}: {err}"]) from None
+        text = str(err).removeprefix(f"{at}: ")  # the file named once
+        raise InputFileError([f"{at}: with overrides {overrides}: {text}"]) from None
     return new_case
 
 
