@@ -221,6 +221,7 @@ def grid_bundle(folder: Path, keys: str, rows: list[str] | None = None) -> Path:
 HEMISPHERE_KEYS = ('geometry = "hemisphere"\npunch_radius_mm = 60.0\nfillet_radius_mm = 20.0\n'
                    "holder_opening_mm = 170.0\nsheet_mm = 240.0\ntravel_mm = 80.0\n"
                    "duration_s = 40.0\nholder_force_N = 133.0\ngrid_mm = 10.0")
+RUN_KEYS = HEMISPHERE_KEYS + "\nposition_sd_mm = 0.5"  # a grid whose runs are formed
 
 
 def compare(folder: Path, *more: str) -> list[str]:
@@ -459,17 +460,17 @@ def rows() -> list[Row]:
         lambda f: _swapped_cache(f), check=_same_as_first,
         pending="a cached run stores its key and is checked on every read", timeout_s=600.0)
     row("workers-1000", "runs", "refused",
-        lambda f: compare(grid_bundle(f, HEMISPHERE_KEYS), "--workers", "1000",
+        lambda f: compare(grid_bundle(f, RUN_KEYS), "--workers", "1000",
                           "--forming-cell-mm", "40", "--no-fit", "--no-cache"),
         "--workers", pending="--workers above the cores refused or capped", timeout_s=120.0)
     row("drape-workers-1000", "runs", "refused",
-        lambda f: compare(grid_bundle(f, HEMISPHERE_KEYS), "--forming-cell-mm", "40",
+        lambda f: compare(grid_bundle(f, RUN_KEYS), "--forming-cell-mm", "40",
                           "--no-fit", "--no-cache"), "DRAPE_WORKERS",
         env={"DRAPE_WORKERS": "1000"}, pending="DRAPE_WORKERS above the cores refused or capped",
         timeout_s=120.0)
     row("ctrl-c-diagnose", "runs", "interrupted",
-        lambda f: ["diagnose", str(grid_bundle(f, HEMISPHERE_KEYS)), "--workers", "2",
-                   "--forming-cell-mm", "40", "--no-cache"], "interrupted",
+        lambda f: ["diagnose", str(grid_bundle(f, RUN_KEYS)), "--json", str(f / "REPORT.json"),
+                   "--workers", "2", "--forming-cell-mm", "40", "--no-cache"], "interrupted",
         interrupt_after_s=20.0, pending="Ctrl-C ends with one 'interrupted' line, exit 130",
         timeout_s=120.0)
     return r
@@ -507,7 +508,7 @@ def _ten_million_rows(path: Path) -> Path:
 def _swapped_cache(folder: Path) -> list[str]:
     """Two models compared on one grid (two runs cached), their cache entries' values swapped;
     the command is the first compare again."""
-    bundle = grid_bundle(folder / "b", HEMISPHERE_KEYS)
+    bundle = grid_bundle(folder / "b", RUN_KEYS)
     cache = folder / "cache"
     (folder / "m").mkdir(parents=True, exist_ok=True)
     (folder / "m" / "no_buckling.toml").write_text(
@@ -543,7 +544,10 @@ def _same_as_first(folder: Path, _: str) -> str | None:
 def run_row(row: Row, folder: Path) -> tuple[str, str, float]:
     """The class the row ended in, the message's first line (or why it failed), the time."""
     folder.mkdir(parents=True, exist_ok=True)
-    args = row.build(folder)
+    try:
+        args = row.build(folder)
+    except Exception as err:  # the input could not be made: the row fails, the battery goes on
+        return "input not made", f"{type(err).__name__}: {str(err)[-200:]}", 0.0
     if "--out" not in args and args[0] in ("form", "compare", "diagnose", "fit"):
         args = [*args, "--out", str(folder / "out")]
     env = {**os.environ, "PYTHONPATH": str(ROOT), **row.env}

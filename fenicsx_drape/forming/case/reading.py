@@ -215,11 +215,6 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
                        holder=holder, description=description, model=model, step_mm=step,
                        penalty_factor=penalty, stabilisation_N_per_mm=stab, path=path,
                        plies=tuple(plies), interply=interply)
-    errors, warns = builtin_stack_fit(case, stated)
-    if errors:
-        raise InputFileError([f"{fname}: [[ply]]: {e}" for e in errors])
-    for text in warns:
-        warnings.warn(f"{fname}: [[ply]]: {text}", stacklevel=2)
     if any(v is not None for v in overrides.values()):
         # Overrides first (--full removes the planes an off-centre blank breaks), then the
         # check of the blank, in with_overrides.
@@ -231,6 +226,11 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
             except DrapeInputError as err:
                 at = f"[[ply]] {k}" if case.plies else "[blank]"
                 raise InputFileError([f"{fname}: {at}: {err}"]) from None
+    errors, warns = builtin_stack_fit(case, stated)  # the tools as overridden (a gap, no die)
+    if errors:
+        raise InputFileError([f"{fname}: [[ply]]: {e}" for e in errors])
+    for text in warns:
+        warnings.warn(f"{fname}: [[ply]]: {text}", stacklevel=2)
     try:
         check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
         check_run_size(case)  # and the run's length
