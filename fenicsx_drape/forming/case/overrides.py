@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from fenicsx_drape.errors import DrapeInputError, InputFileError
+from fenicsx_drape.errors import DrapeInputError, InputFileError, did_you_mean
 from fenicsx_drape.forming.case.size import check_run_size
 from fenicsx_drape.forming.case.spec import (
     BlankSpec,
@@ -105,7 +105,7 @@ def with_overrides(case: FormingCase, **overrides: Any) -> FormingCase:
     try:
         new_case = dataclasses.replace(case, blank=blank, tools=tuple(tools), holder=holder,
                                        **changes)
-        for blank_k in new_case.ply_blanks():
+        for blank_k in dict.fromkeys(new_case.ply_blanks()):
             blank_k.grid()
         check_tool_sizes(new_case, warn=False)
         check_run_size(new_case)
@@ -315,8 +315,6 @@ def override_names(case: FormingCase) -> set[str]:
 
 def did_you_mean_override(key: str, case: FormingCase) -> str:
     """`` (did you mean `x`?)`` when ``key`` is a likely typo of a name the case takes."""
-    from fenicsx_drape.errors import did_you_mean
-
     return did_you_mean(key, sorted(override_names(case)))
 
 

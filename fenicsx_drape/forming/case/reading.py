@@ -171,7 +171,7 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
 
     Every problem of the file is reported at once, each naming the file and the key; the
     checks that cost nothing come before any geometry runs: the code the case would run
-    (:func:`_untrusted_models`), the stack against the builtin die's gap, the nets' and the
+    (:func:`_read_model`), the stack against the builtin die's gap, the nets' and the
     tools' sizes and the run's length (:mod:`~fenicsx_drape.forming.case.size`).
 
     Args:
@@ -220,8 +220,9 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
         # check of the blank, in with_overrides.
         case = with_overrides(case, **overrides)
     else:
-        for k, blank_k in enumerate(case.ply_blanks(), 1):
-            try:
+        blanks = case.ply_blanks()
+        for k, blank_k in {b: k for k, b in reversed(list(enumerate(blanks, 1)))}.items():
+            try:  # each distinct ply's net once, named by its first ply
                 blank_k.grid()
             except DrapeInputError as err:
                 at = f"[[ply]] {k}" if case.plies else "[blank]"

@@ -195,7 +195,7 @@ class FormingCase:
                                       ply_angle_deg=self.blank.ply_angle_deg + p.angle_deg)
                   for p in self.plies]
         fitted = set()
-        for b in blanks:
+        for b in dict.fromkeys(blanks):  # each distinct net once (a stack repeats its angles)
             try:
                 fitted.add(b.grid().cell_mm)
             except DrapeInputError:  # reported with the ply by whoever builds its grid
