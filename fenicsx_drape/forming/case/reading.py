@@ -221,7 +221,7 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
         case = with_overrides(case, **overrides)
     else:
         blanks = case.ply_blanks()
-        for k, blank_k in {b: k for k, b in reversed(list(enumerate(blanks, 1)))}.items():
+        for blank_k, k in {b: k for k, b in reversed(list(enumerate(blanks, 1)))}.items():
             try:  # each distinct ply's net once, named by its first ply
                 blank_k.grid()
             except DrapeInputError as err:
