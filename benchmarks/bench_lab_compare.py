@@ -36,8 +36,8 @@ def main() -> None:
     parser.add_argument("--diagnose", action="store_true")
     args = parser.parse_args()
 
+    from fenicsx_drape import runs
     from fenicsx_drape.diagnosis import forming_kind as fc
-    from fenicsx_drape.diagnosis import forming_runs as runs
     from fenicsx_drape.diagnosis import lab_kind
     from fenicsx_drape.diagnosis.compare import evaluate
     from fenicsx_drape.diagnosis.diagnose import diagnose
@@ -82,22 +82,22 @@ def main() -> None:
         if not args.diagnose:
             return
         baseline = default_model().without_effects("tow_buckling")
-        runs._cache.clear()
+        runs.current().forget()
         t = time.perf_counter()
         report = diagnose(bundle, baseline, candidates=["tow_buckling"])
         lab_s = time.perf_counter() - t
-        runs_lab = len(runs._cache)
+        runs_lab = runs.current().in_memory()
         test = fc.synthetic_case_test(truth, case, sd_mm=0.3, seed=1, full=True)
         fc.write_case_bundle("grid", [test], Path(tmp) / "grid")
         grid_bundle = load_bundle(Path(tmp) / "grid", read_case=case_for_test)
-        runs._cache.clear()
+        runs.current().forget()
         t = time.perf_counter()
         grid_report = diagnose(grid_bundle, baseline, candidates=["tow_buckling"])
         grid_s = time.perf_counter() - t
         print(f"diagnose, lab bundle (scan + outline + shear points): {lab_s:.1f} s, "
               f"{runs_lab} forming runs, missing_effect {report['missing_effect']}")
         print(f"diagnose, grid bundle ({grid_bundle.tests[0].n_rows} nodes): {grid_s:.1f} s, "
-              f"{len(runs._cache)} forming runs, missing_effect "
+              f"{runs.current().in_memory()} forming runs, missing_effect "
               f"{grid_report['missing_effect']}")
         print(f"ratio lab / grid: {lab_s / grid_s:.2f} (target <= 1.5)")
 

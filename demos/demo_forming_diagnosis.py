@@ -37,8 +37,8 @@
 import sys
 from pathlib import Path
 
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis import forming_kind as fc
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.compare import evaluate, write_compare
 from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
 from fenicsx_drape.forming.case.format import case_for_test

@@ -43,7 +43,7 @@ import sys
 import time
 from pathlib import Path
 
-from fenicsx_drape.diagnosis import forming_runs as runs
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis.compare import evaluate, write_compare
 from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fenicsx_drape import runs
 from fenicsx_drape.cli import main
 from fenicsx_drape.diagnosis import forming_kind as fc
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case.format import case_for_test, load_case
 from fenicsx_drape.forming.running.post import FormedGrid

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis import forming_kind as fc
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.compare import KINDS, compare_tests, normalised_error
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.measurements.bundle import Bundle, Test
