@@ -45,7 +45,7 @@ sliding), and the folder ``shear_ply<k>.png``, ``wrinkling_ply<k>.png`` and ``in
 The paper's hemisphere (``drape form hemisphere``, ``meshes/hemisphere/case.toml``: tools that
 are all builtin) is a case like any other. ``summary.json`` says whether a run on its tools
 had the paper's conditions (``paper_conditions``, and ``paper_differences``: what differs,
-:func:`~fenicsx_drape.forming.paper.numbers.paper_differences`); only then does its folder
+:func:`~fenicsx_drape.forming.running.conditions.paper_differences`); only then does its folder
 hold ``paths.png`` (shear along the diagonal path and wrinkling along the normal path, the
 paper's Figs. 10-11, with the kinematic drape beside the FE result) and does ``drape form
 hemisphere`` print the run beside the paper's numbers
@@ -453,7 +453,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
         result = partial.update({**net_fit(case, run.grid), **case_summary(run)})
         paper = is_paper_hemisphere(case)
         if paper:
-            from fenicsx_drape.forming.paper.numbers import paper_differences
+            from fenicsx_drape.forming.running.conditions import paper_differences
 
             result["paper_differences"] = paper_differences(result, model)
             result["paper_conditions"] = not result["paper_differences"]
