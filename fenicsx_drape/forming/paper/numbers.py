@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from fenicsx_drape.forming.running.conditions import (  # noqa: F401 (re-exported)
+from fenicsx_drape.forming.running.conditions import (
     PAPER_CONDITIONS,
     paper_differences,
 )
