@@ -28,8 +28,9 @@ import time
 
 import numpy as np
 
-from fenicsx_drape.forming.case.format import PlySpec, build_tools, load_case
+from fenicsx_drape.forming.case import PlySpec, load_case
 from fenicsx_drape.forming.running.run import case_model, forming_options, run_case
+from fenicsx_drape.forming.tools.build import build_tools
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--case", default="double_dome")

@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from fenicsx_drape.forming.case.format import PlySpec, load_case
+from fenicsx_drape.forming.case import PlySpec, load_case
 from fenicsx_drape.forming.running.run import run_case
 
 parser = argparse.ArgumentParser()

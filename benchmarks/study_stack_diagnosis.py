@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT / "demos"))
 import make_lab_bundle
 
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
-from fenicsx_drape.forming.case.format import load_case
+from fenicsx_drape.forming.case import load_case
 from fenicsx_drape.forming.running.run import run_case
 from fenicsx_drape.model import default_model
 

@@ -117,7 +117,8 @@ def stack_stl_case(folder: Path, angles=(0.0, 45.0), cell_mm: float = 20.0,
     stack's gap, written as binary STL; the holder stays the plate of ``holder.geo``. One
     ``[[ply]]`` of 0.3 mm per angle, ``interply`` the ``[interply]`` table's text.
     """
-    from fenicsx_drape.forming.case.format import build_tools, load_case
+    from fenicsx_drape.forming.case import load_case
+    from fenicsx_drape.forming.tools.build import build_tools
 
     folder.mkdir(parents=True, exist_ok=True)
     source = DOUBLE_DOME / "case.toml"

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.cli import main
-from fenicsx_drape.forming.case.format import PlySpec, load_case
+from fenicsx_drape.forming.case import PlySpec, load_case
 from fenicsx_drape.forming.running.run import case_model, forming_options, run_case
 from fenicsx_drape.model import load_model
 

@@ -19,7 +19,7 @@ import pytest
 
 from fenicsx_drape.cli import main
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case.format import PlySpec, load_case, with_overrides
+from fenicsx_drape.forming.case import PlySpec, load_case, with_overrides
 from fenicsx_drape.forming.running.run import run_case
 
 ROOT = Path(__file__).resolve().parents[1]
