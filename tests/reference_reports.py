@@ -66,8 +66,21 @@ CASES = {
 }
 
 
+def _relative(value):
+    """``value`` with the repository's folder written as ``<root>`` in its strings."""
+    if isinstance(value, dict):
+        return {k: _relative(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_relative(v) for v in value]
+    return value.replace(str(ROOT), "<root>") if isinstance(value, str) else value
+
+
 def report_of(case: Case) -> dict:
-    """The case's report as ``REPORT.json`` holds it, less :data:`VOLATILE`."""
+    """The case's report as ``REPORT.json`` holds it, less :data:`VOLATILE`.
+
+    Paths in it are written from the repository's folder (``<root>/demos/...``), so that
+    the reference holds wherever the repository is.
+    """
     from fenicsx_drape.forming.case.format import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
@@ -84,7 +97,7 @@ def report_of(case: Case) -> dict:
         model = load_model(case.model) if case.model else default_model()
         report = diagnose(bundle, model, candidates=case.candidates, setup=case.setup)
     plain = json.loads(json_text(report))
-    return {k: v for k, v in plain.items() if k not in VOLATILE}
+    return _relative({k: v for k, v in plain.items() if k not in VOLATILE})
 
 
 def make_bundles(names) -> None:

@@ -55,14 +55,12 @@ def test_differences_are_found_field_by_field():
         "report: keys ['b', 'a', 'e'], the reference ['a', 'b', 'e']"]
 
 
-def _cases():
-    for name, case in CASES.items():
-        marks = [pytest.mark.slow] + ([pytest.mark.bench] if case.bench else [])
-        yield pytest.param(name, marks=marks, id=name)
+CASE_PARAMETERS = [pytest.param(name, id=name, marks=[pytest.mark.slow] + (
+    [pytest.mark.bench] if case.bench else [])) for name, case in CASES.items()]
 
 
 @pytest.mark.skip_in_parallel
-@pytest.mark.parametrize("name", _cases())
+@pytest.mark.parametrize("name", CASE_PARAMETERS)
 def test_the_report_is_its_reference(name):
     pytest.importorskip("dolfinx")
     want = json.loads((DATA / f"{name}.json").read_text())
