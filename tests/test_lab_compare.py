@@ -121,7 +121,7 @@ def test_a_scan_in_another_frame_is_registered_with_its_uncertainty(tmp_path, pa
     assert np.allclose(reg["translation_mm"], t, atol=0.5)
     assert max(reg["sd_rotation_deg"]) < 0.1 and max(reg["sd_translation_mm"]) < 0.1
     # A ball of points is another part: no registration brings it onto this sheet.
-    from fenicsx_drape.diagnosis.lab_kind import register, sheet_mesh
+    from fenicsx_drape.diagnosis.kinds.lab import register, sheet_mesh
 
     rng = np.random.default_rng(0)
     ball = rng.normal(size=(500, 3))

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis import setup as st
+from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
+from fenicsx_drape.diagnosis.synthetic import synthetic_case_test
 from fenicsx_drape.forming.case.format import load_case, with_overrides
 from fenicsx_drape.measurements.bundle import Bundle, BundleError, Test, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
@@ -75,7 +76,7 @@ def test_a_hemisphere_test_gets_its_case():
         id="h", kind="forming", file="h.csv", columns=grid_test(None).columns,
         geometry="hemisphere", forming={"duration_s": 40.0, "holder_force_N": 133.0})
     (named,) = st.forming_tests(Bundle(name="b", tests=(test,)))
-    case = fk.forming_case_of(named)
+    case = forming_case_of(named)
     assert case.name == "hemisphere" and case.planes == ("x", "y")
     t, _ = st.applied(named, "tool_offset_mm", [2.0, 0.0], default_model())
     assert t.forming_case.tool("punch").params["punch_x_mm"] == 2.0
@@ -102,7 +103,7 @@ def test_a_set_up_key_means_the_same_on_a_hemisphere_test_and_on_a_case_test(tmp
         from fenicsx_drape.forming.case.format import case_for_test
 
         (test,) = st.forming_tests(load_bundle(folder, read_case=case_for_test))
-        cases[name] = fk.forming_case_of(test)
+        cases[name] = forming_case_of(test)
         assert test.conditions == {}
     for case in cases.values():
         assert case.blank.ply_angle_deg == 4.0
@@ -155,13 +156,13 @@ def test_a_bundle_states_the_offsets_as_x_y_pairs(tmp_path):
     keys = "blank_offset_mm = [6.0, -2]\ntool_offset_mm = [0, 1.5]\n"
     bundle = load_bundle(write_bundle_toml(tmp_path / "b", keys))
     (test,) = bundle.tests
-    case = fk.forming_case_of(test)
+    case = forming_case_of(test)
     assert case.blank.origin_mm == (6.0, -2.0) and case.planes == ()
     assert case.tool("punch").params["punch_y_mm"] == 1.5
     assert test.forming["blank_offset_mm"] == [6.0, -2.0]
     # Written (next to its case) and read again: the same set-up.
     again = load_bundle(write_bundle(bundle, tmp_path / "b"))
-    assert fk.forming_case_of(again.tests[0]).blank.origin_mm == (6.0, -2.0)
+    assert forming_case_of(again.tests[0]).blank.origin_mm == (6.0, -2.0)
     # A wrong length or a non-number: the file and the line of the key (after case = ...).
     for bad in ("[6.0]", "[1, 2, 3]", '["a", 1.0]', "4.0"):
         folder = write_bundle_toml(tmp_path / "b", f"blank_offset_mm = {bad}\n")
@@ -237,7 +238,7 @@ def test_a_candidate_with_nothing_to_gain_stops_at_the_stated_set_up():
 def _bundle(model, stated, seed, **setup) -> Bundle:
     """The coarse double dome formed with a hidden set-up, its test naming the stated case."""
     truth = with_overrides(stated, **setup)
-    test = fk.synthetic_case_test(model, truth, sd_mm=0.3, seed=seed, full=True)
+    test = synthetic_case_test(model, truth, sd_mm=0.3, seed=seed, full=True)
     return Bundle(name="hidden", tests=(dataclasses.replace(test, forming_case=stated,
                                                             case_keys={}),))
 
@@ -300,7 +301,7 @@ def test_a_turned_ply_is_named_with_its_angle_and_a_null_bundle_stays_null():
 def force_and_friction(truth, seed: int) -> Bundle:
     """The quarter double dome formed by ``truth`` with 400 N where the case says 200 N."""
     stated = load_case(CASE, **COARSE)
-    test = fk.synthetic_case_test(truth, with_overrides(stated, holder_force_N=400.0),
+    test = synthetic_case_test(truth, with_overrides(stated, holder_force_N=400.0),
                                   sd_mm=0.1, seed=seed, full=True)
     return Bundle(name="b", tests=(dataclasses.replace(test, forming_case=stated,
                                                        case_keys={}),))

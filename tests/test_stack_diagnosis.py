@@ -16,11 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis import forming_runs
 from fenicsx_drape.diagnosis import setup as st
 from fenicsx_drape.diagnosis.compare import compare_tests, prepare, simulate
 from fenicsx_drape.diagnosis.diagnose import diagnose, setup_rules
+from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
+from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
 from fenicsx_drape.forming.case.format import PlySpec, case_for_test, load_case
 from fenicsx_drape.measurements.bundle import Bundle, BundleError, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
@@ -38,9 +39,9 @@ def stack_case(angles=(0.0, 45.0)):
 
 def write(folder, model, case, plies=(None,), seed=0):
     """A bundle of grids "measured" on the given plies (None: no ply named), 0.3 mm noise."""
-    tests = [fk.synthetic_case_test(model, case, test_id=f"ply{k or 'n'}", ply=k,
+    tests = [synthetic_case_test(model, case, test_id=f"ply{k or 'n'}", ply=k,
                                     seed=seed + i) for i, k in enumerate(plies)]
-    return fk.write_case_bundle("stack", tests, folder)
+    return write_case_bundle("stack", tests, folder)
 
 
 def load(folder):
@@ -167,9 +168,9 @@ def test_the_set_up_stage_reads_each_plys_angle_of_a_stack(tmp_path):
     assert st.stated(tests[0], "ply_angle_deg/2", SLIDING) == 45.0
     assert st.stated(tests[0], "ply_angle_deg/1", SLIDING) == 0.0
     turned, _ = st.applied(tests[0], "ply_angle_deg/2", [6.0], SLIDING)
-    assert [p.angle_deg for p in fk.forming_case_of(turned).plies] == [0.0, 51.0]
+    assert [p.angle_deg for p in forming_case_of(turned).plies] == [0.0, 51.0]
     # The whole stack turned: the blank's angle, the plies' own angles kept within it.
-    whole = fk.forming_case_of(st.applied(tests[0], "ply_angle_deg", [6.0], SLIDING)[0])
+    whole = forming_case_of(st.applied(tests[0], "ply_angle_deg", [6.0], SLIDING)[0])
     assert whole.blank.ply_angle_deg == 6.0
     assert [p.angle_deg for p in whole.plies] == [0.0, 45.0]
 

@@ -82,7 +82,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fenicsx_drape.diagnosis.compare import (
-    KINDS,
     compare_tests,
     error_record,
     find_outliers,
@@ -103,7 +102,7 @@ from fenicsx_drape.diagnosis.data_check import (
     suspect_tests,
 )
 from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM, together
-from fenicsx_drape.diagnosis.kinds import Comparison, sd_column_of
+from fenicsx_drape.diagnosis.kinds import Comparison, is_formed, kind_of, row_sd
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained, finer_net
 from fenicsx_drape.diagnosis.resolution import sentence as resolution_sentence
 from fenicsx_drape.diagnosis.setup import DISTINCT_SD as SETUP_DISTINCT_SD
@@ -177,8 +176,8 @@ def _prepare(bundle: Bundle) -> _Data:
     tests, skipped = prepare(bundle)
     tests = tuple(sorted(tests, key=lambda t: t.id))
     canonical = dataclasses.replace(bundle, tests=tests)
-    noise = {t.id: KINDS[t.kind].noise(t) for t in tests}
-    regions = {t.id: KINDS[t.kind].regions(t) for t in tests}
+    noise = {t.id: kind_of(t).noise(t) for t in tests}
+    regions = {t.id: kind_of(t).regions(t) for t in tests}
     folds, scheme = make_folds(canonical)
     return _Data(canonical, tests, noise, regions, folds, scheme, tuple(skipped))
 
@@ -236,12 +235,8 @@ def _without_rows(test: Test, rows: np.ndarray) -> Test:
     The other rows keep their ``force_sd_N``, or get the test's model-free noise estimate,
     so that they weigh in the fit exactly as they do without a ``force_sd_N`` column.
     """
-    column = sd_column_of(KINDS[test.kind], test)
-    sd = test.column(column)
-    if sd is None:
-        sd = np.full(test.n_rows, KINDS[test.kind].noise(test)[0])
     columns = dict(test.columns)
-    columns[column] = np.where(rows, np.inf, sd)
+    columns[kind_of(test).sd_column(test)] = np.where(rows, np.inf, row_sd(test))
     return dataclasses.replace(test, columns=columns)
 
 
@@ -287,7 +282,7 @@ def _with_setup_refitted(stage: dict[str, Any], model: Model, data: _Data, noise
 
 def _heldout(data: _Data, model: Model, say: Progress) -> dict[str, np.ndarray]:
     """Every row predicted by the fold that held it out (module doc, 5.); the folds at once."""
-    predicted = {t.id: np.full(np.shape(KINDS[t.kind].measured(t)), np.nan) for t in data.tests}
+    predicted = {t.id: np.full(np.shape(kind_of(t).measured(t)), np.nan) for t in data.tests}
     tests = {t.id: t for t in data.tests}
 
     def fold_values(fold: Fold, i: int, say: Progress) -> np.ndarray:
@@ -311,7 +306,7 @@ def _costs(data: _Data, model: Model) -> np.ndarray:
     total = 0.0
     for test in data.tests:
         values = np.atleast_2d(simulate([test], model)[test.id])
-        rmse = np.sqrt(np.mean((values - KINDS[test.kind].measured(test)) ** 2, axis=1))
+        rmse = np.sqrt(np.mean((values - kind_of(test).measured(test)) ** 2, axis=1))
         total = total + (rmse / data.noise[test.id][0]) ** 2
     return total / len(data.tests)
 
@@ -663,7 +658,7 @@ def _report(bundle: Bundle, base: _Base, tried: list[dict[str, Any]],
         "consistency": groups,
         "resolution": checked,
         "metrics": {label: kind_metrics(data.tests, comparisons[label], models[label])
-                    for label in models} if any(KINDS[t.kind].metrics for t in data.tests)
+                    for label in models} if any(is_formed(t) for t in data.tests)
         else {},
         "notes": list(data.notes),
     })
@@ -698,7 +693,7 @@ def _adequate_but_for_the_net(candidate: dict[str, Any], say: Progress) -> bool:
     if candidate["error_after"]["normalised"] <= ADEQUATE:
         return True
     after = candidate["_after"]
-    if not any(c.kind == "forming" for c in after):
+    if not any(is_formed(t) for t in candidate["_tests"]):
         return False
     say(f"candidate {candidate['effect']}: is what it leaves the net's?")
     checked = check_resolution(candidate["_tests"], candidate["_model"], after, ADEQUATE, say)
@@ -1071,7 +1066,7 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     :class:`Report`, ``residual_<test>.png`` (the baseline and the best candidate against
     each test), plus ``provenance.json``.
     """
-    from fenicsx_drape.diagnosis.compare import locate, plot_residuals, plot_where, safe_name
+    from fenicsx_drape.diagnosis.compare import locate, plot_where, safe_name
     from fenicsx_drape.diagnosis.forming_runs import execution_record
     from fenicsx_drape.provenance import write_json, write_provenance
 
@@ -1089,9 +1084,9 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
         regions = locate(comparisons["baseline"])
         for i, base in enumerate(comparisons["baseline"]):
             shown = {"baseline": base} | ({best: comparisons[best][i]} if best else {})
-            plot = KINDS[base.kind].plot or plot_residuals
-            plot(shown, tests[base.id], out / f"residual_{safe_name(base.id)}.png",
-                 [e for e in regions if e["tests"] == [base.id]])
+            kind_of(tests[base.id]).plot(shown, tests[base.id],
+                                         out / f"residual_{safe_name(base.id)}.png",
+                                         [e for e in regions if e["tests"] == [base.id]])
     from fenicsx_drape.diagnosis.setup import record_history
 
     record_history(report, out, bundle)  # the versions, for drape history
@@ -1115,18 +1110,21 @@ def confirm(bundle: Bundle, report, cell_mm: float = FULL_CELL_MM,
         ``{"cell_mm", label: {"error", "metrics", "forming_parameters"}}`` for the baseline
         and the first-ranked candidate.
     """
-    from fenicsx_drape.diagnosis.forming_fit import FORMING, fit_forming, forming_parameters
     from fenicsx_drape.diagnosis.forming_runs import resolution
+    from fenicsx_drape.diagnosis.kinds import find_kind
+    from fenicsx_drape.diagnosis.kinds.forming import fit_forming, forming_parameters
 
-    tests = [t for t in bundle.tests if t.kind == "forming"]
+    tests = [t for t in bundle.tests if is_formed(t)]
     labels = ["baseline"] + [c["effect"] for c in report["candidates"][:1]]
     out: dict[str, Any] = {"cell_mm": cell_mm}
     with resolution(cell_mm):
         for label in labels:
-            model = fit_forming(bundle, report.models[label], progress=progress)
-            values = {t.id: FORMING.simulate(t, model) for t in tests}
+            model = fit_forming(bundle, report.models[label], kind_of=find_kind,
+                                progress=progress)
+            values = {t.id: kind_of(t).simulate(t, model) for t in tests}
             out[label] = {"error": error_record(compare_tests(tests, values)),
-                          "metrics": {t.id: FORMING.metrics(t, values[t.id], model) for t in tests},
+                          "metrics": {t.id: kind_of(t).metrics(t, values[t.id], model)
+                                      for t in tests},
                           "forming_parameters": {n: float(model.parameters[n])
                                                  for n in forming_parameters(model)}}
     return out

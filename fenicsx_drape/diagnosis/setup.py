@@ -88,17 +88,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis import forming_kind as fk
 from fenicsx_drape.diagnosis.compare import compare_tests, error_record, normalised_error
-from fenicsx_drape.diagnosis.forming_fit import (
-    FORMING,
-    mirrorable,
-    moved,
-    on_sheet,
-    value_sd,
-    widened,
-)
 from fenicsx_drape.diagnosis.forming_runs import form_many, runs_of, together
+from fenicsx_drape.diagnosis.kinds import is_formed, kind_of, row_sd
+from fenicsx_drape.diagnosis.kinds.forming import case_of, forming_case_of, moved, names_case
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained
 from fenicsx_drape.errors import DrapeInputError, SolverError
 from fenicsx_drape.forming.case.format import FormingCase, broken_planes, with_overrides
@@ -120,7 +113,7 @@ def ply_index(name: str) -> int | None:
     return int(tail) if tail.isdigit() and int(tail) >= 1 else None
 
 
-def kind_of(name: str) -> str:
+def base_parameter(name: str) -> str:
     """The set-up parameter whose tables a name uses (``ply_angle_deg/<k>``: the ply angle's)."""
     return "ply_angle_deg" if ply_index(name) else name
 
@@ -129,12 +122,12 @@ class _Table(dict):
     """A table of the set-up parameters that answers ``ply_angle_deg/<k>`` as the ply angle."""
 
     def __missing__(self, name: str):
-        if kind_of(name) == name:
+        if base_parameter(name) == name:
             raise KeyError(name)
-        return self[kind_of(name)]
+        return self[base_parameter(name)]
 
     def get(self, name: str, default=None):
-        return super().get(kind_of(name), default)
+        return super().get(base_parameter(name), default)
 
 
 def setup_names(names: Sequence[str], tests: Sequence[Test]) -> list[str]:
@@ -143,7 +136,7 @@ def setup_names(names: Sequence[str], tests: Sequence[Test]) -> list[str]:
     When the forming tests are on stacks, ``ply_angle_deg`` brings ``ply_angle_deg/<k>``
     for every ply k that all their stacks have.
     """
-    plies = min((len(fk.forming_case_of(t).plies) for t in tests), default=0)
+    plies = min((len(forming_case_of(t).plies) for t in tests), default=0)
     out = []
     for name in names:
         out.append(name)
@@ -211,17 +204,17 @@ def forming_tests(bundle: Bundle) -> list[Test]:
     """The bundle's forming tests, each naming its case (a hemisphere test gets its case)."""
     out = []
     for test in bundle.tests:
-        if test.kind != "forming":
+        if not is_formed(test):
             continue
-        if not fk.names_case(test):
-            test = dataclasses.replace(test, forming_case=fk.case_of(test))
+        if not names_case(test):
+            test = dataclasses.replace(test, forming_case=case_of(test))
         out.append(test)
     return out
 
 
 def stated(test: Test, name: str, model: Model) -> float | list[float]:
     """The test's stated value of a set-up parameter (offsets: [0, 0], where the case puts it)."""
-    case = fk.forming_case_of(test)
+    case = forming_case_of(test)
     if name == "ply_angle_deg":
         return case.blank.ply_angle_deg
     if ply_index(name):  # the ply's warp angle to x as laid: the stack's plus its own
@@ -242,7 +235,7 @@ def applied(test: Test, name: str | None, p: Sequence[float], model: Model
     force for ``holder_force_N``, μ itself for ``mu``. The shift (mm) is added to the
     measured grid's flat positions where the model is read (a moved blank).
     """
-    case = fk.forming_case_of(test)
+    case = forming_case_of(test)
     shift = np.zeros(2)
     if name is None:  # the set-up as stated, on the case's own model
         return test, shift
@@ -270,7 +263,7 @@ def applied(test: Test, name: str | None, p: Sequence[float], model: Model
     # model, which may not form quite as the quarter does): the candidate is judged against
     # the stated set-up on that model.
     keep = [q for q in case.planes
-            if q not in broken_planes({kind_of(name): GENERIC.get(name)})]
+            if q not in broken_planes({base_parameter(name): GENERIC.get(name)})]
     new = with_overrides(case, symmetry=keep, **changes)
     return dataclasses.replace(test, forming_case=new, case_keys={}), shift
 
@@ -286,7 +279,7 @@ def _start(name: str, test: Test, model: Model) -> np.ndarray:
 
 def _why_not(name: str, tests: Sequence[Test]) -> str | None:
     """Why the part cannot have this set-up error at all (nothing it acts on), else None."""
-    cases = [fk.forming_case_of(t) for t in tests]
+    cases = [forming_case_of(t) for t in tests]
     if name in ("holder_force_N", "mu") and all(c.holder is None for c in cases):
         return "the part has no blank holder"
     if name == "tool_offset_mm" and all(not any(s.role == "punch" for s in c.tools)
@@ -309,20 +302,22 @@ class _Runs:
     def __init__(self, tests: Sequence[Test], model: Model, name: str | None):
         self.tests, self.model, self.name = list(tests), model, name
         # Every measurement kind as the comparison reads it: its values, its one noise
-        # function (forming_fit.value_sd), its regions.
-        self.noise = {t.id: FORMING.noise(t) for t in self.tests}
-        self.regions = {t.id: FORMING.regions(t) for t in self.tests}
-        self.measured = {t.id: np.asarray(FORMING.measured(t), float) for t in self.tests}
-        self.weights = {t.id: 1.0 / value_sd(t) for t in self.tests}
+        # function (its kind's value_sd), its regions.
+        self.kinds = {t.id: kind_of(t) for t in self.tests}
+        self.noise = {t.id: self.kinds[t.id].noise(t) for t in self.tests}
+        self.regions = {t.id: self.kinds[t.id].regions(t) for t in self.tests}
+        self.measured = {t.id: np.asarray(self.kinds[t.id].measured(t), float)
+                         for t in self.tests}
+        self.weights = {t.id: 1.0 / self.kinds[t.id].value_sd(t) for t in self.tests}
         # Compared values per row: a grid's x, y, z; an edge with draw-in, two; else one.
         self.per_row = {t.id: self.measured[t.id].size // max(1, t.n_rows) for t in self.tests}
         self.size = sum(v.size for v in self.measured.values())
-        self.mirrorable = all(mirrorable(t) for t in self.tests)
+        self.mirrorable = all(k.mirrorable for k in self.kinds.values())
         self.asked: set[tuple] = set()  # the forming runs its values were read from
         self.known: dict[tuple[float, ...], dict[str, np.ndarray]] = {}  # values by point
         # The stated cases' common symmetry planes (a case keeps them with a ply at a
         # multiple of 90° only, which mirrors to itself).
-        cases = [fk.forming_case_of(t) for t in self.tests]
+        cases = [forming_case_of(t) for t in self.tests]
         self.planes = [q for q in ("x", "y") if all(q in c.planes for c in cases)]
 
     @property
@@ -366,7 +361,7 @@ class _Runs:
                 t, shift = applied(test, self.name, np.array(p), self.model)
                 if plane is not None:  # formed as its image, read where p's part lies
                     t, _ = applied(test, self.name, np.array(source), self.model)
-                jobs.append((fk.case_of(t), self.model))
+                jobs.append((case_of(t), self.model))
                 reads.append((test, shift, plane))
         self.asked |= runs_of(jobs)  # the tests of one part share its run
         sheets = form_many(jobs)
@@ -374,8 +369,8 @@ class _Runs:
         for k, (sheet, (test, shift, plane), (case, _)) in enumerate(zip(sheets, reads, jobs)):
             # A force curve is read from its own run: the test on the case it was formed as.
             formed = dataclasses.replace(test, forming_case=case, case_keys={})
-            out[k // len(self.tests)][test.id] = on_sheet(formed, sheet, self.model, shift,
-                                                          plane)
+            out[k // len(self.tests)][test.id] = self.kinds[test.id].on_sheet(
+                moved(formed, shift), sheet, self.model, plane)
         return out
 
     def residual(self, values: dict[str, np.ndarray], rows: dict[str, np.ndarray] | None = None
@@ -403,7 +398,7 @@ def _mirrored(name: str | None, p: tuple[float, ...], plane: str) -> tuple[float
     A net turned by δθ mirrors to one turned by −δθ (in either plane); an offset's
     component across the plane changes sign; the force and μ have no image.
     """
-    if kind_of(name) == "ply_angle_deg":
+    if base_parameter(name) == "ply_angle_deg":
         return (-p[0],)
     if name in ("blank_offset_mm", "tool_offset_mm"):
         a = "xy".index(plane)
@@ -632,13 +627,13 @@ def _sd_of(runs: _Runs, J: np.ndarray, r: np.ndarray) -> np.ndarray:
 def _step_text(name: str) -> str:
     v = min(u for u in SCAN[name] if u > 0)
     return {"ply_angle_deg": f"{v:g}°", "holder_force_N": f"a factor {1 + v:g}",
-            "mu": f"{v:g}"}.get(kind_of(name), f"{v:g} mm along x and along y")
+            "mu": f"{v:g}"}.get(base_parameter(name), f"{v:g} mm along x and along y")
 
 
 def _fitted(name: str, p: np.ndarray, test: Test, model: Model):
     """The fitted value in the report's units (and the stated one)."""
     s = stated(test, name, model)
-    if kind_of(name) == "ply_angle_deg":
+    if base_parameter(name) == "ply_angle_deg":
         return s + float(p[0])
     if name == "holder_force_N":
         return s * float(p[0])
@@ -732,7 +727,7 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
     """
     say = progress or (lambda line: None)
     names = list(parameters if parameters is not None else SETUP_PARAMETERS)
-    unknown = [n for n in names if kind_of(n) not in SETUP_PARAMETERS]
+    unknown = [n for n in names if base_parameter(n) not in SETUP_PARAMETERS]
     if unknown:
         raise DrapeInputError(f"set-up parameters {unknown}: not among "
                               f"{', '.join(SETUP_PARAMETERS)} (and {PLY}<k> on a stack)")
@@ -874,8 +869,20 @@ def _tied_mu(entry: dict[str, Any], c: dict[str, Any], test: Test, model: Model)
                   "sd_internal": np.array([mu * sd])}
 
 
+def widened(test: Test, extra: float) -> Test:
+    """``test`` with ``extra`` (in its unit) added in quadrature to every row's noise.
+
+    A model error of known size weighed as noise: the net's own error on a measurement whose
+    residual it explains (:mod:`~fenicsx_drape.diagnosis.resolution`).
+    """
+    column = kind_of(test).sd_column(test)
+    columns = dict(test.columns)
+    columns[column] = np.hypot(np.asarray(row_sd(test), float), float(extra))
+    return dataclasses.replace(test, columns=columns)
+
+
 def _planes(tests: Sequence[Test], name: str, p, model: Model) -> tuple[str, ...]:
-    return fk.forming_case_of(applied(tests[0], name, p, model)[0]).planes
+    return forming_case_of(applied(tests[0], name, p, model)[0]).planes
 
 
 def refit_setup(bundle: Bundle, name: str, p: Sequence[float], model: Model,
@@ -980,11 +987,11 @@ def setup_stage(bundle: Bundle, model: Model, parameters: Sequence[str] | None, 
     """
     from fenicsx_drape.diagnosis.compare import fit_bundle
 
-    if not parameters or not any(t.kind == "forming" for t in bundle.tests):
+    if not parameters or not any(is_formed(t) for t in bundle.tests):
         return None, bundle
     say = progress or (lambda line: None)
     stated_model = model
-    coupons = tuple(t for t in bundle.tests if t.kind != "forming")
+    coupons = tuple(t for t in bundle.tests if not is_formed(t))
     if coupons:
         say("set-up: the material fitted to the coupon tests first")
         stated_model = fit_bundle(dataclasses.replace(bundle, tests=coupons), model,

@@ -1,67 +1,52 @@
-"""Coupon tests in ``compare`` and ``diagnose``: tensile, bias extension, picture frame.
+"""What the coupon kinds share: tensile, bias extension and picture frame tests.
 
 A coupon test is compared row by row on its force (N): simulated by the unit-cell solutions
 (:func:`fenicsx_drape.calibration.coupons.simulate`), weighed with the same noise as in the
 fit (``force_sd_N``, or the model-free estimate), and fitted by
-:func:`fenicsx_drape.calibration.fit.fit` (the material's parameters).
+:func:`fenicsx_drape.calibration.fit.fit` (the material's parameters: :func:`fit_material`,
+the fit hook all coupon kinds share).
 
-Its **regions** are the ranges of the kinematic strain (:func:`coupon_strain`) that separate
-the mechanisms of the paper's section 3.2 (bias extension: initial tow bending, friction
-plateau, lock-up; tension: decrimping, then tow stretching), found by tangent intersections on
-the loading curve (:func:`_knees`), and the phases of the loading history (loading, hold,
-unloading).
+Its **regions** are the ranges of the kinematic strain (each kind's own, e.g.
+:func:`fenicsx_drape.diagnosis.kinds.bias_extension.strain`) that separate the mechanisms of
+the paper's section 3.2 (bias extension: initial tow bending, friction plateau, lock-up;
+tension: decrimping, then tow stretching), found by tangent intersections on the loading
+curve (:func:`_knees`), and the phases of the loading history (loading, hold, unloading).
+Each kind is a :class:`CouponKind` in its own module.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
-from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.kinds import Kind, Region
+from fenicsx_drape.diagnosis.kinds.base import FitHook, Region
 
 if TYPE_CHECKING:
+    from fenicsx_drape.diagnosis.kinds.base import Comparison
+    from fenicsx_drape.forming.case.format import FormingCase
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
 
-def _coupon_noise(test: Test) -> tuple[float, str]:
+def coupon_noise(test: Test) -> tuple[float, str]:
+    """A coupon's force noise (N) and its source: the fit's own (``test_noise``)."""
     from fenicsx_drape.calibration.coupons import test_noise
 
     _, noise, source = test_noise(test)  # the same noise the fit weighs the rows with
     return noise, source
 
 
-def _coupon_simulate(test: Test, model: Model) -> np.ndarray:
+def coupon_simulate(test: Test, model: Model) -> np.ndarray:
+    """The force (N) of each row by the unit-cell solutions."""
     from fenicsx_drape.calibration.coupons import simulate as simulate_coupon
 
     return simulate_coupon(test, model)
-
-
-def coupon_strain(test: Test) -> tuple[str, np.ndarray]:
-    """The kinematic strain of a coupon's rows: ``("tow_strain" | "diagonal_strain", values)``.
-
-    Tension: the Green-Lagrange strain of the loaded tows, ``e + e²/2`` with
-    ``e = displacement / gauge length`` (eq. 13). Bias extension: the diagonal strain of the
-    gauge region, eq. 21. Picture frame: the diagonal strain sin γ / 2 of the frame's shear
-    angle (:func:`fenicsx_drape.unitcell.picture_frame_shear_angle`). All follow from the
-    measured displacement alone.
-    """
-    if test.kind == "tensile":
-        e = test.displacement_mm / test.gauge_length_mm
-        return "tow_strain", e + 0.5 * e**2
-    if test.kind == "picture_frame":
-        from fenicsx_drape.unitcell import picture_frame_shear_angle
-
-        γ = np.radians(picture_frame_shear_angle(test.displacement_mm, test.frame_side_mm))
-        return "diagonal_strain", 0.5 * np.sin(γ)
-    from fenicsx_drape.unitcell import bias_diagonal_strain
-
-    return "diagonal_strain", np.asarray(
-        bias_diagonal_strain(test.displacement_mm, test.length_mm, test.width_mm))
 
 
 def _loading_phases(time_s: np.ndarray, displacement_mm: np.ndarray) -> np.ndarray:
@@ -116,22 +101,11 @@ def _knees(x: np.ndarray, y: np.ndarray, pattern: str) -> tuple[float, ...]:
     return tuple(knees)
 
 
-# The strain ranges of each coupon kind, in order, and the shape of its loading curve:
-# bias extension stiff - soft - stiff, tension soft - stiff (section 3.2).
-_STRAIN_REGIONS = {
-    "bias_extension": (("initial tow bending", "friction plateau", "lock-up"),
-                       "stiff-soft-stiff"),
-    "tensile": (("decrimping", "tow stretching"), "soft-stiff"),
-    "picture_frame": (("initial tow bending", "friction plateau", "lock-up"),
-                      "stiff-soft-stiff"),
-}
-
-
-def _coupon_regions(test: Test) -> list[Region]:
-    variable, strain = coupon_strain(test)
+def coupon_regions(test: Test, variable: str, strain: np.ndarray, names: Sequence[str],
+                   pattern: str) -> list[Region]:
+    """The strain ranges (``names`` in order, by the ``pattern``'s knees) and the phases."""
     phases = _loading_phases(test.time_s, test.displacement_mm)
     regions: list[Region] = []
-    names, pattern = _STRAIN_REGIONS[test.kind]
     loading = phases > 0
     knees = _knees(strain[loading], test.force_N[loading], pattern) \
         if loading.sum() >= 24 else (math.nan,) * (len(names) - 1)
@@ -160,14 +134,16 @@ def _coupon_regions(test: Test) -> list[Region]:
     return regions
 
 
-def _coupon_fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
-                parameters: Sequence[str] | None = None, max_iterations: int = 200,
-                from_features: bool = True, progress: Callable[[str], None] | None = None,
-                details: dict | None = None) -> Model:
-    """The coupons' fit (:class:`~fenicsx_drape.diagnosis.kinds.FitHook`): the material.
+def fit_material(bundle: Bundle, model: Model, *, kind_of: Callable | None = None,
+                 tests: Sequence[str] | None = None, parameters: Sequence[str] | None = None,
+                 max_iterations: int = 200, from_features: bool = True,
+                 progress: Callable[[str], None] | None = None,
+                 details: dict | None = None) -> Model:
+    """The coupons' fit (:class:`~fenicsx_drape.diagnosis.kinds.base.FitHook`): the material.
 
     The coupon tests fix the material (:func:`fenicsx_drape.calibration.fit.fit`) when some
-    of ``parameters`` (all when None) act on them. A fit from the features has the global
+    of ``parameters`` (all when None) act on them; it picks them by their kind itself
+    (``kind_of`` is not needed). A fit from the features has the global
     stage; ``details["coupons"]`` receives the :class:`~fenicsx_drape.calibration.fit.
     FitResult` (its starts, undetermined parameters, noise) when ``details`` is given.
     """
@@ -185,6 +161,111 @@ def _coupon_fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     return result.model
 
 
-COUPON = Kind(unit="N", measured=lambda test: test.force_N, noise=_coupon_noise,
-              simulate=_coupon_simulate, regions=_coupon_regions, abscissa=coupon_strain,
-              sd_column="force_sd_N", fit=_coupon_fit)
+def plot_curves(comparisons: Mapping[str, Comparison], test: Test, path: Path,
+                shares: Sequence[Mapping[str, Any]], abscissa: tuple[str, np.ndarray]) -> Path:
+    """Measured against one or more models (top) and their residuals (bottom).
+
+    Args:
+        comparisons: The models' comparisons with ``test``, by label (e.g. "baseline").
+        test: The test.
+        path: The PNG to write.
+        shares: Regions of the test (entries of :func:`~fenicsx_drape.diagnosis.compare.
+            locate`) to shade with their share of the first model's error.
+        abscissa: What the rows are plotted against (the kind's ``abscissa``).
+    """
+    import matplotlib.pyplot as plt
+
+    from fenicsx_drape.provenance import save_figure
+
+    first = next(iter(comparisons.values()))
+    name, x = abscissa
+    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7, 6),
+                                      gridspec_kw={"height_ratios": [2, 1]})
+    top.plot(x, first.measured, ".", ms=3, color="0.5", label="measured")
+    bottom.axhspan(-first.noise, first.noise, color="C2", alpha=0.2, label="± noise")
+    for i, (label, c) in enumerate(comparisons.items()):
+        top.plot(x, c.simulated, "-", color=f"C{i}",
+                 label=f"{label}: RMSE {c.rmse:.3g} {c.unit} = {c.normalised:.2f} × noise")
+        bottom.plot(x, c.residual, ".", ms=3, color=f"C{i}", label=label)
+    top.set_ylabel(f"value ({first.unit})")
+    top.legend(loc="upper left", fontsize=7)
+    top.set_title(f"{first.id} ({first.kind.replace('_', ' ')})")
+    for i, entry in enumerate(e for e in shares if e["variable"] == name):
+        lo, hi = entry["range"]
+        bottom.axvspan(lo, hi, color=f"C{i % 10}", alpha=0.08)
+        bottom.annotate(f"{entry['says']}\n{100 * entry['share_of_error']:.0f} %",
+                        xy=(0.5 * (lo + hi), 1.0), xycoords=("data", "axes fraction"),
+                        ha="center", va="top", fontsize=7)
+    bottom.set_xlabel(name.replace("_", " "))
+    bottom.set_ylabel(f"measured − model ({first.unit})")
+    bottom.legend(loc="lower left", fontsize=7)
+    return save_figure(fig, path)
+
+
+@dataclasses.dataclass(frozen=True)
+class CouponKind:
+    """A coupon kind (:class:`~fenicsx_drape.diagnosis.kinds.base.Kind`): forces per row."""
+
+    name: str  # the bundle's kind of its tests
+    # the kinematic strain of a test's rows, from the displacement alone: (variable, values)
+    strain: Callable[[Test], tuple[str, np.ndarray]]
+    mechanisms: tuple[str, ...]  # the strain ranges' names, in order (section 3.2)
+    pattern: str  # the loading curve's shape: "stiff-soft-stiff" or "soft-stiff"
+    fit: FitHook = fit_material  # the material, shared by every coupon kind
+    formed: bool = False  # a coupon is not a formed part
+
+    @property
+    def test_kind(self) -> str:
+        """The bundle's kind of its tests: the kind's own name."""
+        return self.name
+
+    def holds(self, test: Test) -> bool:
+        """Whether ``test`` is of this kind."""
+        return test.kind == self.name
+
+    def unit(self, test: Test) -> str:
+        """Newtons."""
+        return "N"
+
+    def measured(self, test: Test) -> np.ndarray:
+        """The measured force per row (N)."""
+        return test.force_N
+
+    def noise(self, test: Test) -> tuple[float, str]:
+        """The force noise (N) and its source (:func:`coupon_noise`)."""
+        return coupon_noise(test)
+
+    def value_sd(self, test: Test) -> np.ndarray:
+        """Each row's force sd (N): its ``force_sd_N``, else the test's noise."""
+        sd = test.column("force_sd_N")
+        return np.full(test.n_rows, self.noise(test)[0]) if sd is None else np.asarray(sd)
+
+    def sd_column(self, test: Test) -> str:
+        """``force_sd_N``."""
+        return "force_sd_N"
+
+    def simulate(self, test: Test, model: Model) -> np.ndarray:
+        """The force per row (N) by the unit-cell solutions (:func:`coupon_simulate`)."""
+        return coupon_simulate(test, model)
+
+    def regions(self, test: Test) -> list[Region]:
+        """The mechanisms' strain ranges and the loading phases (module doc)."""
+        variable, strain = self.strain(test)
+        return coupon_regions(test, variable, strain, self.mechanisms, self.pattern)
+
+    def abscissa(self, test: Test) -> tuple[str, np.ndarray]:
+        """The kinematic strain of the rows."""
+        return self.strain(test)
+
+    def metrics(self, test: Test, simulated: np.ndarray, model: Model | None = None) -> None:
+        """None: a coupon has no measures beyond its error."""
+        return None
+
+    def plot(self, comparisons: Mapping[str, Comparison], test: Test, path: Path,
+             shares: Sequence[Mapping[str, Any]] = ()) -> Path:
+        """The force curves and residuals against the strain (:func:`plot_curves`)."""
+        return plot_curves(comparisons, test, path, shares, self.abscissa(test))
+
+    def check(self, test: Test, case: FormingCase) -> None:
+        """None: a coupon names no case to be checked against."""
+        return None

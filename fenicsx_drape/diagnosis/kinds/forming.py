@@ -1,94 +1,140 @@
-"""The forming kind as ``compare`` and ``diagnose`` see it, and the fit of its parameters.
+"""What the forming kinds share: the case a test forms, its runs, and the fit of the friction.
 
-A forming test holds a measured grid (:mod:`~fenicsx_drape.diagnosis.forming_kind`) or a lab
-measurement (:mod:`~fenicsx_drape.diagnosis.lab_kind`: shear points, a scan, the blank's
-edge, the press force; spec version 3). :data:`FORMING` hands each test to the module that
-knows its measurement; :func:`fit_forming` fits the model's forming parameters (the friction
-coefficients) to all of a bundle's forming tests together, whichever they hold (the method:
-:mod:`~fenicsx_drape.diagnosis.forming_kind`'s module docstring, "Fitting").
+Every forming measurement (the measured grid, :mod:`~fenicsx_drape.diagnosis.kinds.grid`, and
+the lab's, :mod:`~fenicsx_drape.diagnosis.kinds.shear_points`, ``surface``, ``outline``,
+``punch_force``) is compared with the run of the case its test names
+(:func:`forming_case_of`, on the cells of :func:`case_of`), one run per parameter set of a
+vectorised model (:func:`parameter_sets`); a blank placed off-centre moves the flat
+positions it is read at (:func:`moved`). They share one fit hook, :func:`fit_forming`.
+
+**Fitting.** In a forming test only the forming parameters are fitted
+(:func:`~fenicsx_drape.diagnosis.forming_fit.fit_forming`):
+the friction coefficients of the model's forming effects (``mu`` of ``holder_friction``,
+``mu_tool`` of ``tool_friction``), the material parameters staying at their coupon-fitted (or
+given) values. The fit is Gauss-Newton on the per-coordinate residuals in noise units, with
+forward differences of :data:`FD_STEP`, from the better of two starts (the model's values and
+the parameters' defaults, judged in the first batch of runs: a warm start from a model
+lacking the right physics can sit far off, e.g. a holder μ driven up by a model whose tows
+carry compression), steps of at most :data:`MAX_STEP` within :data:`MU_BOUNDS` and halved
+once when they do not lower the cost; every forming run is cached by its case and
+parameters. The runs of one iteration (the point and its perturbations) go to the workers
+at once (:mod:`~fenicsx_drape.diagnosis.forming_runs`) when the point fits in the
+perturbations' last batch for no extra time (one parameter on two workers); else a point's
+perturbations are formed only once the fit takes the point (a rejected step's are not
+needed: on one worker, a fifth of the lab README diagnosis's runs). The fit is the same
+either way.
+
+The holder's μ is fitted only where a test's holder does not fix it (a case's
+``[holder] mu``).
+
+**Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
+a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
+in at most :data:`MAX_ITERATIONS` iterations), every run is cached, the runs of an iteration
+go to persistent worker processes, and the held-out folds (every third node of the grid
+left out, three folds) start from the full fit, so a fold costs a run only when its step
+moves the parameters by more than :data:`XTOL`. The hemisphere runs use cells of
+:data:`~fenicsx_drape.diagnosis.forming_runs.FULL_CELL_MM` (the paper's Δ) and a case its
+blank's ``cell_mm``; :func:`~fenicsx_drape.diagnosis.forming_runs.resolution` sets another
+for both. A coarser screening mesh
+(:data:`~fenicsx_drape.diagnosis.forming_runs.SCREEN_CELL_MM`, 4× cheaper) is only sound
+when its discretisation error is below the noise: against a grid formed on 10 mm cells, the
+20 mm mesh misses by 2.9 × the 0.3 mm noise (at the tow axes over the fillet), which hides a
+tool friction that the 10 mm mesh finds; :func:`~fenicsx_drape.diagnosis.diagnose.confirm`
+refits the baseline and the winner on another mesh to check a verdict.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Sequence
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fenicsx_drape.diagnosis import forming_kind as fk
-from fenicsx_drape.diagnosis import lab_kind
-from fenicsx_drape.diagnosis.forming_kind import (
-    FD_STEP,
-    FORMING_PARAMETERS,
-    MAX_ITERATIONS,
-    MAX_STEP,
-    MU_BOUNDS,
-    XTOL,
-    holder_mu_free,
-)
-from fenicsx_drape.diagnosis.forming_runs import Deferred, spare
-from fenicsx_drape.diagnosis.kinds import Kind
+from fenicsx_drape.diagnosis.forming_runs import Deferred, cell_override, spare
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.forming.case.format import FormingCase, case_file, case_for_test, with_overrides
 
 if TYPE_CHECKING:
-    from fenicsx_drape.forming.running.post import FormedGrid
+    from fenicsx_drape.diagnosis.kinds.base import Kind
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
+FORMING_PARAMETERS = ("mu", "mu_tool")  # what a forming test fits (friction coefficients)
+FD_STEP = 0.02  # forward-difference step in a friction coefficient
+XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
+MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
+MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
+MU_BOUNDS = (0.0, 2.0)  # friction coefficients fitted within (prepreg on steel: 0.1-0.5)
+
 
 # --------------------------------------------------------------------------------------------
-# The kind: a grid's hooks or a lab measurement's
+# The case a test forms
 
 
-def _lab(test: Test) -> Any:
-    """The lab module's hooks when ``test`` holds a lab measurement, else None."""
-    if getattr(test, "lab", None) is None or test.lab.measurement == "file":
+def names_case(test: Test) -> bool:
+    """Whether a forming test names its case file (else it is the paper's hemisphere)."""
+    return test.case is not None or test.forming_case is not None
+
+
+_read_cases: dict[tuple, FormingCase] = {}
+
+
+def forming_case_of(test: Test) -> FormingCase:
+    """The case a test forms, with the test's keys applied.
+
+    A test that names its case file: that case (as the bundle loader read it, else read here);
+    a test with ``geometry = "hemisphere"``: the paper's, ``meshes/hemisphere/case.toml`` (a
+    symmetric quarter), with the test's tool sizes, travel, duration and holding force. Read
+    once per file and keys.
+    """
+    if test.forming_case is not None:
+        return test.forming_case
+    if test.case_path is not None:
+        path, keys = test.case_path, test.case_keys
+    elif test.geometry == "hemisphere":
+        path, keys = case_file("hemisphere"), test.forming
+    else:
+        raise DrapeInputError(f"test {test.id!r}: forming geometry {test.geometry!r} cannot be "
+                              "simulated (known: hemisphere; or name the forming case with "
+                              "case = \"case.toml\")")
+    key = (str(path), tuple(sorted((k, str(v)) for k, v in keys.items())))
+    if key not in _read_cases:
+        _read_cases[key] = case_for_test(path, keys)[0]
+    return _read_cases[key]
+
+
+@functools.lru_cache(maxsize=64)
+def _with_cell(case: FormingCase, cell_mm: float) -> FormingCase:
+    return case if case.blank.cell_mm == cell_mm else with_overrides(case, cell_mm=cell_mm)
+
+
+def case_of(test: Test, cell_mm: float | None = None) -> FormingCase:
+    """The case a forming test is simulated with (:func:`forming_case_of`), on its cells.
+
+    The cells are ``cell_mm``, else the :func:`~fenicsx_drape.diagnosis.forming_runs.
+    resolution`'s, else the case's own (the hemisphere's: the paper's 10 mm).
+    """
+    case = forming_case_of(test)
+    cell = cell_mm or cell_override()
+    return _with_cell(case, float(cell)) if cell else case
+
+
+def model_planes(test: Test) -> tuple[str, ...]:
+    """The symmetry planes of the part the test's runs model (the hemisphere: a quarter)."""
+    return forming_case_of(test).planes
+
+
+def parameter_sets(model: Model) -> list[Model] | None:
+    """The models of each parameter set of a vectorised model (None: not vectorised)."""
+    sizes = {np.size(v) for v in model.parameters.values() if np.ndim(v) > 0}
+    if not sizes:
         return None
-    return lab_kind
-
-
-def _by_measurement(grid_hook: Callable, name: str) -> Callable:
-    """A hook of the forming kind: the grid's, or a lab measurement's.
-
-    A test holding a lab measurement (spec version 3) goes to the lab module's
-    function ``name`` (:mod:`~fenicsx_drape.diagnosis.lab_kind`).
-    """
-
-    def hook(test: Test, *args, **kwargs):
-        lab = _lab(test)
-        if lab is not None:
-            return getattr(lab, name)(test, *args, **kwargs)
-        return grid_hook(test, *args, **kwargs)
-
-    hook.__name__ = hook.__qualname__ = getattr(grid_hook, "__name__", name)
-    hook.__doc__ = grid_hook.__doc__
-    return hook
-
-
-def measured_values(test: Test) -> np.ndarray:
-    """The measured values of a forming test: x, y, z of every node (flattened)."""
-    return fk.measured_positions(test).ravel()
-
-
-def value_noise(test: Test) -> np.ndarray:
-    """Per compared value, the noise (``inf``: not fitted).
-
-    The grid's x, y, z of a node share its ``position_sd_mm``.
-    """
-    return np.repeat(fk.row_noise(test), 3)
-
-
-def value_sd(test: Test) -> np.ndarray:
-    """Per compared value of any forming measurement, the noise it is weighed with.
-
-    The one noise function of each measurement kind (its column, else its key, else its
-    model-free estimate: the grid's :func:`~fenicsx_drape.diagnosis.forming_kind.noise`, a
-    lab measurement's :func:`~fenicsx_drape.diagnosis.lab_kind.noise`), shared by the set-up
-    stage, the effects' fits and the comparison; ``inf``: not fitted.
-    """
-    return _by_measurement(value_noise, "row_sd")(test)
+    (k,) = sizes
+    return [model.with_parameters(**{n: float(v[i]) for n, v in model.parameters.items()
+                                     if np.ndim(v) > 0}) for i in range(k)]
 
 
 def moved(test: Test, shift: np.ndarray) -> Test:
@@ -107,60 +153,16 @@ def moved(test: Test, shift: np.ndarray) -> Test:
     return dataclasses.replace(test, columns=columns)
 
 
-def mirrorable(test: Test) -> bool:
-    """Whether a measurement can be read from a mirrored run (:func:`on_sheet`'s ``plane``)."""
-    return _lab(test) is None
-
-
-def on_sheet(test: Test, sheet: FormedGrid, model: Model, shift: np.ndarray | None = None,
-             plane: str | None = None) -> np.ndarray:
-    """A forming measurement's model values on one formed sheet (as :data:`FORMING` compares).
-
-    Args:
-        test: The measurement (a grid or a lab measurement).
-        sheet: The formed part (:func:`~fenicsx_drape.diagnosis.forming_runs.form_many`'s).
-        model: The model it was formed with (a force curve is read from its run).
-        shift: A blank offset (mm) the flat positions are read at (:func:`moved`).
-        plane: The sheet is the run of the mirror image in this symmetry plane ("x" or "y"):
-            the grid is read at its image and mirrored back (grids only: :func:`mirrorable`).
-    """
-    test = moved(test, np.zeros(2) if shift is None else np.asarray(shift, float))
-    if _lab(test) is not None:
-        if plane is not None:
-            raise ValueError(f"test {test.id!r}: a lab measurement is not read mirrored")
-        return np.asarray(lab_kind.match(test, sheet, model)["values"], float)
-    sheet = sheet.ply(test.ply)  # a stack: the ply measured
-    M = np.ones(3) if plane is None else np.where(np.arange(3) == "xy".index(plane), -1.0, 1.0)
-    P = fk.reference_points(test) * M[:2]
-    part = sheet if all(bool((P[:, "xy".index(q)] >= -1e-9).all()) for q in sheet.planes) \
-        else sheet.full()
-    return (fk.sample(part, P, test.id) * M).ravel()
-
-
-def widened(test: Test, extra: float) -> Test:
-    """``test`` with ``extra`` (in its unit) added in quadrature to every row's noise.
-
-    A model error of known size weighed as noise: the net's own error on a measurement whose
-    residual it explains (:mod:`~fenicsx_drape.diagnosis.resolution`).
-    """
-    column = _sd_column(test)
-    sd = test.column(column)
-    if sd is None:
-        lab = _lab(test)
-        sd = np.full(test.n_rows, lab.noise(test)[0]) if lab is not None else fk.row_noise(test)
-    columns = dict(test.columns)
-    columns[column] = np.hypot(np.asarray(sd, float), float(extra))
-    return dataclasses.replace(test, columns=columns)
-
-
-def _sd_column(test: Test) -> str:
-    from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
-
-    return SD_COLUMN.get(measurement_of(test) or "file", "position_sd_mm")
-
-
 # --------------------------------------------------------------------------------------------
 # Fitting the forming parameters
+
+
+def holder_mu_free(test: Test) -> bool:
+    """Whether the model's holder μ acts in a test (a case may fix it, or have no holder)."""
+    if not names_case(test):
+        return True
+    holder = forming_case_of(test).holder
+    return holder is not None and holder.mu is None
 
 
 def forming_parameters(model: Model) -> tuple[str, ...]:
@@ -169,28 +171,30 @@ def forming_parameters(model: Model) -> tuple[str, ...]:
     return tuple(n for n in FORMING_PARAMETERS if n in active)
 
 
-def _residuals(tests: Sequence[Test], model: Model, names: Sequence[str],
-               sets: np.ndarray) -> np.ndarray:
+def _residuals(tests: Sequence[Test], kinds: Sequence[Kind], model: Model,
+               names: Sequence[str], sets: np.ndarray) -> np.ndarray:
     """Residuals in noise units, cost = Σ_tests (RMSE / noise)², one row per parameter set."""
     vectorised = model.with_parameters(**{n: sets[:, i] for i, n in enumerate(names)})
     out = []
-    for test in tests:
-        values = np.atleast_2d(FORMING.simulate(test, vectorised))
-        sd = value_sd(test)
+    for test, kind in zip(tests, kinds):
+        values = np.atleast_2d(kind.simulate(test, vectorised))
+        sd = kind.value_sd(test)
         w = 1.0 / sd / math.sqrt(sd.size)
-        r = (values - FORMING.measured(test)) * w
+        r = (values - kind.measured(test)) * w
         out.append(np.where(np.isfinite(r), r, 0.0))
     return np.concatenate(out, axis=1)
 
 
-def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
-                max_iterations: int = MAX_ITERATIONS,
+def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
+                tests: Sequence[str] | None = None, max_iterations: int = MAX_ITERATIONS,
                 progress: Callable[[str], None] | None = None) -> Model:
     """Fit the model's forming parameters to the forming tests of ``bundle`` (module doc).
 
     Args:
         bundle: The measurements (coupon tests are ignored here).
         model: The model, material parameters as fitted to the coupons (or given).
+        kind_of: Each test's kind (:func:`~fenicsx_drape.diagnosis.kinds.kind_of`; None: no
+            kind compares it).
         tests: Only these test ids; all forming tests when None.
         max_iterations: Gauss-Newton iterations at most (capped at :data:`MAX_ITERATIONS`).
         progress: Called with a line of text per iteration.
@@ -201,7 +205,9 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     from fenicsx_drape.model import parameter_info
 
     say = progress or (lambda line: None)
-    chosen = [t for t in bundle.tests if t.kind == "forming" and (tests is None or t.id in tests)]
+    chosen = [t for t in bundle.tests if (kind := kind_of(t)) is not None and kind.formed
+              and (tests is None or t.id in tests)]
+    kinds = [kind_of(t) for t in chosen]
     names = forming_parameters(model)
     if not any(holder_mu_free(t) for t in chosen):
         names = tuple(n for n in names if n != "mu")
@@ -212,7 +218,7 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     h = FD_STEP * np.eye(k)
 
     def residuals(*points: np.ndarray) -> np.ndarray:
-        return _residuals(chosen, model, names, np.vstack(points))
+        return _residuals(chosen, kinds, model, names, np.vstack(points))
 
     def slopes(p: np.ndarray, r: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
         R = residuals(*(p + h)) if R is None else R
@@ -274,32 +280,16 @@ def fit_forming(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = N
     return model.with_parameters(**{n: float(v) for n, v in zip(names, p)})
 
 
-def _fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
-         parameters: Sequence[str] | None = None, max_iterations: int = MAX_ITERATIONS,
-         from_features: bool = True, progress: Callable[[str], None] | None = None) -> Model:
-    """The forming kind's fit (:class:`~fenicsx_drape.diagnosis.kinds.FitHook`).
+def fit_friction(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
+                 tests: Sequence[str] | None = None, parameters: Sequence[str] | None = None,
+                 max_iterations: int = MAX_ITERATIONS, from_features: bool = True,
+                 progress: Callable[[str], None] | None = None, details: dict | None = None
+                 ) -> Model:
+    """The forming kinds' fit hook (:class:`~fenicsx_drape.diagnosis.kinds.base.FitHook`).
 
     The forming parameters only (:func:`fit_forming`), the material held as the coupons (or
-    the model) left it: ``parameters`` and ``from_features`` concern the material.
+    the model) left it: ``parameters``, ``from_features`` and ``details`` concern the
+    material.
     """
-    return fit_forming(bundle, model, tests=tests, progress=progress,
+    return fit_forming(bundle, model, kind_of=kind_of, tests=tests, progress=progress,
                        max_iterations=max_iterations)
-
-
-def _plot(comparisons, test: Test, path: Path, shares=()) -> Path:
-    """The forming kind's picture: the grid's error map, or a lab measurement's own."""
-    lab = _lab(test)
-    if lab is not None:
-        return lab.plot(comparisons, test, path, shares)
-    return fk.plot_error_map(comparisons, test, path, shares)
-
-
-FORMING = Kind(unit=_by_measurement(lambda test: "mm", "unit"),
-               measured=_by_measurement(measured_values, "measured"),
-               noise=_by_measurement(fk.noise, "noise"),
-               simulate=_by_measurement(fk.simulate, "simulate"),
-               regions=_by_measurement(fk.part_regions, "regions"),
-               abscissa=_by_measurement(fk.abscissa, "abscissa"),
-               sd_column=_sd_column, fit=_fit,
-               metrics=_by_measurement(fk.metrics, "metrics"),
-               plot=_plot)
