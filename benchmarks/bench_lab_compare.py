@@ -37,9 +37,9 @@ def main() -> None:
     args = parser.parse_args()
 
     from fenicsx_drape.diagnosis import forming_runs as runs
-    from fenicsx_drape.diagnosis.kinds import lab as lab_kind
     from fenicsx_drape.diagnosis.compare import evaluate
     from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis.kinds import lab as lab_kind
     from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
     from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
     from fenicsx_drape.forming.case.format import case_for_test, load_case, with_overrides

@@ -16,8 +16,8 @@ from fenicsx_drape.diagnosis.compare import (
     trends,
     where,
 )
-from fenicsx_drape.diagnosis.kinds.coupon import _knees, _loading_phases
 from fenicsx_drape.diagnosis.kinds import Region
+from fenicsx_drape.diagnosis.kinds.coupon import _knees, _loading_phases
 from fenicsx_drape.measurements.noise import noise_from_sd, noise_from_second_differences
 from fenicsx_drape.model import Model, default_parameters, load_model
 
