@@ -16,8 +16,8 @@ cores), the forming runs it made, the verdict and the errors.
 
 import time
 
+from fenicsx_drape.diagnosis import diagnose
 from fenicsx_drape.diagnosis import forming_runs as runs
-from fenicsx_drape.diagnosis.diagnose import diagnose
 from fenicsx_drape.diagnosis.synthetic import synthetic_forming_test
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model

@@ -36,9 +36,8 @@ def main() -> None:
     parser.add_argument("--diagnose", action="store_true")
     args = parser.parse_args()
 
+    from fenicsx_drape.diagnosis import diagnose, evaluate
     from fenicsx_drape.diagnosis import forming_runs as runs
-    from fenicsx_drape.diagnosis.compare import evaluate
-    from fenicsx_drape.diagnosis.diagnose import diagnose
     from fenicsx_drape.diagnosis.kinds import lab as lab_kind
     from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
     from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle

@@ -32,9 +32,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_forming_case_diagnosis import write_case
 
 from fenicsx_drape.cli import main as drape
+from fenicsx_drape.diagnosis import diagnose, run_store
 from fenicsx_drape.diagnosis import forming_runs as runs
-from fenicsx_drape.diagnosis import run_store
-from fenicsx_drape.diagnosis.diagnose import diagnose
 from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
 from fenicsx_drape.forming.case.format import case_for_test, load_case
 from fenicsx_drape.measurements.bundle import load_bundle

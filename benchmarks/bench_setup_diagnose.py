@@ -24,9 +24,9 @@ import sys
 import time
 from pathlib import Path
 
+from fenicsx_drape.diagnosis import diagnose
 from fenicsx_drape.diagnosis import forming_runs as runs
-from fenicsx_drape.diagnosis.diagnose import diagnose
-from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS
+from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS
 from fenicsx_drape.diagnosis.synthetic import synthetic_case_test
 from fenicsx_drape.forming.case.format import load_case, with_overrides
 from fenicsx_drape.measurements.bundle import Bundle

@@ -44,8 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.diagnose import diagnose
-from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS, setup_summary
+from fenicsx_drape.diagnosis import diagnose
+from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS
+from fenicsx_drape.diagnosis.setup_words import setup_summary
 from fenicsx_drape.diagnosis.synthetic import write_case_bundle
 from fenicsx_drape.forming.case.format import load_case, with_overrides
 from fenicsx_drape.forming.running.run import NODE_ATOL_N, forming_options, run_case

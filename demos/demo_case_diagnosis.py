@@ -42,9 +42,8 @@ import sys
 import time
 from pathlib import Path
 
+from fenicsx_drape.diagnosis import diagnose, evaluate, summary, write_compare, write_diagnosis
 from fenicsx_drape.diagnosis import forming_runs as runs
-from fenicsx_drape.diagnosis.compare import evaluate, write_compare
-from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
 from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
 from fenicsx_drape.forming.case.format import case_for_test, load_case
 from fenicsx_drape.measurements.bundle import load_bundle

@@ -39,8 +39,7 @@ import sys
 from pathlib import Path
 
 from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
-from fenicsx_drape.diagnosis.compare import compare, write_compare
-from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
+from fenicsx_drape.diagnosis import compare, diagnose, summary, write_compare, write_diagnosis
 from fenicsx_drape.diagnosis.ledger import history, table
 from fenicsx_drape.model import Model, default_parameters
 

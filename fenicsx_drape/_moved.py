@@ -28,9 +28,12 @@ class MovedModule(types.ModuleType):
         for target in self._targets:
             module = importlib.import_module(target)
             if hasattr(module, attr):
-                warnings.warn(f"{self.__name__}.{attr} moved to {target}.{attr}; the old path "
+                value = getattr(module, attr)
+                home = getattr(value, "__module__", None)
+                home = home if home in self._targets else target
+                warnings.warn(f"{self.__name__}.{attr} moved to {home}.{attr}; the old path "
                               "goes in the next release", DeprecationWarning, stacklevel=2)
-                return getattr(module, attr)
+                return value
         raise AttributeError(f"module {self.__name__!r} (moved to "
                              f"{', '.join(self._targets)}) has no attribute {attr!r}")
 

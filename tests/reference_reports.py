@@ -24,7 +24,6 @@ hemisphere's [0/90, ±45] stack) against a model of bonded plies.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import json
 import sys
 from pathlib import Path
@@ -81,15 +80,11 @@ def report_of(case: Case) -> dict:
     Paths in it are written from the repository's folder (``<root>/demos/...``), so that
     the reference holds wherever the repository is.
     """
+    from fenicsx_drape.diagnosis import diagnose
     from fenicsx_drape.forming.case.format import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
     from fenicsx_drape.provenance import json_text
-
-    diagnose = getattr(importlib.import_module("fenicsx_drape.diagnosis"), "diagnose", None)
-    if not callable(diagnose):  # before the package exported it: its module of that name
-        diagnose = importlib.import_module("fenicsx_drape.diagnosis.diagnose").diagnose
-
     from fenicsx_drape.trust import trusting
 
     with trusting(case.trust):

@@ -377,8 +377,8 @@ def test_the_old_solver_stepping_circle_would_be_found(graph):
     assert ["fenicsx_drape.fe.solver", "fenicsx_drape.fe.stepping"] in cycles(injected)
     # and the grid kind importing compare back (compare reads the table of kinds)
     injected = {k: set(v) for k, v in edges.items()}
-    injected["fenicsx_drape.diagnosis.kinds.grid"].add("fenicsx_drape.diagnosis.compare")
-    assert any({"fenicsx_drape.diagnosis.compare", "fenicsx_drape.diagnosis.kinds.grid"}
+    injected["fenicsx_drape.diagnosis.kinds.grid"].add("fenicsx_drape.diagnosis.comparison")
+    assert any({"fenicsx_drape.diagnosis.comparison", "fenicsx_drape.diagnosis.kinds.grid"}
                <= set(c) for c in cycles(injected))
 
 
@@ -389,10 +389,10 @@ def test_layer_violations_are_found(graph):
     injected["fenicsx_drape.fe.output"].add("fenicsx_drape.measurements.bundle")
     injected["fenicsx_drape.measurements.bundle"].add("fenicsx_drape.forming.running.post")
     injected["fenicsx_drape.forming.running.outputs"].add("fenicsx_drape.calibration.fit")
-    injected["fenicsx_drape.calibration.fit"].add("fenicsx_drape.diagnosis.compare")
+    injected["fenicsx_drape.calibration.fit"].add("fenicsx_drape.diagnosis.comparison")
     injected["fenicsx_drape.model"].add("fenicsx_drape.commands.fit")
     assert layer_violations(injected) == [
-        "fenicsx_drape.calibration.fit (calibration) imports fenicsx_drape.diagnosis.compare "
+        "fenicsx_drape.calibration.fit (calibration) imports fenicsx_drape.diagnosis.comparison "
         "(diagnosis)",
         "fenicsx_drape.fe.output (fe) imports fenicsx_drape.measurements.bundle (measurements)",
         "fenicsx_drape.forming.running.outputs (forming) imports fenicsx_drape.calibration.fit "

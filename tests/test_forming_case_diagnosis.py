@@ -333,7 +333,7 @@ def test_a_quarter_model_matches_a_whole_grid_of_the_whole_model(tmp_path, dolfi
     most (0.5 % of the corners' draw-in under the holder, whose friction is path-dependent
     and follows each model's own load steps): below a typical 0.3 mm grid noise.
     """
-    from fenicsx_drape.diagnosis.compare import evaluate
+    from fenicsx_drape.diagnosis import evaluate
     from fenicsx_drape.measurements.bundle import Bundle
     from fenicsx_drape.model import default_model
 
@@ -356,7 +356,7 @@ def test_a_quarter_model_matches_a_whole_grid_of_the_whole_model(tmp_path, dolfi
 @pytest.mark.skip_in_parallel
 def test_diagnose_names_a_hidden_effect_on_a_generic_case(tmp_path, dolfinx):
     """The octagon formed with tow buckling, 0.3 mm noise, whole grid; the model lacks it."""
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
     from fenicsx_drape.model import default_model
 
     case = load_case(write_case(tmp_path / "part"))

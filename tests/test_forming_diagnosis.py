@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.diagnosis import forming_runs as runs
-from fenicsx_drape.diagnosis.compare import compare_tests, normalised_error
+from fenicsx_drape.diagnosis.comparison import compare_tests, normalised_error
 from fenicsx_drape.diagnosis.kinds import GRID
 from fenicsx_drape.diagnosis.kinds import grid as gk
 from fenicsx_drape.diagnosis.synthetic import synthetic_forming_test
@@ -91,7 +91,7 @@ def test_regions_partition_the_part_and_shares_sum_to_the_error():
     shifted = truth.copy()
     shifted[regions[0].rows] += 2.0
     (c,) = compare_tests([test], {"dome": shifted})
-    from fenicsx_drape.diagnosis.compare import locate
+    from fenicsx_drape.diagnosis.comparison import locate
 
     entries = {e["says"]: e["share_of_error"] for e in locate([c])}
     assert entries["apex"] == pytest.approx(1.0, abs=0.01)
@@ -126,7 +126,7 @@ LIGHT_HOLDER_N = 133.0 / 4
 
 def _diagnose(truth, baseline, candidates, seed, holder_force_N=133.0):
     """Data formed and diagnosed on the same coarse 20 mm mesh (4× cheaper than 10 mm)."""
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
 
     with runs.resolution(runs.SCREEN_CELL_MM):
         test = synthetic_forming_test(truth, seed=seed, sd_mm=0.3,
@@ -184,7 +184,7 @@ def test_diagnose_names_hidden_tool_friction_in_a_forming_bundle(dolfinx):
 def test_mixed_bundle_reports_coupons_and_forming_and_names_the_forming_effect(dolfinx):
     """Coupons and a formed part in one bundle; the hidden effect acts on the part only."""
     from fenicsx_drape.calibration.synthetic import standard_tests, synthetic_bundle
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
     from fenicsx_drape.model import default_model
 
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.cli import main
-from fenicsx_drape.diagnosis import ledger
-from fenicsx_drape.diagnosis.compare import CompareResult
+from fenicsx_drape.diagnosis import CompareResult, ledger
 from fenicsx_drape.diagnosis.kinds import Comparison
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements.bundle import Bundle

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fenicsx_drape.diagnosis.compare import OUTLIER_SD, evaluate, write_compare
+from fenicsx_drape.diagnosis import evaluate, write_compare
+from fenicsx_drape.diagnosis.comparison import OUTLIER_SD
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
 from fenicsx_drape.forming.case.format import case_for_test
 from fenicsx_drape.measurements.bundle import load_bundle

@@ -211,3 +211,36 @@ def history(dirs: Iterable[str | Path], out_dir: str | Path | None = None) -> li
                                           for v in result])
         write_provenance(out, ledgers=[str(Path(d).resolve()) for d in dirs])
     return result
+
+
+def record_history(report: dict[str, Any], out_dir, bundle: Bundle | None = None) -> list[dict]:
+    """Record a diagnosis's model versions in ``out_dir``'s ledger (``drape history``).
+
+    In order: the model with the set-up as stated (when set-up candidates were tried), with
+    the set-up error fitted, and with the missing effect added: the error falls version by
+    version as the set-up is corrected, then as the effect is added.
+    """
+    if "error" not in report.get("baseline", {}) or "noise_floor" not in report:
+        return []
+    base = report["baseline"]
+    model = {k: base[k] for k in ("effects", "plugins", "parameters") if k in base}
+    noise = report["noise_floor"]
+    name = report.get("bundle", bundle.name if bundle else "")
+    entries = []
+    setup = None
+    if report.get("setup"):
+        stated = report["setup_stated"]["error"]
+        entries.append(record_version(out_dir, name, model, stated, noise, bundle=bundle))
+        if report.get("setup_error"):
+            best = report["setup"][0]
+            setup = {best["parameter"]: best["fitted"]}
+    if setup or not entries:
+        entries.append(record_version(out_dir, name, model, base["error"], noise,
+                                      bundle=bundle, setup=setup))
+    if report.get("missing_effect"):
+        c = report["candidates"][0]
+        added = {**model, "effects": list(dict.fromkeys([*model.get("effects", []),
+                                                         *c["effects"]]))}
+        entries.append(record_version(out_dir, name, added, c["error_after"], noise,
+                                      bundle=bundle, setup=setup))
+    return entries

@@ -169,7 +169,7 @@ def plot_curves(comparisons: Mapping[str, Comparison], test: Test, path: Path,
         comparisons: The models' comparisons with ``test``, by label (e.g. "baseline").
         test: The test.
         path: The PNG to write.
-        shares: Regions of the test (entries of :func:`~fenicsx_drape.diagnosis.compare.
+        shares: Regions of the test (entries of :func:`~fenicsx_drape.diagnosis.comparison.
             locate`) to shade with their share of the first model's error.
         abscissa: What the rows are plotted against (the kind's ``abscissa``).
     """

@@ -5,10 +5,11 @@ the lab's, :mod:`~fenicsx_drape.diagnosis.kinds.shear_points`, ``surface``, ``ou
 ``punch_force``) is compared with the run of the case its test names
 (:func:`forming_case_of`, on the cells of :func:`case_of`), one run per parameter set of a
 vectorised model (:func:`parameter_sets`); a blank placed off-centre moves the flat
-positions it is read at (:func:`moved`). They share one fit hook, :func:`fit_forming`.
+positions it is read at (:func:`moved`). They share one fit hook, :func:`fit_friction`
+(:func:`fit_forming`).
 
 **Fitting.** In a forming test only the forming parameters are fitted
-(:func:`~fenicsx_drape.diagnosis.forming_fit.fit_forming`):
+(:func:`fit_forming`):
 the friction coefficients of the model's forming effects (``mu`` of ``holder_friction``,
 ``mu_tool`` of ``tool_friction``), the material parameters staying at their coupon-fitted (or
 given) values. The fit is Gauss-Newton on the per-coordinate residuals in noise units, with
@@ -39,7 +40,7 @@ for both. A coarser screening mesh
 (:data:`~fenicsx_drape.diagnosis.forming_runs.SCREEN_CELL_MM`, 4× cheaper) is only sound
 when its discretisation error is below the noise: against a grid formed on 10 mm cells, the
 20 mm mesh misses by 2.9 × the 0.3 mm noise (at the tow axes over the fillet), which hides a
-tool friction that the 10 mm mesh finds; :func:`~fenicsx_drape.diagnosis.diagnose.confirm`
+tool friction that the 10 mm mesh finds; :func:`~fenicsx_drape.diagnosis.pipeline.confirm`
 refits the baseline and the winner on another mesh to check a verdict.
 """
 
