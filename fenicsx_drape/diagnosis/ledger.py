@@ -4,7 +4,9 @@ Every ``drape compare --out DIR`` appends one line to ``DIR/ledger.jsonl``: when
 which model (effects, plugins, fitted parameters) and its errors. :func:`history` gathers the
 ledgers of several folders (or of one folder compared into repeatedly), orders the versions in
 time, says what changed from one version to the next, and plots the normalised error version
-by version against the noise floor.
+by version against the noise floor. ``drape diagnose --out DIR`` records the versions a
+diagnosis went through (:func:`record_history`: the set-up as stated, the set-up fitted, the
+effect added).
 """
 
 from __future__ import annotations

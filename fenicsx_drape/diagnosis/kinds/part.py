@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.forming_runs import case_key
 from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
+from fenicsx_drape.forming.case.format import case_key
 
 if TYPE_CHECKING:
     from fenicsx_drape.forming.case.format import FormingCase
