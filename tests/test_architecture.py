@@ -299,7 +299,7 @@ def test_the_walk_sees_the_package(graph):
     edges, _, _ = graph
     # a module-level, a function-level and a TYPE_CHECKING import of the real package
     assert "fenicsx_drape.fe.stepping" in edges["fenicsx_drape.fe.solver"]
-    assert "fenicsx_drape.calibration.fit" in edges["fenicsx_drape.diagnosis.kinds.coupon"]
+    assert "fenicsx_drape.calibration.fitting" in edges["fenicsx_drape.diagnosis.kinds.coupon"]
     assert "fenicsx_drape.measurements.bundle" in edges["fenicsx_drape.diagnosis.kinds"]
     assert len(edges) > 60 and sum(map(len, edges.values())) > 150
     assert all(layer(m) for m in edges)  # every module is in a layer
@@ -388,14 +388,14 @@ def test_layer_violations_are_found(graph):
     injected["fenicsx_drape.materials.tow"].add("fenicsx_drape.fe.grid")
     injected["fenicsx_drape.fe.output"].add("fenicsx_drape.measurements.bundle")
     injected["fenicsx_drape.measurements.bundle"].add("fenicsx_drape.forming.running.post")
-    injected["fenicsx_drape.forming.running.outputs"].add("fenicsx_drape.calibration.fit")
-    injected["fenicsx_drape.calibration.fit"].add("fenicsx_drape.diagnosis.comparison")
+    injected["fenicsx_drape.forming.running.outputs"].add("fenicsx_drape.calibration.fitting")
+    injected["fenicsx_drape.calibration.fitting"].add("fenicsx_drape.diagnosis.comparison")
     injected["fenicsx_drape.model"].add("fenicsx_drape.commands.fit")
     assert layer_violations(injected) == [
-        "fenicsx_drape.calibration.fit (calibration) imports fenicsx_drape.diagnosis.comparison "
-        "(diagnosis)",
+        "fenicsx_drape.calibration.fitting (calibration) imports "
+        "fenicsx_drape.diagnosis.comparison (diagnosis)",
         "fenicsx_drape.fe.output (fe) imports fenicsx_drape.measurements.bundle (measurements)",
-        "fenicsx_drape.forming.running.outputs (forming) imports fenicsx_drape.calibration.fit "
+        "fenicsx_drape.forming.running.outputs (forming) imports fenicsx_drape.calibration.fitting "
         "(calibration)",
         "fenicsx_drape.materials.tow (materials) imports fenicsx_drape.fe.grid (fe)",
         "fenicsx_drape.measurements.bundle (measurements) imports "

@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from fenicsx_drape.calibration.consistency import consistency, groups
-from fenicsx_drape.calibration.fit import fit
+from fenicsx_drape.calibration import consistency, fit
+from fenicsx_drape.calibration.agreement import groups
 from fenicsx_drape.calibration.synthetic import bias_test, picture_frame_test, synthetic_bundle
 from fenicsx_drape.model import Model
 

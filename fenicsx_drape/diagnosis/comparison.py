@@ -518,7 +518,7 @@ def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = No
 
     The fits of the kinds present among the chosen tests run once each, in the order
     of :data:`~fenicsx_drape.diagnosis.kinds.KINDS`: the coupons fix the material
-    (:func:`fenicsx_drape.calibration.fit.fit`), then the forming tests fit the friction
+    (:func:`fenicsx_drape.calibration.fitting.fit`), then the forming tests fit the friction
     coefficients with the material held (:func:`~fenicsx_drape.diagnosis.kinds.forming.
     fit_forming`).
 
@@ -532,7 +532,7 @@ def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = No
             the model's values.
         progress: Called with a line of text as the fits proceed.
         details: Filled by the kinds' fits with what they found (the coupons:
-            ``details["coupons"]``, the :class:`~fenicsx_drape.calibration.fit.FitResult`).
+            ``details["coupons"]``, the :class:`~fenicsx_drape.calibration.fitting.FitResult`).
 
     Returns:
         The fitted model.

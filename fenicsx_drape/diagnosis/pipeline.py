@@ -10,7 +10,7 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
 1. **Prepare** (:func:`prepare_tests` → ``Prepared``): each test's noise from its kind's one
    noise function, its regions, the held-out folds (:mod:`~fenicsx_drape.diagnosis.folds`).
 2. **Baseline, outliers** (:func:`baseline_stage` → ``Baseline``): the model is fitted to
-   the bundle (:func:`fenicsx_drape.calibration.fit.fit` for the coupons, the friction for
+   the bundle (:func:`fenicsx_drape.calibration.fitting.fit` for the coupons, the friction for
    the forming tests) and compared with every test (:mod:`~fenicsx_drape.diagnosis.
    compare`); the rows beyond ``OUTLIER_SD`` robust sd are left out and it is refitted.
 3. **Set-up before physics** (:func:`~fenicsx_drape.diagnosis.setup_stage.setup_stage` →
@@ -33,7 +33,7 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
    the kinds it acts on (:func:`~fenicsx_drape.diagnosis.decision.evidence`).
 6. **Groups** (:func:`groups_stage`): when the coupon tests come from several labs, sizes or
    shear tests, each group is left out of the baseline's coupon fit in turn and predicted by
-   the rest (:mod:`fenicsx_drape.calibration.consistency`).
+   the rest (:mod:`fenicsx_drape.calibration.agreement`).
 7. **The best candidate, looked at again** (:func:`setup_with_effect_stage`,
    :func:`net_check_stage`): a significant best with no set-up error named: the set-up
    stage again with it in (a missing effect can hide a set-up error); above the noise: is
@@ -385,9 +385,9 @@ def _with_setup_refitted(stage: SetupResult, model: Model, data: Prepared, noise
 def groups_stage(base: Baseline, say: Progress) -> dict[str, Any] | None:
     """Leave one lab, size or shear-test kind out of the coupons' fit, when there are several.
 
-    See :mod:`fenicsx_drape.calibration.consistency`; None when there is nothing to compare.
+    See :mod:`fenicsx_drape.calibration.agreement`; None when there is nothing to compare.
     """
-    from fenicsx_drape.calibration.consistency import consistency, informative
+    from fenicsx_drape.calibration.agreement import consistency, informative
 
     coupons = base.coupons
     if coupons is None:

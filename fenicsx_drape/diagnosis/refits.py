@@ -91,7 +91,7 @@ def best_start(data: Prepared, model: Model, own: Sequence[str], names: Sequence
     catalogue's documented value (Table 2: a baseline fitted without the effect can sit far
     from it); the curve-feature guess of section 3.2.
     """
-    from fenicsx_drape.calibration.fit import initial_guess
+    from fenicsx_drape.calibration.fitting import initial_guess
     from fenicsx_drape.model import parameter_info
 
     weak = {n: WEAK * float(model.parameters[n]) for n in own

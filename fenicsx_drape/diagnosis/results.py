@@ -27,7 +27,7 @@ import numpy as np
 from fenicsx_drape.diagnosis.comparison import compare_tests, normalised_error
 
 if TYPE_CHECKING:
-    from fenicsx_drape.calibration.fit import FitResult
+    from fenicsx_drape.calibration.fitting import FitResult
     from fenicsx_drape.diagnosis.folds import Fold
     from fenicsx_drape.diagnosis.kinds import Comparison, Region
     from fenicsx_drape.measurements.bundle import Bundle, Test

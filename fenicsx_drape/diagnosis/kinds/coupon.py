@@ -3,7 +3,7 @@
 A coupon test is compared row by row on its force (N): simulated by the unit-cell solutions
 (:func:`fenicsx_drape.calibration.coupons.simulate`), weighed with the same noise as in the
 fit (``force_sd_N``, or the model-free estimate), and fitted by
-:func:`fenicsx_drape.calibration.fit.fit` (the material's parameters: :func:`fit_material`,
+:func:`fenicsx_drape.calibration.fitting.fit` (the material's parameters: :func:`fit_material`,
 the fit hook all coupon kinds share).
 
 Its **regions** are the ranges of the kinematic strain (each kind's own, e.g.
@@ -141,14 +141,14 @@ def fit_material(bundle: Bundle, model: Model, *, kind_of: Callable | None = Non
                  details: dict | None = None) -> Model:
     """The coupons' fit (:class:`~fenicsx_drape.diagnosis.kinds.base.FitHook`): the material.
 
-    The coupon tests fix the material (:func:`fenicsx_drape.calibration.fit.fit`) when some
+    The coupon tests fix the material (:func:`fenicsx_drape.calibration.fitting.fit`) when some
     of ``parameters`` (all when None) act on them; it picks them by their kind itself
     (``kind_of`` is not needed). A fit from the features has the global
-    stage; ``details["coupons"]`` receives the :class:`~fenicsx_drape.calibration.fit.
+    stage; ``details["coupons"]`` receives the :class:`~fenicsx_drape.calibration.fitting.
     FitResult` (its starts, undetermined parameters, noise) when ``details`` is given.
     """
     from fenicsx_drape.calibration.coupons import COUPON_KINDS
-    from fenicsx_drape.calibration.fit import fit
+    from fenicsx_drape.calibration.fitting import fit
 
     if parameters is not None and not set(parameters) & set(
             model.active_parameters(COUPON_KINDS)):
