@@ -34,7 +34,7 @@ from fenicsx_drape.diagnosis.setup_fit import DISTINCT_SD
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds import Comparison
-    from fenicsx_drape.diagnosis.results import Candidate, DataCheck, SetupResult
+    from fenicsx_drape.diagnosis.results import Candidate, DataCheck, Effects, SetupResult
 
 EVIDENCE_THRESHOLD = 1.2  # significant: evidence at least this (fixed for every bundle)
 ADEQUATE = 1.5  # a model within this many times the noise floor explains the data
@@ -145,18 +145,19 @@ def setup_as_reported(setup: SetupResult | None, missing: Candidate | None
                                withdrawn=entry["parameter"] if within else None)
 
 
-def decide(ranked: Sequence[Candidate], setup: SetupResult | None,
+def decide(effects: Effects, best: Candidate | None, setup: SetupResult | None,
            checked: DataCheck) -> Decision:
-    """What the diagnosis names (module doc), from the ranked candidates and the set-up.
+    """What the diagnosis names (module doc), from the candidates, the set-up and the data.
 
     Args:
-        ranked: The candidates as :func:`rank` orders them, the first as the later stages
-            left it (refitted at a set-up found with it, its net checked).
+        effects: The candidates, ranked (:func:`rank`).
+        best: The first of them as the later stages left it (refitted at a set-up found with
+            it, its net checked).
         setup: The set-up stage's result (None: not run).
         checked: The data check.
     """
-    best = ranked[0] if ranked else None
+    ranked = (best, *effects.ranked[1:]) if best is not None else effects.ranked
     missing = best if best is not None and best.significant and adequate(best) else None
-    return Decision(ranked=tuple(ranked), best=best, missing=missing,
+    return Decision(ranked=ranked, best=best, missing=missing,
                     named=None if checked.suspects else missing,
                     setup=setup_as_reported(setup, missing))

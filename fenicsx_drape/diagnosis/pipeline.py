@@ -99,6 +99,7 @@ from fenicsx_drape.diagnosis.results import (
     Baseline,
     Candidate,
     DataCheck,
+    Effects,
     HeldOut,
     Prepared,
     Resolution,
@@ -155,17 +156,14 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     held, resolution = together([functools.partial(heldout_stage, base),
                                  functools.partial(resolution_stage, base)], say)
     names = [n for n in candidate_names(model) if candidates is None or n in candidates]
-    tried = together([functools.partial(effect_stage, name, model, base, held, stage,
-                                         resolution) for name in names], say)
+    effects = effects_stage(names, model, base, held, stage, resolution, say)
     groups = groups_stage(base, say)
-    ranked = rank([c for c in tried if isinstance(c, Candidate)])
-    stage, best = setup_with_effect_stage(stage, ranked[0] if ranked else None, base, say)
+    stage, best = setup_with_effect_stage(stage, effects.best, base, say)
     best = net_check_stage(best, say)
-    decision = decide([best, *ranked[1:]] if ranked else [], stage, checked)
-    report = format_report(bundle, checked, base, held, resolution,
-                           [u for u in tried if not isinstance(u, Candidate)], decision,
-                           groups, measures_stage(base, decision.ranked))
-    report["seconds"] = time.perf_counter() - start
+    decision = decide(effects, best, stage, checked)
+    report = format_report(bundle, checked, base, held, resolution, effects, decision, groups,
+                           measures_stage(base, decision.ranked),
+                           seconds=time.perf_counter() - start)
     say(report["conclusion"])
     return report
 
@@ -283,6 +281,15 @@ def resolution_stage(base: Baseline, say: Progress) -> Resolution:
 
 # --------------------------------------------------------------------------------------------
 # 5. Effects
+
+
+def effects_stage(names: Sequence[str], model: Model, base: Baseline, held: HeldOut,
+                  stage: SetupResult | None, resolution: Resolution, say: Progress) -> Effects:
+    """Every candidate effect (:func:`effect_stage`), tried together and ranked."""
+    tried = together([functools.partial(effect_stage, name, model, base, held, stage,
+                                        resolution) for name in names], say)
+    return Effects(tuple(rank([c for c in tried if isinstance(c, Candidate)])),
+                   tuple(u for u in tried if not isinstance(u, Candidate)))
 
 
 def effect_stage(name: str, model: Model, base: Baseline, held: HeldOut,

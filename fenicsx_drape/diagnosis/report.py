@@ -8,7 +8,7 @@ ledger of versions and the provenance.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -54,6 +54,7 @@ if TYPE_CHECKING:
         Candidate,
         DataCheck,
         Decision,
+        Effects,
         Entry,
         HeldOut,
         Resolution,
@@ -93,8 +94,9 @@ def candidate_record(c: Candidate, explanation: str) -> dict[str, Any]:
 
 
 def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: HeldOut,
-                  resolution: Resolution, untestable: Sequence[Entry], decision: Decision,
-                  groups: Entry | None, measures: Mapping[str, Any]) -> Report:
+                  resolution: Resolution, effects: Effects, decision: Decision,
+                  groups: Entry | None, measures: Mapping[str, Any], *,
+                  seconds: float) -> Report:
     """The contract's report from the stages' results: their fields and their words.
 
     Args:
@@ -103,10 +105,12 @@ def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: H
         base: The baseline (at the fitted set-up, when one was applied).
         heldout: The baseline's held-out error.
         resolution: The baseline's net checked against the forming measurements.
-        untestable: The untestable effects' entries.
+        effects: The effects tried (their untestable entries; the ranked ones are the
+            decision's).
         decision: The ranked candidates, the effect named and the set-up as reported.
         groups: The coupon groups' consistency (None: nothing to compare).
         measures: The kinds' own measures by model label (``metrics``).
+        seconds: How long the diagnosis took (wall clock).
     """
     compared, coupons, missing, stage = base.compared, base.coupons, decision.missing, \
         decision.setup
@@ -151,7 +155,7 @@ def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: H
         "where": where(compared),
         "trends": trends(compared),
         "candidates": candidates,
-        "untestable": [*untestable, *(stage.untestable if stage else ())],
+        "untestable": [*effects.untestable, *(stage.untestable if stage else ())],
         "missing_effect": named.effect if named else None,
         "add_effects": list(named.effects) if named else [],
         "heldout_scheme": base.data.scheme,
@@ -165,6 +169,7 @@ def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: H
         "notes": notes,
         **setup_fields(stage),
         "data_check": list(checked.entries),
+        "seconds": seconds,
     })
     report.models, report.comparisons = models, comparisons
     report.tests = base.data.tests

@@ -9,7 +9,8 @@ formats them:
 - the baseline fitted, its outliers left out (and again at a fitted set-up): :class:`Baseline`;
 - the set-up stage: :class:`SetupResult` (its chosen set-up :class:`SetupBest`);
 - the baseline's held-out error: :class:`HeldOut`; the net's own error: :class:`Resolution`;
-- each candidate effect refitted and judged: :class:`Candidate` (or an untestable entry);
+- each candidate effect refitted and judged: :class:`Candidate` (or an untestable entry),
+  all of them ranked: :class:`Effects`;
 - the decision: :class:`Decision`.
 
 Entries that go into the report as they are (a set-up candidate, an outlier, a resolution
@@ -173,6 +174,19 @@ class Candidate:
     n_parameters: int  # the parameters it adds (ties go to the fewest)
     # what it leaves checked against its net (the best candidate, when it needs it)
     resolution_after: tuple[Entry, ...] | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Effects:
+    """Every candidate effect tried: the testable ones ranked, the others with the reason."""
+
+    ranked: tuple[Candidate, ...]  # by held-out error, the parsimonious near-best first
+    untestable: tuple[Entry, ...]  # the report's ``untestable`` entries of the effects
+
+    @property
+    def best(self) -> Candidate | None:
+        """The first ranked, if any."""
+        return self.ranked[0] if self.ranked else None
 
 
 @dataclasses.dataclass(frozen=True)
