@@ -114,8 +114,62 @@ def cli_reference():
     return CommandLine
 
 
+def public_packages() -> list[str]:
+    """The packages (and top-level modules) that declare their public names (``__all__``)."""
+    import importlib
+    import pkgutil
+
+    names = ["fenicsx_drape"]
+    for info in pkgutil.walk_packages(fenicsx_drape.__path__, "fenicsx_drape."):
+        if info.ispkg or info.name.count(".") == 1:
+            module = importlib.import_module(info.name)
+            if "__all__" in vars(module):
+                names.append(info.name)
+    return names
+
+
+def api_reference():
+    """A directive listing each package's public names (its ``__all__``), with their summaries.
+
+    One section a package, its first docstring line, then an autosummary table of its
+    ``__all__``: each name links to where it is defined (the module pages below).
+    """
+    import importlib
+
+    from docutils import nodes
+    from docutils.statemachine import StringList
+    from sphinx.util.docutils import SphinxDirective
+    from sphinx.util.nodes import nested_parse_with_titles
+
+    def target(module, name: str) -> str:
+        obj = getattr(module, name)
+        home = getattr(obj, "__module__", None)
+        if (callable(obj) and isinstance(home, str) and home.startswith("fenicsx_drape")
+                and hasattr(obj, "__qualname__")):
+            return f"{home}.{obj.__qualname__}"
+        return f"{module.__name__}.{name}"
+
+    class PublicApi(SphinxDirective):
+        def run(self):
+            lines = []
+            for package in public_packages():
+                module = importlib.import_module(package)
+                summary = (module.__doc__ or "").strip().splitlines()[0]
+                lines += [f"``{package}``", "^" * (len(package) + 4), "", summary, "",
+                          ".. autosummary::", ""]
+                lines += [f"   ~{target(module, name)}" for name in module.__all__
+                          if not name.startswith("__")]
+                lines.append("")
+            node = nodes.section()
+            nested_parse_with_titles(self.state, StringList(lines, "drape-api"), node)
+            return node.children
+
+    return PublicApi
+
+
 def setup(app):
-    """Run :func:`escape_bars` on the docstrings; add the ``drape-commands`` directive."""
+    """Run :func:`escape_bars` on the docstrings; add the directives ``drape-commands``, ``drape-api``."""
     app.connect("autodoc-process-docstring",
                 lambda app, what, name, obj, options, lines: escape_bars(lines), priority=900)
     app.add_directive("drape-commands", cli_reference())
+    app.add_directive("drape-api", api_reference())

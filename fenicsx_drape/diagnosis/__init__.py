@@ -1,5 +1,13 @@
 """Where a model is judged against measurements: compare, diagnose, the ledger of versions.
 
+The public API (:data:`__all__`)::
+
+    from fenicsx_drape.diagnosis import compare, diagnose, write_diagnosis
+    report = diagnose(bundle, model)        # which effect the model misses (a Report)
+    write_diagnosis(report, "REPORT.json")  # the contract's JSON
+
+Its modules:
+
 - :mod:`~fenicsx_drape.diagnosis.kinds`: the measurement kinds, one module each (how each is
   measured, simulated, fitted, located, pictured and checked), and their table;
 - :mod:`~fenicsx_drape.diagnosis.comparison`: how far, and where, a model misses a bundle;
@@ -37,10 +45,18 @@ _PUBLIC = {
     "confirm": "pipeline",
     "diagnose": "pipeline",
     "evaluate": "comparison",
+    "fit_setup": "setup_stage",
     "history": "ledger",
+    "history_table": "ledger",
+    "lab_tables": "lab_synthetic",
+    "setup_rules": "decision",
     "summary": "report",
+    "synthetic_case_test": "synthetic",
+    "synthetic_forming_test": "synthetic",
+    "write_case_bundle": "synthetic",
     "write_compare": "comparison",
     "write_diagnosis": "report",
+    "write_lab_bundle": "lab_synthetic",
 }
 
 __all__ = sorted(_PUBLIC)

@@ -153,7 +153,7 @@ def _value(v) -> str:
     return f"[{v[0]:.3g}, {v[1]:.3g}]" if isinstance(v, list) else f"{v:.4g}"
 
 
-def table(history: Sequence[Version]) -> str:
+def history_table(history: Sequence[Version]) -> str:
     """The history as a text table."""
     rows = [("version", "bundle", "normalised", "rmse", "noise", "change", "folder")]
     for v in history:
@@ -164,6 +164,9 @@ def table(history: Sequence[Version]) -> str:
     lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+table = history_table  # the earlier name, kept for one release
 
 
 def plot(history: Sequence[Version], path: str | Path) -> Path:
