@@ -168,7 +168,7 @@ def api_reference():
 
 
 def setup(app):
-    """Run :func:`escape_bars` on the docstrings; add the directives ``drape-commands``, ``drape-api``."""
+    """Run :func:`escape_bars` on the docstrings; add ``drape-commands`` and ``drape-api``."""
     app.connect("autodoc-process-docstring",
                 lambda app, what, name, obj, options, lines: escape_bars(lines), priority=900)
     app.add_directive("drape-commands", cli_reference())
