@@ -131,7 +131,7 @@ def public_packages() -> list[str]:
 def api_reference():
     """A directive listing each package's public names (its ``__all__``), with their summaries.
 
-    One section a package, its first docstring line, then an autosummary table of its
+    A heading a package, its first docstring line, then an autosummary table of its
     ``__all__``: each name links to where it is defined (the module pages below).
     """
     import importlib
@@ -139,7 +139,6 @@ def api_reference():
     from docutils import nodes
     from docutils.statemachine import StringList
     from sphinx.util.docutils import SphinxDirective
-    from sphinx.util.nodes import nested_parse_with_titles
 
     def target(module, name: str) -> str:
         obj = getattr(module, name)
@@ -155,13 +154,12 @@ def api_reference():
             for package in public_packages():
                 module = importlib.import_module(package)
                 summary = (module.__doc__ or "").strip().splitlines()[0]
-                lines += [f"``{package}``", "^" * (len(package) + 4), "", summary, "",
-                          ".. autosummary::", ""]
+                lines += [f".. rubric:: {package}", "", summary, "", ".. autosummary::", ""]
                 lines += [f"   ~{target(module, name)}" for name in module.__all__
                           if not name.startswith("__")]
                 lines.append("")
-            node = nodes.section()
-            nested_parse_with_titles(self.state, StringList(lines, "drape-api"), node)
+            node = nodes.container()
+            self.state.nested_parse(StringList(lines, "drape-api"), self.content_offset, node)
             return node.children
 
     return PublicApi
