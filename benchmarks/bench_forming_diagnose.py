@@ -16,8 +16,8 @@ cores), the forming runs it made, the verdict and the errors.
 
 import time
 
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis import diagnose
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.synthetic import synthetic_forming_test
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model
@@ -35,14 +35,14 @@ def main() -> None:
     print(f"forming workers: {runs.default_workers()}; cells {runs.FULL_CELL_MM:g} mm", flush=True)
     for hidden, (truth, baseline) in cases.items():
         test = synthetic_forming_test(truth, sd_mm=0.3, seed=7)
-        runs._cache.clear()
+        runs.current().forget()
         start = time.perf_counter()
         report = diagnose(Bundle(name=f"hidden-{hidden}", tests=(test,)), baseline,
                           candidates=[c for c in CANDIDATES if c not in baseline.effects])
         seconds = time.perf_counter() - start
         best = report["candidates"][0]
         m = report["metrics"]
-        print(f"hidden {hidden}: {seconds:.1f} s, {len(runs._cache)} forming runs, "
+        print(f"hidden {hidden}: {seconds:.1f} s, {runs.current().in_memory()} forming runs, "
               f"missing_effect = {report['missing_effect']}, normalised "
               f"{report['baseline']['error']['normalised']:.2f} → "
               f"{best['error_after']['normalised']:.2f} (evidence {best['evidence']:.2f}), "

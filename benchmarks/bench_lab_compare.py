@@ -36,8 +36,8 @@ def main() -> None:
     parser.add_argument("--diagnose", action="store_true")
     args = parser.parse_args()
 
+    from fenicsx_drape import runs
     from fenicsx_drape.diagnosis import diagnose, evaluate
-    from fenicsx_drape.diagnosis import forming_runs as runs
     from fenicsx_drape.diagnosis.kinds import lab as lab_kind
     from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
     from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
@@ -81,22 +81,22 @@ def main() -> None:
         if not args.diagnose:
             return
         baseline = default_model().without_effects("tow_buckling")
-        runs._cache.clear()
+        runs.current().forget()
         t = time.perf_counter()
         report = diagnose(bundle, baseline, candidates=["tow_buckling"])
         lab_s = time.perf_counter() - t
-        runs_lab = len(runs._cache)
+        runs_lab = runs.current().in_memory()
         test = synthetic_case_test(truth, case, sd_mm=0.3, seed=1, full=True)
         write_case_bundle("grid", [test], Path(tmp) / "grid")
         grid_bundle = load_bundle(Path(tmp) / "grid", read_case=case_for_test)
-        runs._cache.clear()
+        runs.current().forget()
         t = time.perf_counter()
         grid_report = diagnose(grid_bundle, baseline, candidates=["tow_buckling"])
         grid_s = time.perf_counter() - t
         print(f"diagnose, lab bundle (scan + outline + shear points): {lab_s:.1f} s, "
               f"{runs_lab} forming runs, missing_effect {report['missing_effect']}")
         print(f"diagnose, grid bundle ({grid_bundle.tests[0].n_rows} nodes): {grid_s:.1f} s, "
-              f"{len(runs._cache)} forming runs, missing_effect "
+              f"{runs.current().in_memory()} forming runs, missing_effect "
               f"{grid_report['missing_effect']}")
         print(f"ratio lab / grid: {lab_s / grid_s:.2f} (target <= 1.5)")
 

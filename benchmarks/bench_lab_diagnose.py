@@ -22,8 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis import diagnose
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
 from fenicsx_drape.diagnosis.synthetic import synthetic_case_test
 from fenicsx_drape.forming.case.format import case_for_test, load_case, with_overrides
@@ -58,7 +58,7 @@ def main() -> None:
           f"the ply turned by {args.ply_angle_deg:g}°", flush=True)
     times = {}
     for label, bundle in (("grid", grid), ("lab: shear lines, edge, force", lab)):
-        runs._cache.clear()
+        runs.current().forget()
         start = time.perf_counter()
         with trusting():
             report = diagnose(bundle, paper)

@@ -2,7 +2,7 @@
 
 Forms ``--runs`` runs of the quarter hemisphere on ``--cell-mm`` cells (holder frictions
 μ = 0.20, 0.21, ...: distinct runs, about the same work) through
-:func:`~fenicsx_drape.diagnosis.forming_runs.form_many`, as ``compare`` and ``diagnose`` do,
+:func:`~fenicsx_drape.runs.form_many`, as ``compare`` and ``diagnose`` do,
 with ``--ranks-per-run`` K (K ranks per run, ranks / K runs at once; default: all ranks per
 run), no disk cache, after a JIT warm-up. Prints the wall time and the machine's load.
 
@@ -17,7 +17,7 @@ import time
 
 from mpi4py import MPI
 
-from fenicsx_drape.diagnosis import forming_runs as runs
+from fenicsx_drape import runs
 from fenicsx_drape.forming.case.format import load_case
 from fenicsx_drape.forming.running.run import run_case
 from fenicsx_drape.model import default_model

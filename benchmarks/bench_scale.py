@@ -17,6 +17,7 @@ baseline lacks ``tow_buckling``. Printed:
 """
 
 import argparse
+import json
 import multiprocessing
 import operator
 import sys
@@ -31,13 +32,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_forming_case_diagnosis import write_case
 
+from fenicsx_drape import runs
 from fenicsx_drape.cli import main as drape
-from fenicsx_drape.diagnosis import diagnose, run_store
-from fenicsx_drape.diagnosis import forming_runs as runs
+from fenicsx_drape.diagnosis import diagnose
 from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
 from fenicsx_drape.forming.case.format import case_for_test, load_case
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import default_model
+from fenicsx_drape.runs import pools, store
 
 
 def quiet(*args: str) -> None:
@@ -52,12 +54,10 @@ def quiet(*args: str) -> None:
 
 
 def counted(action) -> tuple[float, int, int]:
-    """Wall time (s), runs formed and runs read from disk of ``action()``."""
-    before = dict(runs.counts)
+    """Wall time (s) of ``action()``, and the runs formed and read from disk it returns."""
     start = time.perf_counter()
-    action()
-    return (time.perf_counter() - start, runs.counts["formed"] - before["formed"],
-            runs.counts["from_disk"] - before["from_disk"])
+    formed, read = action()
+    return time.perf_counter() - start, formed, read
 
 
 def main() -> None:
@@ -93,10 +93,13 @@ def main() -> None:
             if workers in seen:
                 continue
             seen.add(workers)
-            runs._cache.clear()
-            with runs.execution(workers=workers):
-                seconds, formed, _ = counted(lambda: diagnose(
-                    bundle, baseline, candidates=args.candidates))
+            with runs.execution(workers=workers) as made:  # nothing in memory at its start
+
+                def diagnosed(made=made):
+                    diagnose(bundle, baseline, candidates=args.candidates)
+                    return made.counts["formed"], 0
+
+                seconds, formed, _ = counted(diagnosed)
             print(f"{workers:>8} {seconds:>8.1f} {formed:>5} {seconds / max(formed, 1):>6.2f}",
                   flush=True)
 
@@ -106,19 +109,20 @@ def main() -> None:
         cache = tmp / "runs"
         totals = []
         for k in (1, 2):
-            runs._cache.clear()  # a new command: nothing in memory
 
-            def loop(k=k):
+            def loop(k=k):  # each command its own Runs: nothing in memory at its start
                 out = tmp / f"pass{k}"
                 quiet("compare", str(tmp / "bundle"), "--model", str(tmp / "baseline.toml"),
                       "--out", str(out / "v1"), "--cache", str(cache))
-                runs._cache.clear()
-                with runs.execution(cache=cache):
+                with runs.execution(cache=cache) as made:
                     diagnose(bundle, baseline, candidates=args.candidates)
-                runs._cache.clear()
                 quiet("compare", str(tmp / "bundle"), "--model", str(tmp / "with.toml"),
                       "--out", str(out / "v2"), "--cache", str(cache))
                 quiet("history", str(out / "v1"), str(out / "v2"), "--out", str(out / "history"))
+                made = [made.record()["runs"]] + [json.loads(
+                    (out / v / "provenance.json").read_text())["forming_runs"]["runs"]
+                    for v in ("v1", "v2")]
+                return sum(r["formed"] for r in made), sum(r["from_disk"] for r in made)
 
             seconds, formed, read = counted(loop)
             totals.append(seconds)
@@ -130,22 +134,22 @@ def main() -> None:
         print(f"\nexecutor cost per run: a job that sends a run's case and model and gets its "
               f"result back, without forming ({args.overhead_runs} jobs, warm one-process pool)")
         job = (case, paper)
-        runs._form(*job)  # this process warm: DOLFINx imported, forms compiled
+        pools.form(*job)  # this process warm: DOLFINx imported, forms compiled
         start = time.perf_counter()
-        grid, stopped, curves = runs._form(*job)
+        grid, stopped, curves = pools.form(*job)
         here = time.perf_counter() - start
-        data = run_store.encode(grid, stopped, curves)
+        data = store.encode(grid, stopped, curves)
         with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
             start = time.perf_counter()
-            with runs._fresh_workers():  # a new worker's first run: it imports DOLFINx
-                pool.submit(runs._run, *job, False, runs._solver_options()).result()
+            with pools.fresh_workers():  # a new worker's first run: it imports DOLFINx
+                pool.submit(pools.run_job, *job, False, runs.solver_options()).result()
             first = time.perf_counter() - start
             times = []
             for _ in range(args.overhead_runs):
                 start = time.perf_counter()
-                with runs._fresh_workers():
+                with pools.fresh_workers():
                     future = pool.submit(operator.itemgetter(1), (job, data))
-                back = run_store.decode(future.result())
+                back = store.decode(future.result())
                 times.append(time.perf_counter() - start)
         assert np.array_equal(back[0].x, grid.x, equal_nan=True)
         print(f"median {1e3 * np.median(times):.1f} ms, max {1e3 * max(times):.1f} ms per run "

@@ -11,7 +11,7 @@ A quarter-model double-dome bundle (the case's own 10 mm cells and 1 mm steps; t
 Printed: the wall time of each, their ratio (target: the set-up adds at most 2×; the whole
 diagnosis under 5 minutes on one core), the forming runs made, and the verdicts.
 ``--workers 1`` runs the forming solves on one process (one core); the default is the pool's
-(:func:`~fenicsx_drape.diagnosis.forming_runs.default_workers`); ``--cell-mm`` and ``--step-mm``
+(:func:`~fenicsx_drape.runs.default_workers`); ``--cell-mm`` and ``--step-mm``
 change the net and the step.
 
     ./drape exec python3 benchmarks/bench_setup_diagnose.py --workers 1
@@ -24,8 +24,8 @@ import sys
 import time
 from pathlib import Path
 
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis import diagnose
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS
 from fenicsx_drape.diagnosis.synthetic import synthetic_case_test
 from fenicsx_drape.forming.case.format import load_case, with_overrides
@@ -57,12 +57,12 @@ def main() -> None:
           flush=True)
     times = {}
     for label, setup in (("effects only", ()), ("set-up and effects", SETUP_PARAMETERS)):
-        runs._cache.clear()
+        runs.current().forget()
         start = time.perf_counter()
         report = diagnose(bundle, paper, candidates=EFFECTS, setup=setup,
                           progress=lambda line: print(line, file=sys.stderr, flush=True))
         times[label] = time.perf_counter() - start
-        print(f"{label}: {times[label]:.0f} s, {len(runs._cache)} forming runs cached; "
+        print(f"{label}: {times[label]:.0f} s, {runs.current().in_memory()} forming runs cached; "
               f"setup_error {report.get('setup_error')}, missing_effect "
               f"{report['missing_effect']}", flush=True)
         for s in report.get("setup", []):

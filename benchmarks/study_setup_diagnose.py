@@ -99,7 +99,7 @@ def measured_test(stated, setup: dict, model, test_id: str, seed: int = SEED,
 
 def drift(stated, paper) -> dict:
     """The whole blank against the mirrored quarter, as stated (no hidden set-up)."""
-    from fenicsx_drape.diagnosis.forming_runs import form_many
+    from fenicsx_drape.runs import form_many
 
     whole = with_overrides(stated, symmetry=[])
     out = {}

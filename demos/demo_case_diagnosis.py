@@ -42,8 +42,8 @@ import sys
 import time
 from pathlib import Path
 
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis import diagnose, evaluate, summary, write_compare, write_diagnosis
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
 from fenicsx_drape.forming.case.format import case_for_test, load_case
 from fenicsx_drape.measurements.bundle import load_bundle
@@ -110,7 +110,7 @@ for entry in result.where()[:4]:
 # interleaved folds).
 
 # +
-runs_before = len(runs._cache)
+runs_before = runs.execution_record()["runs"]["formed"]  # formed so far in this process
 report = diagnose(bundle, baseline, candidates=CANDIDATES,
                   progress=lambda line: print(line, flush=True))
 write_diagnosis(report, out / "diagnose" / "REPORT.json", out / "diagnose", bundle=bundle)
@@ -128,7 +128,7 @@ for label, r in (("baseline", result), (report["candidates"][0]["effect"], after
     print(f"{label}: {r.normalised:.2f} × noise, mean distance {e['mean_distance_mm']:.2f} mm "
           f"({e['percent_of_displacement']:.1f} % of the mean displacement)")
 print(f"missing_effect: {report['missing_effect']} (hidden: {HIDDEN}); "
-      f"{len(runs._cache) - runs_before} forming runs, "
+      f"{runs.execution_record()['runs']['formed'] - runs_before} forming runs, "
       f"{time.perf_counter() - start:.0f} s in all")
 print(f"pictures: {out / 'compare'}, {out / 'diagnose'}, {out / 'after'}")
 # -

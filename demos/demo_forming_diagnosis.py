@@ -37,8 +37,8 @@
 import sys
 from pathlib import Path
 
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis import diagnose, evaluate, summary, write_compare, write_diagnosis
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.synthetic import synthetic_forming_test
 from fenicsx_drape.forming.case.format import case_for_test
 from fenicsx_drape.measurements.bundle import Bundle, load_bundle, write_bundle

@@ -43,8 +43,8 @@ import sys
 import time
 from pathlib import Path
 
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis import diagnose, evaluate, summary, write_compare, write_diagnosis
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
 from fenicsx_drape.forming.case.format import case_for_test, load_case, with_overrides
 from fenicsx_drape.measurements.bundle import load_bundle

@@ -113,7 +113,7 @@ def make(out: Path, seed: int = SEED, measurements=None, truth_model=None, stl: 
     ``stl=False``: the bundle's case is the octagon's own (closed-form tools), not the lab's
     STL copy; ``overrides`` change the truth's case (its net, step, set-up).
     """
-    from fenicsx_drape.diagnosis import forming_runs as runs
+    from fenicsx_drape import runs
     from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
     from fenicsx_drape.forming.case.format import load_case, with_overrides
     from fenicsx_drape.model import default_model

@@ -32,6 +32,7 @@ COMMANDS: dict[str, str] = {
     "diagnose": "find which physical effect a model is missing (REPORT.json contract)",
     "history": "the ledger of model versions and their errors",
     "form": "run a forming case (case.toml, or hemisphere): fields, pictures, a bundle",
+    "probe": "the model's shear, positions and draw-in at a lab's points, from drape form",
     "drape": "kinematic (pin-jointed net) drape of a case's formed surface",
     "mesh": "build a truss mesh of the woven sheet with Gmsh and write it",
 }
@@ -77,33 +78,37 @@ def petsc_option_argument(parser: argparse.ArgumentParser) -> None:
 
 def forming_runs_arguments(parser: argparse.ArgumentParser) -> None:
     """``--workers``, ``--cache``, ``--no-cache``, ``--ranks-per-run``: where runs go, kept."""
-    import os
+    from fenicsx_drape.runs.workers import cores
 
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cores = os.cpu_count() or 1
     parser.add_argument("--workers", type=positive_int, default=None, metavar="N",
                         help="processes forming at once (default: DRAPE_WORKERS, else this "
-                        f"machine's cores, here {cores}; under 'python3 -m mpi4py.futures' "
-                        "the job's other ranks)")
+                        f"machine's cores, here {cores()}; under 'python3 -m mpi4py.futures' "
+                        "the job's other ranks). More than the cores (here or in "
+                        "DRAPE_WORKERS) is capped to them, with a note: a run is one "
+                        "process's work, and a worker beyond the cores only waits, holding "
+                        "DOLFINx and a run in memory")
     parser.add_argument("--cache", metavar="DIR", default=None,
                         help="folder keeping the forming runs across commands, by content "
                         "(default: DRAPE_CACHE, else $XDG_CACHE_HOME/fenicsx-drape/runs; "
-                        "remove it to clear it)")
+                        "remove it to clear it). Each run read is checked to be the run "
+                        "asked for; a damaged database is moved aside into DIR/damaged-TIME, "
+                        "with a note")
     parser.add_argument("--no-cache", action="store_true", help="keep no forming run on disk")
     parser.add_argument("--ranks-per-run", type=positive_int, default=None, metavar="K",
                         help="under plain mpirun: each run on K ranks, (ranks / K) runs at "
                         "once (default: every run on all ranks, one after the other)")
 
 
-def forming_runs_setting(args: argparse.Namespace):
-    """The :func:`~fenicsx_drape.diagnosis.forming_runs.execution` the options ask for."""
-    from fenicsx_drape.diagnosis.forming_runs import execution
-    from fenicsx_drape.diagnosis.run_store import default_folder
+def forming_runs_setting(args: argparse.Namespace, cell_mm: float | None = None):
+    """The :class:`~fenicsx_drape.runs.Runs` the options ask for (``with`` it: current).
+
+    ``--workers`` above the cores is capped to them with a note; ``cell_mm``: the forming
+    runs' cells (``--forming-cell-mm``; None: each case's own).
+    """
+    from fenicsx_drape.runs import Runs, capped, default_folder
 
     cache = None if args.no_cache else (args.cache or default_folder())
-    return execution(args.workers, cache, ranks_per_run=args.ranks_per_run)
+    return Runs(capped(args.workers), cache, ranks_per_run=args.ranks_per_run, cell_mm=cell_mm)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -125,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     module, parser = command_parser(name)
     args = parser.parse_args(rest)  # exits 2 on bad options
     if "mpi4py.futures._core" in sys.modules:  # rank 0 of python3 -m mpi4py.futures
-        from fenicsx_drape.diagnosis.mpi_pool import petsc_alone, shared_pool
+        from fenicsx_drape.runs.mpi import petsc_alone, shared_pool
 
         if shared_pool():
             petsc_alone()
@@ -142,8 +147,10 @@ def main(argv: list[str] | None = None) -> int:
     except DrapeInputError as err:
         print(f"drape {name}: error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"drape {name}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as err:  # Ctrl-C: what was kept, in one line (no traceback)
+        kept = "; ".join(getattr(err, "__notes__", ()))
+        print(f"drape {name}: interrupted" + (f"; {kept}" if kept else ""), file=sys.stderr,
+              flush=True)
         return 130
     except Exception:
         traceback.print_exc()

@@ -10,13 +10,15 @@ statement names (``from pkg import name`` names ``pkg.name`` when that is a modu
 The layers, lowest first (docs/development.md, Layout)::
 
     base (errors, the package root) < provenance < materials < model (effects, model,
-    unitcell, nodal) < fe | measurements < forming < calibration < diagnosis < command line
+    unitcell, nodal) < fe | measurements < forming < runs | calibration < diagnosis
+    < command line
 
 ``fe`` and ``measurements`` are side by side: neither imports the other; ``forming`` may
-write a bundle (it imports ``measurements``). Inside ``forming`` its parts are layered too
-(:data:`FORMING_PARTS`): tools < terms < case < running < paper. ``materials`` imports only
-``errors``, and neither DOLFINx (nor its stack) nor file I/O; only the command line parses
-arguments.
+write a bundle (it imports ``measurements``). ``runs`` (how forming runs are formed and kept)
+and ``calibration`` (coupon fits, which form nothing) are side by side too. Inside
+``forming`` its parts are layered too (:data:`FORMING_PARTS`): tools < terms < case < running
+< paper. ``materials`` imports only ``errors``, and neither DOLFINx (nor its stack) nor file
+I/O; only the command line parses arguments.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ LAYER_OF = (
     ("fenicsx_drape.forming", "forming"),
     ("fenicsx_drape.measurements", "measurements"),
     ("fenicsx_drape.calibration", "calibration"),
+    ("fenicsx_drape.runs", "runs"),
     ("fenicsx_drape.diagnosis", "diagnosis"),
     ("fenicsx_drape.effects", "model"),
     ("fenicsx_drape.model", "model"),
@@ -65,9 +68,12 @@ MAY_IMPORT = {
     "fe": _BELOW_FE | {"fe"},
     "measurements": _BELOW_FE | {"measurements"},
     "forming": _BELOW_FE | {"fe", "measurements", "forming"},
+    "runs": _BELOW_FE | {"fe", "measurements", "forming", "runs"},
     "calibration": _BELOW_FE | {"fe", "measurements", "forming", "calibration"},
-    "diagnosis": _BELOW_FE | {"fe", "measurements", "forming", "calibration", "diagnosis"},
-    "cli": _BELOW_FE | {"fe", "measurements", "forming", "calibration", "diagnosis", "cli"},
+    "diagnosis": _BELOW_FE | {"fe", "measurements", "forming", "runs", "calibration",
+                              "diagnosis"},
+    "cli": _BELOW_FE | {"fe", "measurements", "forming", "runs", "calibration", "diagnosis",
+                        "cli"},
 }
 
 # The parts of forming/, lowest first: a part imports only itself and the parts before it
@@ -391,16 +397,22 @@ def test_layer_violations_are_found(graph):
     injected["fenicsx_drape.forming.running.outputs"].add("fenicsx_drape.calibration.fitting")
     injected["fenicsx_drape.calibration.fitting"].add("fenicsx_drape.diagnosis.comparison")
     injected["fenicsx_drape.model"].add("fenicsx_drape.commands.fit")
+    injected["fenicsx_drape.runs.runner"].add("fenicsx_drape.diagnosis.comparison")
+    injected["fenicsx_drape.runs.store"].add("fenicsx_drape.calibration.fit")
+    injected["fenicsx_drape.forming.running.run"].add("fenicsx_drape.runs.runner")
     assert layer_violations(injected) == [
         "fenicsx_drape.calibration.fitting (calibration) imports "
         "fenicsx_drape.diagnosis.comparison (diagnosis)",
         "fenicsx_drape.fe.output (fe) imports fenicsx_drape.measurements.bundle (measurements)",
         "fenicsx_drape.forming.running.outputs (forming) imports fenicsx_drape.calibration.fitting "
         "(calibration)",
+        "fenicsx_drape.forming.running.run (forming) imports fenicsx_drape.runs.runner (runs)",
         "fenicsx_drape.materials.tow (materials) imports fenicsx_drape.fe.grid (fe)",
         "fenicsx_drape.measurements.bundle (measurements) imports "
         "fenicsx_drape.forming.running.post (forming)",
         "fenicsx_drape.model (model) imports fenicsx_drape.commands.fit (cli)",
+        "fenicsx_drape.runs.runner (runs) imports fenicsx_drape.diagnosis.comparison (diagnosis)",
+        "fenicsx_drape.runs.store (runs) imports fenicsx_drape.calibration.fit (calibration)",
     ]
 
 

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fenicsx_drape import runs
 from fenicsx_drape.cli import main
-from fenicsx_drape.diagnosis import forming_runs as runs
 from fenicsx_drape.diagnosis.kinds import grid as gk
 from fenicsx_drape.diagnosis.kinds.forming import case_of, forming_case_of, model_planes
 from fenicsx_drape.diagnosis.kinds.part import CASE_REGION_NAMES

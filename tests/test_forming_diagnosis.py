@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from fenicsx_drape.diagnosis import forming_runs as runs
+from fenicsx_drape import runs
 from fenicsx_drape.diagnosis.comparison import compare_tests, normalised_error
 from fenicsx_drape.diagnosis.kinds import GRID
 from fenicsx_drape.diagnosis.kinds import grid as gk

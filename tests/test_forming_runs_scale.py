@@ -5,7 +5,7 @@ nodes, under a second each). The same runs on 1, 2 and 3 worker processes (and u
 ``mpi4py.futures``) give the same sheets to the last digit, in the order asked; a run that
 fails comes back as its error, naming its case and model, after the others; a second
 ``compare`` of a bundle with its cache forms nothing; a damaged cache entry or one of another
-code is not used.
+code is not used (``test_run_cache.py``: a cache corrupted in every way gives the same report).
 """
 
 import json
@@ -18,11 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fenicsx_drape.cli import main
-from fenicsx_drape.diagnosis import forming_runs as runs
-from fenicsx_drape.diagnosis import run_store
+from fenicsx_drape import runs
+from fenicsx_drape.cli import forming_runs_setting, main
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.running.post import FormedGrid
+from fenicsx_drape.runs import pools
+from fenicsx_drape.runs.store import RunStore
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))
@@ -36,10 +37,11 @@ def dolfinx():
 
 @pytest.fixture
 def fresh_memory():
-    """No run in memory before or after the test (the disk cache is the test's own)."""
-    runs._cache.clear()
+    """No run in the default Runs' memory before or after the test (the disk cache is the
+    test's own)."""
+    runs.current().forget()
     yield
-    runs._cache.clear()
+    runs.current().forget()
 
 
 def octagon_jobs(folder: Path):
@@ -64,8 +66,7 @@ def test_the_same_runs_on_one_two_and_three_workers_and_a_failed_run_named(
     jobs = octagon_jobs(tmp_path)
     sheets = {}
     for workers in (1, 2, 3):
-        runs._cache.clear()
-        with runs.execution(workers=workers):
+        with runs.execution(workers=workers):  # a Runs of its own: nothing in memory
             assert runs.executor()[0] == ("this process" if workers == 1 else "processes")
             sheets[workers] = runs.form_many(jobs)
     for workers in (2, 3):  # bit for bit, in the order asked
@@ -80,11 +81,10 @@ def test_the_same_runs_on_one_two_and_three_workers_and_a_failed_run_named(
     write_case(tmp_path / "plate", MESHED)
     (tmp_path / "plate" / "punch.stl").write_text(STL)
     plate = load_case(tmp_path / "plate" / "case.toml")
-    runs._cache.clear()
-    with runs.execution(workers=2), pytest.raises(Exception) as info:
+    with runs.execution(workers=2) as made, pytest.raises(Exception) as info:
         runs.form_many([jobs[0], (plate, jobs[1][1]), jobs[2]])
     assert "forming run of case 'plate'" in str(info.value) and "mu = 0.3" in str(info.value)
-    assert runs.cached(*jobs[0]) and runs.cached(*jobs[2]) and not runs.cached(plate, jobs[1][1])
+    assert made.cached(*jobs[0]) and made.cached(*jobs[2]) and not made.cached(plate, jobs[1][1])
 
 
 @pytest.mark.parallel
@@ -109,7 +109,7 @@ def test_runs_times_ranks_under_mpirun_give_each_rank_every_run(tmp_path_factory
         record = runs.execution_record()
     assert record["executor"] == ("all ranks" if comm.size > 1 else "this process")
     assert record["workers"] == comm.size and record["ranks"] == 1
-    alone = runs._form(*jobs[comm.rank % len(jobs)], MPI.COMM_SELF)[0]
+    alone = pools.form(*jobs[comm.rank % len(jobs)], MPI.COMM_SELF)[0]
     assert np.array_equal(sheets[comm.rank % len(jobs)].x, alone.x, equal_nan=True)
     everywhere = comm.allgather([s.x for s in sheets])
     assert all(np.array_equal(a, b, equal_nan=True)
@@ -125,23 +125,23 @@ def test_the_execution_record_counts_the_runs_asked_formed_and_reused(tmp_path, 
         calls.append((case, model))
         return FormedGrid(np.zeros((2, 2, 3)), np.ones((2, 2, 3)), False), None, {}
 
-    monkeypatch.setattr(runs, "_form", form)
-    monkeypatch.setattr(runs, "_key", lambda case, model: (case, model))
-    monkeypatch.setattr(runs, "_cache", {})
-    with runs.execution(workers=1, cache=tmp_path / "runs"):
+    monkeypatch.setattr(pools, "form", form)
+    with runs.execution(workers=1, cache=tmp_path / "runs") as made:
+        monkeypatch.setattr(made, "key", lambda case, model: (case, model))
         runs.form_many([("a", "m"), ("b", "m"), ("a", "m")])  # "a" twice: asked once
         runs.form_many([("a", "m"), ("c", "m")])  # "a" from memory
-    record = runs.execution_record()
+        assert runs.execution_record() == made.record()  # the current Runs'
+    record = made.record()
     assert len(calls) == 3
     assert record["executor"] == "this process" and record["workers"] == 1
     assert record["cache"] == str((tmp_path / "runs").resolve())
     assert record["runs"] == {"asked": 4, "formed": 3, "from_disk": 0, "from_memory": 1,
                               "reused": 1}
-    runs._cache.clear()
-    with runs.execution(workers=3, cache=None):
+    with runs.execution(workers=3, cache=None) as made:
+        monkeypatch.setattr(made, "key", lambda case, model: (case, model))
         runs.form_many([("a", "m")])
         assert runs.execution_record()["executor"] == "processes"  # while it runs
-    record = runs.execution_record()
+    record = made.record()
     assert record["cache"] is None and record["workers"] == 3
     assert record["runs"]["formed"] == 1 and len(calls) == 4
 
@@ -154,15 +154,13 @@ def test_a_batch_keeps_its_runs_in_memory_when_new_ones_fill_it(monkeypatch):
         return FormedGrid(np.full((2, 2, 3), float(ord(case))), np.ones((2, 2, 3)), False), \
             None, {}
 
-    monkeypatch.setattr(runs, "_form", form)
-    monkeypatch.setattr(runs, "_key", lambda case, model: (case, model))
-    monkeypatch.setattr(runs, "_cache", {})
-    monkeypatch.setattr(runs, "_CACHE_SIZE", 2)
-    with runs.execution(workers=1, cache=None):
+    monkeypatch.setattr(pools, "form", form)
+    with runs.Runs(workers=1, memory=2) as made:
+        monkeypatch.setattr(made, "key", lambda case, model: (case, model))
         runs.form_many([("a", "m")])
         sheets = runs.form_many([("a", "m"), ("b", "m"), ("c", "m")])
     assert [float(g.X[0, 0, 0]) for g in sheets] == [ord("a"), ord("b"), ord("c")]
-    assert len(runs._cache) == 2
+    assert made.in_memory() == 2
 
 
 def test_workers_and_cache_options_are_checked(tmp_path, monkeypatch, capsys):
@@ -176,10 +174,10 @@ def test_workers_and_cache_options_are_checked(tmp_path, monkeypatch, capsys):
     with pytest.raises(DrapeInputError, match="DRAPE_WORKERS='two'"):
         with runs.execution():
             pass
-    monkeypatch.setenv("DRAPE_WORKERS", "3")
-    assert runs.default_workers() == 3
+    monkeypatch.setenv("DRAPE_WORKERS", "1")
+    assert runs.default_workers() == 1
     monkeypatch.delenv("DRAPE_WORKERS")
-    assert runs.default_workers() == len(os.sched_getaffinity(0))
+    assert runs.default_workers() == runs.cores() == len(os.sched_getaffinity(0))
     (tmp_path / "file").write_text("")
     with pytest.raises(DrapeInputError, match="not a folder"):
         runs.execution(cache=tmp_path / "file").__enter__()
@@ -189,12 +187,31 @@ def test_workers_and_cache_options_are_checked(tmp_path, monkeypatch, capsys):
     assert info.value.code == 2
     assert "--workers: '0' is not a whole number" in capsys.readouterr().err
     monkeypatch.setenv("DRAPE_CACHE", str(tmp_path / "c"))
-    assert run_store.default_folder() == tmp_path / "c"
+    assert runs.default_folder() == tmp_path / "c"
     monkeypatch.setenv("DRAPE_CACHE", "off")
-    assert run_store.default_folder() is None
+    assert runs.default_folder() is None
     monkeypatch.delenv("DRAPE_CACHE")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
-    assert run_store.default_folder() == tmp_path / "xdg" / "fenicsx-drape" / "runs"
+    assert runs.default_folder() == tmp_path / "xdg" / "fenicsx-drape" / "runs"
+
+
+def test_workers_above_the_cores_are_capped_with_a_note(monkeypatch, capsys):
+    """``--workers 1000`` or ``DRAPE_WORKERS=1000``: as many workers as cores, and a note."""
+    import argparse
+
+    cores = runs.cores()
+    options = argparse.Namespace(workers=1000, cache=None, no_cache=True, ranks_per_run=None)
+    monkeypatch.delenv("DRAPE_WORKERS", raising=False)
+    assert forming_runs_setting(options).workers == cores
+    assert f"--workers 1000 is more than the {cores} core(s)" in capsys.readouterr().err
+    monkeypatch.setenv("DRAPE_WORKERS", "1000")
+    options.workers = None
+    assert forming_runs_setting(options).workers == cores == runs.default_workers()
+    assert f"DRAPE_WORKERS=1000 is more than the {cores} core(s)" in capsys.readouterr().err
+    options.workers = cores  # as many as the cores: as given, no note
+    assert forming_runs_setting(options).workers == cores
+    assert capsys.readouterr().err == ""
+    assert runs.Runs(workers=cores + 1).workers == cores + 1  # a Python caller's own choice
 
 
 def made_up_run():
@@ -205,12 +222,12 @@ def made_up_run():
                                                   "punch": np.array([1.0, 2.0, 4.0])}
 
 
-def test_a_stored_run_comes_back_whole_and_a_damaged_one_or_another_codes_never(
-        tmp_path, monkeypatch):
-    store = runs_store = run_store.RunStore(tmp_path / "cache")
+def test_a_stored_run_comes_back_whole_and_a_damaged_one_or_another_runs_never(tmp_path):
+    notes = []
+    store = RunStore(tmp_path / "cache", say=notes.append)
     grid, stopped, curves = made_up_run()
-    key = run_store.run_key(["a case", "a model"])
-    assert key != run_store.run_key(["a case", "another model"])
+    key = store.name(["a case", "a model"])
+    assert key != store.name(["a case", "another model"])
     store.put(key, grid, stopped, curves)
     back, back_stopped, back_curves = store.get(key)
     assert np.array_equal(back.x, grid.x, equal_nan=True) and np.array_equal(back.X, grid.X)
@@ -222,30 +239,52 @@ def test_a_stored_run_comes_back_whole_and_a_damaged_one_or_another_codes_never(
     store.put(key, full, None, {})
     again = store.get(key)
     assert again[0].symmetry is None and again[0].planes == ("x", "y") and again[1] is None
+    assert notes == []
 
-    # One byte changed in the stored bytes: not used, and dropped.
-    data = bytearray(runs_store._cache.get(key))
+    # One byte changed in the stored bytes: not used, dropped, and said.
+    data = bytearray(store._cache.get(key))
     data[-100] ^= 0xFF
-    runs_store._cache.set(key, bytes(data))
-    assert store.get(key) is None and runs_store._cache.get(key) is None
-    runs_store._cache.set(key, b"not a run")
+    store._cache.set(key, bytes(data))
+    assert store.get(key) is None and store._cache.get(key) is None
+    assert "a damaged value: not used; the run is formed again" in notes[-1]
+    store._cache.set(key, b"not a run")
     assert store.get(key) is None
+    # Another run's value filed under this name (its checksum right): not used, and said.
+    other = store.name(["a case", "another model"])
+    store.put(other, grid, stopped, curves)
+    store._cache.set(key, store._cache.get(other))
+    assert store.get(key) is None and store._cache.get(key) is None
+    assert store.get(other) is not None and len(store.replaced) == 3
     # The entry of another code version (same name): not used.
     store.put(key, grid, stopped, curves)
-    monkeypatch.setattr(run_store, "_code", ["another code"])
-    assert store.get(key) is None
+    newer = RunStore(tmp_path / "cache", code="another code", say=notes.append)
+    assert newer.get(key) is None
     # Another code's runs have other names: the same inputs, another key.
-    assert run_store.run_key(["a case", "a model"]) != key
+    assert newer.name(["a case", "a model"]) != key
     store.close()
+    assert "3 entries of the run cache" in notes[-1]
+    newer.close()
 
-    # A database that cannot be opened: a warning, and runs are formed as without a cache.
+    # A database that cannot be read: moved aside (a note names it) and a new one made.
     shutil.rmtree(tmp_path / "cache")
     (tmp_path / "cache").mkdir()
     (tmp_path / "cache" / "cache.db").write_bytes(b"garbage" * 1000)
-    damaged = run_store.RunStore(tmp_path / "cache")
+    notes.clear()
+    damaged = RunStore(tmp_path / "cache", say=notes.append)
+    (aside,) = (tmp_path / "cache").glob("damaged-*")
+    assert (aside / "cache.db").read_bytes() == b"garbage" * 1000
+    assert len(notes) == 1 and f"rm -r '{aside}'" in notes[0] and damaged.usable
     assert damaged.get(key) is None
     damaged.put(key, grid, stopped, curves)
-    assert len(damaged) == 0
+    assert len(damaged) == 1 and damaged.get(key) is not None
+    damaged.close()
+
+    # A folder that cannot be made: a note, no run kept, and not recorded as the cache.
+    (tmp_path / "file").write_text("")
+    notes.clear()
+    with runs.Runs(workers=1, cache=tmp_path / "file" / "runs") as made:
+        assert not made.store.usable and made.record()["cache"] is None
+    assert len(notes) == 0  # said on standard error, not to this test's notes
 
 
 @pytest.mark.slow
@@ -260,20 +299,16 @@ def test_a_second_compare_forms_nothing_and_reports_the_same(tmp_path, dolfinx, 
     form_case(tmp_path / "formed", case, fields=False, pictures=False)
     bundle, cache = tmp_path / "formed" / "bundle", tmp_path / "runs"
     reports = []
-    for k in range(2):
-        runs._cache.clear()
-        before = dict(runs.counts)
+    for k in range(2):  # each command its own Runs: nothing in memory at its start
         assert main(["compare", str(bundle), "--out", str(tmp_path / f"c{k}"),
                      "--cache", str(cache), "--workers", "2"]) == 0
-        formed = runs.counts["formed"] - before["formed"]
-        read = runs.counts["from_disk"] - before["from_disk"]
-        reports.append((formed, read, (tmp_path / f"c{k}" / "compare.json").read_text()))
         # provenance.json says how the runs were made and which were reused.
         made = json.loads((tmp_path / f"c{k}" / "provenance.json").read_text())["forming_runs"]
         assert made["executor"] == "processes" and made["workers"] == 2
         assert made["cache"] == str(cache.resolve())
-        assert made["runs"]["formed"] == formed and made["runs"]["from_disk"] == read
+        formed, read = made["runs"]["formed"], made["runs"]["from_disk"]
         assert made["runs"]["reused"] == made["runs"]["asked"] - formed
+        reports.append((formed, read, (tmp_path / f"c{k}" / "compare.json").read_text()))
     (formed, read, first), (formed_again, read_again, second) = reports
     assert formed > 0 and read == 0
     assert formed_again == 0 and read_again == formed
@@ -318,7 +353,7 @@ def test_a_worker_that_dies_fails_its_runs_and_the_next_batch_has_a_new_pool(tmp
     jobs = octagon_jobs(tmp_path)[:2]
     with runs.execution(workers=2):
         _, pool = runs.executor()
-        with runs._fresh_workers():
+        with pools.fresh_workers():
             futures = [pool.submit(signal.pause) for _ in range(2)]  # two workers, waiting
         # A write to the dead worker's pipe is Python's BrokenPipeError, not PETSc's abort.
         os.kill(os.getpid(), signal.SIGPIPE)
@@ -340,24 +375,24 @@ def test_the_petsc_options_are_in_a_runs_key_and_go_with_its_job(tmp_path, dolfi
     db = PETSc.Options()
     names = ("snes_linesearch_order", "ksp_converged_reason")
     assert not any(db.hasName(n) for n in names)
-    before, plain = dict(runs._solver_options()), runs._key(case, model)
+    before, plain = dict(runs.solver_options()), runs.key_of(case, model)
     db["drape_truss_99_snes_atol"] = "1e-3"  # a problem's own option: not the user's
     try:
-        assert runs._key(case, model) == plain
+        assert runs.key_of(case, model) == plain
         set_petsc_options("-snes_linesearch_order 2 -ksp_converged_reason")
-        given = runs._solver_options()
+        given = runs.solver_options()
         assert dict(given) == {**before, "snes_linesearch_order": "2",
                                "ksp_converged_reason": ""}
-        assert runs._key(case, model) != plain
+        assert runs.key_of(case, model) != plain
     finally:
         for name in (*names, "drape_truss_99_snes_atol"):
             db.delValue(name)
-    assert runs._key(case, model) == plain
+    assert runs.key_of(case, model) == plain
     # A worker sets the job's options and drops those of its last job that are not given.
-    status, _ = runs._run(None, model, False, given)  # no case: fails after the options
+    status, _ = pools.run_job(None, model, False, given)  # no case: fails after the options
     assert status == "error" and db.getString("snes_linesearch_order") == "2"
     assert db.hasName("ksp_converged_reason")
-    runs._run(None, model, False, tuple(before.items()))
+    pools.run_job(None, model, False, tuple(before.items()))
     assert not any(db.hasName(n) for n in names)
 
 
@@ -368,7 +403,19 @@ def test_a_local_worker_leaves_the_launchers_job_and_keeps_how_mpi_runs_here(mon
     settings = {"OMPI_MCA_btl": "^ofi", "OMPI_ALLOW_RUN_AS_ROOT": "1"}
     for name, value in {**job, **settings}.items():
         monkeypatch.setenv(name, value)
-    with runs._fresh_workers():
+    with pools.fresh_workers():
         assert not set(job) & set(os.environ)
         assert all(os.environ[name] == value for name, value in settings.items())
     assert all(os.environ[name] == value for name, value in {**job, **settings}.items())
+
+
+def test_the_runs_package_imports_no_dolfinx():
+    """A worker of mpi4py.futures imports runs.mpi (its initializer) before it starts PETSc on
+    itself alone: had the package started PETSc on MPI.COMM_WORLD, every rank would wait
+    for the others in a collective that never comes."""
+    code = ("import sys, fenicsx_drape.runs, fenicsx_drape.runs.mpi; "
+            "print(sorted({m.split('.')[0] for m in sys.modules} & "
+            "{'dolfinx', 'petsc4py', 'ufl', 'basix', 'ffcx'}))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)}, check=True, timeout=120)
+    assert done.stdout.strip() == "[]"

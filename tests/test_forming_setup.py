@@ -176,8 +176,11 @@ def test_the_hemisphere_with_every_set_up_is_formed(tmp_path):
                      blank_offset_mm=(0.0, 7.0), tool_offset_mm=(2.0, 0.0))
     assert case.planes == ()  # every plane broken: the full sheet, unasked
     _, result = form_case(tmp_path / "h", case, fields=False)
-    for f in ("summary.json", "shear.png", "paths.png", "bundle/bundle.toml"):
+    for f in ("summary.json", "shear.png", "bundle/bundle.toml"):
         assert (tmp_path / "h" / f).is_file()
+    # Not the paper's conditions: no paper paths, and the summary says what differs.
+    assert not (tmp_path / "h" / "paths.png").exists()
+    assert {"ply at 4°", "blank centre [0, 7] mm"} <= set(result["paper_differences"])
     assert result["mirror_asymmetry_deg"] > 1.0
 
 
@@ -211,8 +214,8 @@ def test_the_whole_blank_held_at_its_centre_forms_as_the_mirrored_quarter():
     this net, docs/setup-diagnosis.md); the quarter's planes and the hold both stop that,
     and the part is symmetric, so the two models agree to the solver's tolerance.
     """
-    from fenicsx_drape.diagnosis.forming_runs import form_many
     from fenicsx_drape.model import default_model
+    from fenicsx_drape.runs import form_many
 
     quarter = load_case(DOUBLE_DOME, **COARSE)
     whole = with_overrides(quarter, symmetry=[])
@@ -232,9 +235,9 @@ def test_a_cut_back_does_not_make_the_formed_part_jump_with_the_set_up():
     # on the grid its part lies where the neighbours say (within 0.002 mm in the mean x of
     # the points below); when they went on shifted it sat 0.007 mm off (0.023 mm over the
     # whole grid, twice an offset fit's sd).
-    from fenicsx_drape.diagnosis.forming_runs import form_many
     from fenicsx_drape.forming.running.run import forming_options, run_case
     from fenicsx_drape.model import default_model
+    from fenicsx_drape.runs import form_many
 
     model = default_model()
     # (the force shared over the whole sheet's own nodes, as the premise was measured)
@@ -268,8 +271,8 @@ def test_a_stated_force_means_the_same_press_on_a_quarter_and_on_the_whole_sheet
     symmetric = with_overrides(quarter, holder_force_share="symmetric_part")
     assert with_overrides(symmetric, symmetry=[]).holder.force_N == symmetric.holder.force_N
 
-    from fenicsx_drape.diagnosis.forming_runs import form_many
     from fenicsx_drape.model import default_model
+    from fenicsx_drape.runs import form_many
 
     a, b = form_many([(quarter, default_model()), (whole, default_model())])
     γa, γb = np.nanmax(np.abs(a.full().shear_deg())), np.nanmax(np.abs(b.shear_deg()))
@@ -285,8 +288,8 @@ def test_a_whole_blank_on_tools_of_revolution_moves_smoothly_with_the_ply_angle(
     """The whole hemisphere (20 mm net, its centre held: hold_origin) with the ply at 4.000°
     and 4.006°: the two parts differ by far less than a noise of 0.1 mm (measured 0.0012 mm)
     and each keeps its half-turn symmetry about the centre (no mean shift)."""
-    from fenicsx_drape.diagnosis.forming_runs import form_many
     from fenicsx_drape.model import default_model
+    from fenicsx_drape.runs import form_many
 
     hemisphere = MESHES / "hemisphere" / "case.toml"
     stated = load_case(hemisphere, cell_mm=20.0, step_mm=4.0)

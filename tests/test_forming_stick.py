@@ -58,7 +58,7 @@ def test_a_stl_copy_of_the_tools_forms_as_the_closed_form_on_a_half_model(tmp_pa
     sys.path.insert(0, str(ROOT / "demos"))
     import make_lab_bundle
 
-    from fenicsx_drape.diagnosis import forming_runs as runs
+    from fenicsx_drape import runs
     from fenicsx_drape.forming.case.format import load_case, with_overrides
     from fenicsx_drape.model import default_model
 

@@ -35,7 +35,7 @@ def _trust_our_own_case():
 def part():
     """The double dome (quarter model, 20 mm cells) formed by the paper's model."""
     pytest.importorskip("dolfinx")
-    from fenicsx_drape.diagnosis import forming_runs as runs
+    from fenicsx_drape import runs
     from fenicsx_drape.forming.case.format import load_case, with_overrides
     from fenicsx_drape.model import default_model
 

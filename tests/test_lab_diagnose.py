@@ -24,7 +24,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.skip_in_parallel]
 def lab_bundle(tmp_path_factory):
     """The octagon's lab bundle (one wild shear row), formed by the paper's model."""
     pytest.importorskip("dolfinx")
-    from fenicsx_drape.diagnosis import forming_runs as runs
+    from fenicsx_drape import runs
     from fenicsx_drape.forming.case.format import load_case
     from fenicsx_drape.model import default_model
 

@@ -75,7 +75,7 @@ def test_in_the_image_a_script_reads_the_callers_file_and_nothing_is_left(tmp_pa
 def test_in_the_image_the_runs_go_to_the_hosts_cache_folder():
     """The default run cache is the documented one on the host, or DRAPE_CACHE when set."""
     state = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "fenicsx-drape"
-    code = ("from fenicsx_drape.diagnosis.run_store import default_folder; "
+    code = ("from fenicsx_drape.runs.store import default_folder; "
             "print(default_folder())")
     env = {k: v for k, v in os.environ.items() if k != "DRAPE_CACHE"}
     env["DRAPE_MODE"] = "container"

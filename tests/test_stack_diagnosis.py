@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fenicsx_drape.diagnosis import diagnose, forming_runs, setup_parameters
+from fenicsx_drape import runs
+from fenicsx_drape.diagnosis import diagnose, setup_parameters
 from fenicsx_drape.diagnosis.comparison import compare_tests, prepare, simulate
 from fenicsx_drape.diagnosis.decision import setup_rules
 from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
@@ -49,7 +50,7 @@ def load(folder):
 
 
 def test_a_run_keeps_every_ply_and_a_single_ply_ignores_interply_friction():
-    (sheet,) = forming_runs.form_many([(stack_case(), SLIDING)])
+    (sheet,) = runs.form_many([(stack_case(), SLIDING)])
     assert len(sheet.plies) == 2 and sheet.ply(None) is sheet and sheet.ply(2) is sheet.plies[1]
     # The plies differ: the 45° ply shears more (docs/laminates.md).
     assert np.nanmax(np.abs(sheet.ply(2).shear_deg())) > np.nanmax(
@@ -58,8 +59,8 @@ def test_a_run_keeps_every_ply_and_a_single_ply_ignores_interply_friction():
         sheet.ply(3)
     # On one ply the effect changes nothing: its runs are the model's without it.
     single = load_case("hemisphere", cell_mm=30.0)
-    assert forming_runs._key(single, SLIDING) == forming_runs._key(single, BONDED)
-    assert forming_runs._key(stack_case(), SLIDING) != forming_runs._key(stack_case(), BONDED)
+    assert runs.key_of(single, SLIDING) == runs.key_of(single, BONDED)
+    assert runs.key_of(stack_case(), SLIDING) != runs.key_of(stack_case(), BONDED)
 
 
 def test_a_measurement_is_compared_with_the_ply_it_names(tmp_path):

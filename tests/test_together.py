@@ -1,5 +1,5 @@
-"""Calls made together (forming_runs.together): their results as one after the other, their runs
-in common batches.
+"""Calls made together (runs.together): their results as one after the other, their runs in
+common batches.
 
 A "run" here is a stand-in: the forming of a job is replaced by a function of the job, and
 every batch handed to the executor is recorded. Each call is a little fit that asks one run
@@ -10,12 +10,13 @@ import threading
 
 import pytest
 
-from fenicsx_drape.diagnosis import forming_runs as runs
+from fenicsx_drape import runs
 
 
 @pytest.fixture
 def batches(monkeypatch):
-    """Runs formed as a function of their job; each batch of new runs recorded."""
+    """Runs formed as a function of their job; each batch of new runs recorded (a Runs of the
+    test's own, made current)."""
     seen = []
 
     def form_all(jobs):
@@ -23,12 +24,12 @@ def batches(monkeypatch):
         return [("error", RuntimeError("diverged")) if model == "bad" else
                 ("ok", (f"{case}:{model}", None, {})) for case, model in jobs]
 
-    monkeypatch.setattr(runs, "_key", lambda case, model: (case, model))
-    monkeypatch.setattr(runs, "_form_all", form_all)
-    monkeypatch.setattr(runs, "describe", lambda case, model: f"the run of {case!r} ({model})")
-    runs._cache.clear()
-    yield seen
-    runs._cache.clear()
+    made = runs.Runs(workers=1)
+    monkeypatch.setattr(made, "key", lambda case, model: (case, model))
+    monkeypatch.setattr(made, "_form_all", form_all)
+    monkeypatch.setattr(made, "describe", lambda case, model: f"the run of {case!r} ({model})")
+    with made:
+        yield seen
 
 
 def fit(name, steps, say):
@@ -46,7 +47,7 @@ def test_together_gives_each_calls_result_and_forms_their_runs_in_common_batches
     alone = [fit(n, s, alone_lines.append) for n, s in steps.items()]
     assert [len(b) for b in batches] == [1] * 6  # one after the other: a run at a time
     batches.clear()
-    runs._cache.clear()
+    runs.current().forget()
     lines = []
     made = runs.together([lambda say, n=n, s=s: fit(n, s, say) for n, s in steps.items()],
                          lines.append)
@@ -111,8 +112,8 @@ def test_each_call_sees_the_callers_resolution_and_keeps_its_own(batches):
 
 def test_spare_runs_fill_the_free_slots_of_a_batch_and_no_more(batches, monkeypatch):
     """A fit's finite differences are spare: formed beside its point only where a worker would
-    wait (forming_runs.spare), else left, and never formed for their own sake."""
-    monkeypatch.setattr(runs, "runs_at_once", lambda: 2)
+    wait (runs.spare), else left, and never formed for their own sake."""
+    monkeypatch.setattr(runs.current(), "runs_at_once", lambda: 2)
     with runs.spare(1):  # a point and one difference: two workers, one batch
         assert runs.form_many([("p", 0), ("p", 1)]) == ["p:0", "p:1"]
     assert batches == [[("p", 0), ("p", 1)]]
@@ -138,7 +139,7 @@ def test_spare_runs_fill_the_free_slots_of_a_batch_and_no_more(batches, monkeypa
     assert runs.together([lambda say, n=n: point(n, say) for n in "ab"]) == [False, False]
     assert batches == [[("a", 0), ("b", 0)]]
     batches.clear()
-    monkeypatch.setattr(runs, "runs_at_once", lambda: 1)  # one worker: no free slot ever
+    monkeypatch.setattr(runs.current(), "runs_at_once", lambda: 1)  # one worker: no free slot
     with runs.spare(1), pytest.raises(runs.Deferred):
         runs.form_many([("r", 0), ("r", 1)])
     assert batches == [[("r", 0)]]

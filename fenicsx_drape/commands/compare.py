@@ -28,20 +28,20 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Fit, compare, write the outputs and print the summary; returns the exit status."""
     from fenicsx_drape.cli import forming_runs_setting, load_bundle_reported
-    from fenicsx_drape.diagnosis.comparison import compare, conclusion, write_compare
-    from fenicsx_drape.diagnosis.forming_runs import resolution
+    from fenicsx_drape.diagnosis import compare, write_compare
+    from fenicsx_drape.diagnosis.comparison import conclusion
     from fenicsx_drape.model import default_model, load_model
 
     bundle = load_bundle_reported(args.bundle)
     model = load_model(args.model) if args.model else default_model()
     if args.forming_cell_mm is not None and not args.forming_cell_mm > 0:
         raise DrapeInputError(f"--forming-cell-mm {args.forming_cell_mm} must be > 0 (mm)")
-    with resolution(args.forming_cell_mm), forming_runs_setting(args):
+    with forming_runs_setting(args, cell_mm=args.forming_cell_mm):  # provenance: its runs'
         result = compare(bundle, model, fit=not args.no_fit,
                          progress=lambda line: print(line, file=sys.stderr))
-    if not result.tests:
-        raise DrapeInputError(f"{args.bundle}: nothing to compare")
-    write_compare(result, bundle, args.out, model_path=args.model)
+        if not result.tests:
+            raise DrapeInputError(f"{args.bundle}: nothing to compare")
+        write_compare(result, bundle, args.out, model_path=args.model)
     if any(e["suspect"] for e in result.data_check or ()):
         print(conclusion(result))  # data that cannot be of the case, first
     print(summary(result))

@@ -41,9 +41,9 @@ def run(args: argparse.Namespace) -> int:
     """Diagnose, write the report and print its summary; returns the exit status."""
     from fenicsx_drape.cli import forming_runs_setting, load_bundle_reported
     from fenicsx_drape.diagnosis import confirm, diagnose, summary, write_diagnosis
-    from fenicsx_drape.diagnosis.forming_runs import resolution
     from fenicsx_drape.errors import DrapeInputError
     from fenicsx_drape.model import default_model, load_model
+    from fenicsx_drape.runs import resolution
 
     if ((args.forming_cell_mm is not None and not args.forming_cell_mm > 0)
             or not args.confirm_cell_mm >= 0):
@@ -53,12 +53,12 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model) if args.model else default_model()
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
     forming = any(t.kind == "forming" for t in bundle.tests)
-    with forming_runs_setting(args):
+    with forming_runs_setting(args):  # provenance.json records its runs: written inside
         with resolution(args.forming_cell_mm):
             report = diagnose(bundle, model, progress=progress, setup=args.setup)
         if forming and args.confirm_cell_mm and report["candidates"]:
             report["confirmation"] = confirm(bundle, report, args.confirm_cell_mm, progress)
-    write_diagnosis(report, args.json, args.out, bundle=bundle)
+        write_diagnosis(report, args.json, args.out, bundle=bundle)
     if any(e["suspect"] for e in report.get("data_check", ())):
         print(report["conclusion"])  # data that cannot be of the case, first
     print(summary(report))

@@ -26,7 +26,7 @@ Its modules:
 - :mod:`~fenicsx_drape.diagnosis.ledger`: the history of model versions and their errors;
 - :mod:`~fenicsx_drape.diagnosis.synthetic`, :mod:`~fenicsx_drape.diagnosis.lab_synthetic`:
   bundles made by the project's simulator (demos, tests, studies);
-- :mod:`~fenicsx_drape.diagnosis.forming_runs`: the forming runs of compare and diagnose,
+- :mod:`~fenicsx_drape.runs`: the forming runs of compare and diagnose,
   through :mod:`concurrent.futures` on every core (:mod:`~fenicsx_drape.diagnosis.mpi_pool`:
   on the ranks of an MPI job) and remembered on disk
   (:mod:`~fenicsx_drape.diagnosis.run_store`).

@@ -607,8 +607,8 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
         The path of ``compare.json``.
     """
     from fenicsx_drape.diagnosis import ledger
-    from fenicsx_drape.diagnosis.forming_runs import execution_record
     from fenicsx_drape.provenance import atomic_write_text, write_json, write_provenance
+    from fenicsx_drape.runs import execution_record
 
     out = Path(out_dir)
     record = result.to_dict()

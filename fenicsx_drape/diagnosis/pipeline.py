@@ -43,7 +43,7 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
 
 The confirmation on a finer net is ``drape diagnose --confirm-cell-mm`` (:func:`confirm`).
 Stages that do not need each other's results (the candidates; the folds; the held-out error
-and resolution) run through :func:`~fenicsx_drape.diagnosis.forming_runs.together`: the same
+and resolution) run through :func:`~fenicsx_drape.runs.together`: the same
 results as one after the other, their forming runs in common batches that keep every worker
 busy.
 """
@@ -81,7 +81,6 @@ from fenicsx_drape.diagnosis.decision import (
     setup_rules,
 )
 from fenicsx_drape.diagnosis.folds import folds_of
-from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM, together
 from fenicsx_drape.diagnosis.kinds import is_formed, kind_of
 from fenicsx_drape.diagnosis.refits import (
     REFIT_ITERATIONS,
@@ -111,6 +110,7 @@ from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS, corrected
 from fenicsx_drape.diagnosis.setup_stage import setup_stage
 from fenicsx_drape.diagnosis.words import optimiser_record, untestable_reason
 from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.runs import FULL_CELL_MM, together
 
 if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle
@@ -500,9 +500,9 @@ def confirm(bundle: Bundle, report: Report, cell_mm: float = FULL_CELL_MM,
         ``{"cell_mm", label: {"error", "metrics", "forming_parameters"}}`` for the baseline
         and the first-ranked candidate.
     """
-    from fenicsx_drape.diagnosis.forming_runs import resolution
     from fenicsx_drape.diagnosis.kinds import find_kind
     from fenicsx_drape.diagnosis.kinds.forming import fit_forming, forming_parameters
+    from fenicsx_drape.runs import resolution
 
     tests = [t for t in bundle.tests if is_formed(t)]
     labels = ["baseline"] + [c["effect"] for c in report["candidates"][:1]]

@@ -20,8 +20,8 @@ import numpy as np
 
 from fenicsx_drape.diagnosis.comparison import fit_bundle, simulate
 from fenicsx_drape.diagnosis.folds import FOLD_ITERATIONS
-from fenicsx_drape.diagnosis.forming_runs import together
 from fenicsx_drape.diagnosis.kinds import kind_of
+from fenicsx_drape.runs import together
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.folds import Fold

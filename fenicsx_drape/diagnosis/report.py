@@ -252,8 +252,8 @@ def write_diagnosis(report: dict[str, Any], json_path: str | Path,
     each test), plus ``provenance.json``.
     """
     from fenicsx_drape.diagnosis.comparison import locate, plot_where, safe_name
-    from fenicsx_drape.diagnosis.forming_runs import execution_record
     from fenicsx_drape.provenance import write_json, write_provenance
+    from fenicsx_drape.runs import execution_record
 
     path = write_json(json_path, report)
     if out_dir is None:

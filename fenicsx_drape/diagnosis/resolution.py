@@ -29,10 +29,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.forming_runs import cell_override, resolution
 from fenicsx_drape.diagnosis.kinds import is_formed, kind_of
 from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
 from fenicsx_drape.errors import DrapeInputError, SolverError
+from fenicsx_drape.runs import cell_override, resolution
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds import Comparison

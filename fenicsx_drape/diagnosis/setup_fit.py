@@ -41,7 +41,7 @@ The set-up stage (:mod:`~fenicsx_drape.diagnosis.setup_stage`) fits each candida
    The stated set-up fits nothing: its held-out error is its error.
 
 The runs of each round (a point and its finite differences, the folds' predictions) go to
-:func:`~fenicsx_drape.diagnosis.forming_runs.form_many` at once (:class:`SetupRuns`): worker
+:func:`~fenicsx_drape.runs.form_many` at once (:class:`SetupRuns`): worker
 processes on every core of the pool, or all ranks under ``mpirun``.
 """
 
@@ -57,7 +57,6 @@ import numpy as np
 
 from fenicsx_drape.diagnosis.comparison import compare_tests, normalised_error
 from fenicsx_drape.diagnosis.folds import node_folds
-from fenicsx_drape.diagnosis.forming_runs import form_many, runs_of
 from fenicsx_drape.diagnosis.kinds import kind_of
 from fenicsx_drape.diagnosis.kinds.forming import case_of, forming_case_of, moved
 from fenicsx_drape.diagnosis.setup_parameters import (
@@ -74,6 +73,7 @@ from fenicsx_drape.diagnosis.setup_parameters import (
     why_not,
 )
 from fenicsx_drape.errors import DrapeInputError, SolverError
+from fenicsx_drape.runs import form_many, runs_of
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds import Comparison

@@ -45,7 +45,6 @@ import numpy as np
 from fenicsx_drape.diagnosis.comparison import error_record, normalised_error
 from fenicsx_drape.diagnosis.decision import Rules
 from fenicsx_drape.diagnosis.folds import NODE_SCHEME
-from fenicsx_drape.diagnosis.forming_runs import together
 from fenicsx_drape.diagnosis.kinds import is_formed, kind_of, row_sd
 from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
 from fenicsx_drape.diagnosis.resolution import check_resolution, explained
@@ -76,6 +75,7 @@ from fenicsx_drape.diagnosis.setup_parameters import (
 )
 from fenicsx_drape.diagnosis.setup_words import value_text
 from fenicsx_drape.errors import DrapeInputError, SolverError
+from fenicsx_drape.runs import together
 
 if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.forming_runs import FULL_CELL_MM, form_many
+from fenicsx_drape.runs import FULL_CELL_MM, form_many
 
 if TYPE_CHECKING:
     from fenicsx_drape.forming.case.format import FormingCase

@@ -19,7 +19,7 @@ lacking the right physics can sit far off, e.g. a holder μ driven up by a model
 carry compression), steps of at most :data:`MAX_STEP` within :data:`MU_BOUNDS` and halved
 once when they do not lower the cost; every forming run is cached by its case and
 parameters. The runs of one iteration (the point and its perturbations) go to the workers
-at once (:mod:`~fenicsx_drape.diagnosis.forming_runs`) when the point fits in the
+at once (:mod:`~fenicsx_drape.runs`) when the point fits in the
 perturbations' last batch for no extra time (one parameter on two workers); else a point's
 perturbations are formed only once the fit takes the point (a rejected step's are not
 needed: on one worker, a fifth of the lab README diagnosis's runs). The fit is the same
@@ -34,10 +34,10 @@ in at most :data:`MAX_ITERATIONS` iterations), every run is cached, the runs of 
 go to persistent worker processes, and the held-out folds (every third node of the grid
 left out, three folds) start from the full fit, so a fold costs a run only when its step
 moves the parameters by more than :data:`XTOL`. The hemisphere runs use cells of
-:data:`~fenicsx_drape.diagnosis.forming_runs.FULL_CELL_MM` (the paper's Δ) and a case its
-blank's ``cell_mm``; :func:`~fenicsx_drape.diagnosis.forming_runs.resolution` sets another
+:data:`~fenicsx_drape.runs.FULL_CELL_MM` (the paper's Δ) and a case its
+blank's ``cell_mm``; :func:`~fenicsx_drape.runs.resolution` sets another
 for both. A coarser screening mesh
-(:data:`~fenicsx_drape.diagnosis.forming_runs.SCREEN_CELL_MM`, 4× cheaper) is only sound
+(:data:`~fenicsx_drape.runs.SCREEN_CELL_MM`, 4× cheaper) is only sound
 when its discretisation error is below the noise: against a grid formed on 10 mm cells, the
 20 mm mesh misses by 2.9 × the 0.3 mm noise (at the tow axes over the fillet), which hides a
 tool friction that the 10 mm mesh finds; :func:`~fenicsx_drape.diagnosis.pipeline.confirm`
@@ -54,9 +54,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.forming_runs import Deferred, cell_override, spare
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case.format import FormingCase, case_file, case_for_test, with_overrides
+from fenicsx_drape.runs import Deferred, cell_override, spare
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds.base import Kind
@@ -115,7 +115,7 @@ def _with_cell(case: FormingCase, cell_mm: float) -> FormingCase:
 def case_of(test: Test, cell_mm: float | None = None) -> FormingCase:
     """The case a forming test is simulated with (:func:`forming_case_of`), on its cells.
 
-    The cells are ``cell_mm``, else the :func:`~fenicsx_drape.diagnosis.forming_runs.
+    The cells are ``cell_mm``, else the :func:`~fenicsx_drape.runs.
     resolution`'s, else the case's own (the hemisphere's: the paper's 10 mm).
     """
     case = forming_case_of(test)
@@ -228,7 +228,7 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
     def evaluate(*points: np.ndarray) -> tuple[np.ndarray, list[np.ndarray | None]]:
         """The residuals at ``points`` and each one's Jacobian where its runs were at hand.
 
-        A point's finite differences are spare runs (forming_runs.spare): formed with it where
+        A point's finite differences are spare runs (runs.spare): formed with it where
         the batch leaves a worker free (one parameter on two workers), else only once the fit
         takes the point (a rejected step's would be wasted). The same numbers either way.
         """

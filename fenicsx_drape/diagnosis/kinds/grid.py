@@ -49,7 +49,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.forming_runs import form_many, stopped_at
 from fenicsx_drape.diagnosis.kinds import checks
 from fenicsx_drape.diagnosis.kinds.base import FitHook, Region
 from fenicsx_drape.diagnosis.kinds.forming import (
@@ -61,6 +60,7 @@ from fenicsx_drape.diagnosis.kinds.forming import (
 )
 from fenicsx_drape.diagnosis.kinds.part import CASE_REGION_NAMES, region_of_points, travel_axis
 from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.runs import form_many, stopped_at
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds.base import Comparison

@@ -38,7 +38,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.forming_runs import form_many
 from fenicsx_drape.diagnosis.kinds.base import FitHook, Region
 from fenicsx_drape.diagnosis.kinds.forming import (
     case_of,
@@ -49,6 +48,7 @@ from fenicsx_drape.diagnosis.kinds.forming import (
 from fenicsx_drape.diagnosis.kinds.part import CASE_REGION_NAMES, region_of_points
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
+from fenicsx_drape.runs import form_many
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds.base import Comparison

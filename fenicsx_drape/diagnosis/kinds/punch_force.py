@@ -6,7 +6,7 @@ every lab kind shares, the noise rule, runs and measures, is in
 
 - **values**: the force (N) on the named tool (``force_tool``, default the punch);
 - **simulation** (:func:`read`): the model's force on that tool along its motion
-  (:func:`~fenicsx_drape.diagnosis.forming_runs.tool_forces`), linear in the travel between
+  (:func:`~fenicsx_drape.runs.tool_forces`), linear in the travel between
   the run's steps, at the measured travels (a run that stopped short holds its last force);
 - **noise**: ``force_sd_N`` (column or key), else second differences along the travel
   (:func:`model_free_noise`);
@@ -57,7 +57,7 @@ def read(test: Test, grid: FormedGrid, mesh: SheetMesh,
          moved: Callable[[np.ndarray], np.ndarray], reach: float,
          model: Model | None = None) -> Match:
     """The model's force on the tool at the measured travels (from the ``model``'s run)."""
-    from fenicsx_drape.diagnosis.forming_runs import tool_forces
+    from fenicsx_drape.runs import tool_forces
 
     c = test.columns
     if model is None:

@@ -1,0 +1,211 @@
+"""A run cache corrupted in every way gives the report of an intact one, to the last digit.
+
+A stored run carries the name it is filed under and its own checksum, and both are checked on
+every read (``fenicsx_drape/runs/store.py``): a value swapped with another entry's, values
+rotated among fourteen entries, a flipped byte, a database truncated, scribbled over or half
+written -- each is a miss (the run formed again, the entry replaced) and a note, never another
+run's result. The bundle: two forming tests of the small octagon case (39 nodes, 11 steps,
+a quarter of a second a run), at two holder forces, whose ``compare`` fits μ through 18
+stored runs.
+"""
+
+import json
+import shutil
+import sqlite3
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fenicsx_drape.cli import main
+
+sys.path.insert(0, str(Path(__file__).parent))
+from test_forming_case_diagnosis import write_case
+
+pytestmark = pytest.mark.skip_in_parallel  # a cache folder of one process
+
+
+@pytest.fixture(scope="module")
+def intact(tmp_path_factory):
+    """The bundle, the model, and the intact cache and report of its ``compare``."""
+    pytest.importorskip("dolfinx")
+    from fenicsx_drape.diagnosis import synthetic_case_test, write_case_bundle
+    from fenicsx_drape.forming.case.format import load_case, with_overrides
+    from fenicsx_drape.model import default_model
+
+    tmp = tmp_path_factory.mktemp("run_cache")
+    case = load_case(write_case(tmp / "part"))
+    truth = default_model().with_parameters(mu=0.45)
+    tests = [synthetic_case_test(truth, with_overrides(case, holder_force_N=force,
+                                                          step_mm=5.0),  # 11 steps a run
+                                    test_id=f"oct{force:g}", sd_mm=0.3, seed=k,
+                                    case_file=f"c{force:g}/case.toml")
+             for k, force in enumerate((100.0, 400.0))]
+    write_case_bundle("two forces", tests, tmp / "bundle")
+    model = default_model().without_effects("tow_buckling")
+    (tmp / "model.toml").write_text(
+        "effects = [" + ", ".join(f'"{e}"' for e in model.effects) + "]\n")
+    report, made = compare(tmp, tmp / "cache", "intact")
+    assert made["formed"] == 18 and made["from_disk"] == 0
+    return tmp, report
+
+
+def compare(tmp: Path, cache: Path, label: str) -> tuple[dict, dict]:
+    """``drape compare`` of the bundle on ``cache``: compare.json (without its provenance)
+    and the runs of provenance.json."""
+    out = tmp / label
+    assert main(["compare", str(tmp / "bundle"), "--model", str(tmp / "model.toml"),
+                 "--out", str(out), "--cache", str(cache), "--workers", "1"]) == 0
+    report = json.loads((out / "compare.json").read_text())
+    report.pop("provenance", None)
+    return report, json.loads((out / "provenance.json").read_text())["forming_runs"]["runs"]
+
+
+def rows(db: sqlite3.Connection) -> list[tuple]:
+    """The entries' rows and values (diskcache's columns: a value inline or in a file)."""
+    return db.execute("SELECT rowid, size, mode, filename, value FROM Cache ORDER BY rowid"
+                      ).fetchall()
+
+
+def move_values(folder: Path, order: list[int]) -> None:
+    """Give the k-th entry the value of entry ``order[k]`` (the names stay)."""
+    with sqlite3.connect(folder / "cache.db") as db:
+        entries = rows(db)
+        for (rowid, *_), (_, *value) in zip(entries, [entries[k] for k in order]):
+            db.execute("UPDATE Cache SET size = ?, mode = ?, filename = ?, value = ? "
+                       "WHERE rowid = ?", (*value, rowid))
+
+
+def swapped(folder: Path) -> None:
+    n = len(rows(sqlite3.connect(folder / "cache.db")))
+    move_values(folder, [1, 0, *range(2, n)])
+
+
+def rotated(folder: Path) -> None:
+    n = len(rows(sqlite3.connect(folder / "cache.db")))
+    move_values(folder, [*range(1, 14), 0, *range(14, n)])  # fourteen entries rotated
+
+
+def flipped_byte(folder: Path) -> None:
+    with sqlite3.connect(folder / "cache.db") as db:
+        rowid, _, _, filename, value = rows(db)[3]
+        if filename:  # a value kept in a file of its own
+            path = folder / filename
+            data = bytearray(path.read_bytes())
+            data[len(data) // 2] ^= 0x01
+            path.write_bytes(bytes(data))
+        else:
+            data = bytearray(value)
+            data[len(data) // 2] ^= 0x01
+            db.execute("UPDATE Cache SET value = ? WHERE rowid = ?", (bytes(data), rowid))
+
+
+def truncated(folder: Path) -> None:
+    path = folder / "cache.db"
+    path.write_bytes(path.read_bytes()[:1000])
+
+
+def half_written(folder: Path) -> None:
+    path = folder / "cache.db"
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])
+
+
+def scribbled(folder: Path) -> None:
+    path = folder / "cache.db"
+    data = bytearray(path.read_bytes())
+    start, end = len(data) // 4, len(data) // 2
+    data[start:end] = np.random.default_rng(1).integers(0, 256, end - start, np.uint8).tobytes()
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("corrupt", [swapped, rotated, flipped_byte, truncated, half_written,
+                                     scribbled], ids=lambda f: f.__name__)
+def test_a_corrupted_cache_gives_the_intact_report_and_heals(intact, corrupt, capsys):
+    tmp, expected = intact
+    cache = tmp / corrupt.__name__
+    shutil.copytree(tmp / "cache", cache)
+    corrupt(cache)
+    capsys.readouterr()
+    report, made = compare(tmp, cache, f"{corrupt.__name__} 1")
+    notes = [line for line in capsys.readouterr().err.splitlines()
+             if line.startswith("drape: the run cache") or "entries of the run cache" in line]
+    assert report == expected  # to the last digit: every number of compare.json
+    assert notes and made["formed"] > 0  # said, and the runs not trusted formed again
+    if corrupt in (swapped, rotated, flipped_byte):  # those entries only, replaced
+        assert made["formed"] == {swapped: 2, rotated: 14, flipped_byte: 1}[corrupt]
+        assert "not used; the run is formed again and the entry replaced" in notes[0]
+    if corrupt is rotated:
+        assert "14 entries of the run cache" in notes[-1]
+    if corrupt in (truncated, half_written):  # the database moved aside, a new one made
+        (aside,) = cache.glob("damaged-*")
+        assert f"rm -r '{aside}'" in notes[0]
+    # The cache is whole again: the same command forms nothing, and says nothing.
+    again, made = compare(tmp, cache, f"{corrupt.__name__} 2")
+    assert again == expected and made["formed"] == 0 and made["from_disk"] == 18
+    assert "drape: the run cache" not in capsys.readouterr().err
+
+
+def descendants(pid: int) -> set[int]:
+    """The processes ``pid`` started, and theirs (from /proc)."""
+    found = set()
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            found |= {int(c) for c in (task / "children").read_text().split()}
+        except OSError:  # gone meanwhile
+            pass
+    for child in list(found):
+        found |= descendants(child)
+    return found
+
+
+def running(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie, dead but not yet reaped, does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_ctrl_c_on_a_parallel_diagnose_stops_the_workers_and_says_what_was_kept(intact):
+    """SIGINT to the command's process group, as a terminal's Ctrl-C sends it, once its pool of
+    workers forms runs: exit status 130, one line saying the runs are kept in the cache, no
+    traceback, and no worker left running."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    tmp, _ = intact
+    cache = tmp / "interrupted"
+    command = [sys.executable, "-m", "fenicsx_drape", "diagnose", str(tmp / "bundle"),
+               "--model", str(tmp / "model.toml"), "--json", str(tmp / "REPORT.json"),
+               "--cache", str(cache), "--workers", "2"]
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root), "PYTHONFAULTHANDLER": "1"}
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True, env=env)
+    try:
+        start = time.monotonic()
+        while not descendants(process.pid) and time.monotonic() - start < 300:
+            time.sleep(0.1)  # the pool starts with the first batch of runs
+        time.sleep(1.0)
+        workers = descendants(process.pid)
+        assert workers and process.poll() is None
+        os.killpg(process.pid, signal.SIGINT)
+        try:
+            _, err = process.communicate(timeout=120)
+        except subprocess.TimeoutExpired:  # where it waits: every thread's stack (faulthandler)
+            os.kill(process.pid, signal.SIGABRT)
+            pytest.fail("not stopped 120 s after SIGINT:\n" + process.communicate()[1][-8000:])
+    finally:
+        if process.poll() is None:
+            process.kill()
+    lines = err.splitlines()
+    assert process.returncode == 130
+    assert "Traceback" not in err and [line for line in lines if "interrupted" in line] == [
+        lines[-1]]
+    assert lines[-1].startswith("drape diagnose: interrupted; ") and str(cache) in lines[-1]
+    time.sleep(1.0)
+    assert not [pid for pid in workers if running(pid)]
