@@ -49,6 +49,7 @@ LAYER_OF = (
     ("fenicsx_drape.effects", "model"),
     ("fenicsx_drape.model", "model"),
     ("fenicsx_drape.unitcell", "model"),
+    ("fenicsx_drape.curves", "model"),
     ("fenicsx_drape.nodal", "model"),
     ("fenicsx_drape.provenance", "provenance"),
     ("fenicsx_drape.errors", "base"),
