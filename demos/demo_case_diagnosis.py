@@ -43,10 +43,17 @@ import time
 from pathlib import Path
 
 from fenicsx_drape import runs
-from fenicsx_drape.diagnosis import diagnose, evaluate, summary, write_compare, write_diagnosis
-from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
-from fenicsx_drape.forming.case.format import case_for_test, load_case
-from fenicsx_drape.measurements.bundle import load_bundle
+from fenicsx_drape.diagnosis import (
+    diagnose,
+    evaluate,
+    summary,
+    synthetic_case_test,
+    write_case_bundle,
+    write_compare,
+    write_diagnosis,
+)
+from fenicsx_drape.forming import case_for_test, load_case
+from fenicsx_drape.measurements import load_bundle
 from fenicsx_drape.model import default_model
 from fenicsx_drape.trust import set_trusted
 

@@ -38,10 +38,16 @@ import sys
 from pathlib import Path
 
 from fenicsx_drape import runs
-from fenicsx_drape.diagnosis import diagnose, evaluate, summary, write_compare, write_diagnosis
-from fenicsx_drape.diagnosis.synthetic import synthetic_forming_test
-from fenicsx_drape.forming.case.format import case_for_test
-from fenicsx_drape.measurements.bundle import Bundle, load_bundle, write_bundle
+from fenicsx_drape.diagnosis import (
+    diagnose,
+    evaluate,
+    summary,
+    synthetic_forming_test,
+    write_compare,
+    write_diagnosis,
+)
+from fenicsx_drape.forming import case_for_test
+from fenicsx_drape.measurements import Bundle, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
 
 # As a page of the docs the demo is a notebook run in demos/, without arguments.

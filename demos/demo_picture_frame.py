@@ -32,7 +32,7 @@ import numpy as np
 
 from fenicsx_drape import unitcell
 from fenicsx_drape.calibration import consistency, fit, lab_of, size_of, write_fit
-from fenicsx_drape.measurements.bundle import load_bundle
+from fenicsx_drape.measurements import load_bundle
 from fenicsx_drape.model import Model
 from fenicsx_drape.provenance import save_figure, write_json
 
@@ -136,7 +136,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from fenicsx_drape.calibration.features import shear_curve
+from fenicsx_drape.calibration import shear_curve
 
 fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
 for i, test in enumerate(bundle.of_kind("picture_frame")):
