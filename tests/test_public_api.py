@@ -31,16 +31,17 @@ PUBLIC = {
         "format_table", "lab_of", "picture_frame_test", "plot_fit", "shear_curve",
         "simulate_interply", "size_of", "standard_tests", "synthetic_bundle", "table2",
         "tensile_test", "write_fit"],
+    "fenicsx_drape.curves": [
+        "BIAS", "TENSILE", "effective_rate", "fig2b_history", "paper_tests", "write_curves"],
     "fenicsx_drape.diagnosis": [
-        "CompareResult", "Report", "compare", "confirm", "diagnose", "evaluate", "fit_setup",
-        "history", "history_table", "lab_tables", "setup_rules", "summary",
-        "synthetic_case_test", "synthetic_forming_test", "write_case_bundle", "write_compare",
-        "write_diagnosis", "write_lab_bundle"],
+        "CompareResult", "Report", "compare", "confirm", "diagnose", "evaluate",
+        "fit_setup", "history", "history_table", "lab_tables", "setup_rules", "summary",
+        "synthetic_case_test", "synthetic_forming_test", "write_case_bundle",
+        "write_compare", "write_diagnosis", "write_lab_bundle"],
     "fenicsx_drape.diagnosis.kinds": [
-        "BIAS_EXTENSION", "GRID", "KINDS", "OUTLINE", "PICTURE_FRAME", "PUNCH_FORCE",
-        "SHEAR_POINTS", "SURFACE", "TENSILE", "TEST_KINDS", "Comparison", "FitHook",
-        "FormedKind", "Kind", "Region", "comparable", "find_kind", "is_formed", "kind_of",
-        "row_sd"],
+        "BIAS_EXTENSION", "Comparison", "FitHook", "FormedKind", "GRID", "KINDS", "Kind",
+        "OUTLINE", "PICTURE_FRAME", "PUNCH_FORCE", "Region", "SHEAR_POINTS", "SURFACE",
+        "TENSILE", "TEST_KINDS", "comparable", "find_kind", "is_formed", "kind_of", "row_sd"],
     "fenicsx_drape.fe": [
         "FieldWriter", "Results", "RunReport", "Sheet", "SolverOptions", "StepReport",
         "TrussGrid", "TrussProblem", "grid_points", "load_sheet", "read_grid", "run",
@@ -52,15 +53,54 @@ PUBLIC = {
         "RigidMotion", "TriangleSurface", "case_file", "case_for_test", "form_case",
         "kinematic_drape", "load_case", "load_surface", "mean_distance", "run_case",
         "with_overrides", "write_case"],
+    "fenicsx_drape.forming.paper": [
+        "DURATIONS_S", "DURATION_RANGE_S", "DURATION_SHEAR_SPAN_DEG", "DURATION_WRINKLING",
+        "FORCES_N", "FORCE_RANGE_N", "FORCE_SHEAR_PEAK_N", "FORCE_WRINKLING",
+        "MAX_SHEAR_EXPERIMENT_DEG", "MAX_SHEAR_KINEMATIC_DEG", "MAX_SHEAR_MODEL_DEG",
+        "MEAN_DISTANCE_10MM_MM", "MESH_CELLS_MM", "METRICS", "MIN_WRINKLING_EXPERIMENT",
+        "MIN_WRINKLING_MODEL", "MU_LITERATURE", "PAPER_CONDITIONS", "READINGS",
+        "SHEAR_PLATEAU_FROM_NODES", "STATS", "SUMMARY", "TARGETS", "TOTAL_WRINKLING_MODEL",
+        "TOW_STRAIN_800N", "Variant", "WRINKLING_PLACE", "WRINKLING_STABLE_FROM_NODES",
+        "default_options", "mesh_distances", "metrics", "misfit", "paper_case",
+        "paper_comparison", "paper_differences", "paper_numbers", "plot_trend", "run_key",
+        "run_variants", "source_tag", "sweep", "write_rows"],
+    "fenicsx_drape.forming.running": [
+        "FormedGrid", "FormingRun", "KinematicNet", "SheetMesh", "case_bundle",
+        "closest_on_edge", "closest_points", "coverage", "drape_case", "form_case",
+        "interply_maps", "kinematic_drape", "mean_distance", "plot_interply", "plot_paths",
+        "plot_shear", "plot_tool_forces", "plot_wrinkling", "probe", "read_formed",
+        "run_case", "shear_at_flat", "shear_at_formed", "write_drape", "write_run_bundle",
+        "write_values"],
+    "fenicsx_drape.forming.tools": [
+        "Arc", "DistanceField", "HemisphereTools", "MeshedTool", "RevolvedTool",
+        "RigidMotion", "Segment", "TriangleSurface", "distance_field", "load_surface",
+        "write_tool_meshes"],
     "fenicsx_drape.materials": [
-        "BUILT_IN_LAWS", "ROLES", "FrictionLaw", "InterplyLaw", "MaterialLaw", "ShearLaw",
+        "BUILT_IN_LAWS", "FrictionLaw", "InterplyLaw", "MaterialLaw", "ROLES", "ShearLaw",
         "TowLaw", "build_law", "condition", "effect", "fields_of", "get_law", "parameter",
         "register_law", "registered_laws"],
-    "fenicsx_drape.measurements": ["Bundle", "BundleError", "Test", "load_bundle",
-                                   "write_bundle"],
+    "fenicsx_drape.measurements": [
+        "Bundle", "BundleError", "Test", "load_bundle", "write_bundle"],
     "fenicsx_drape.model": [
-        "PAPER_EFFECTS", "Model", "default_model", "default_parameters", "known_parameters",
+        "Model", "PAPER_EFFECTS", "default_model", "default_parameters", "known_parameters",
         "load_model", "load_plugin", "parameter_info"],
+    "fenicsx_drape.runs": [
+        "CACHE_ENV", "Deferred", "FULL_CELL_MM", "MEMORY_SIZE", "RunStore", "Runs",
+        "SCREEN_CELL_MM", "USER_OPTIONS", "WORKERS_ENV", "cached", "capped",
+        "cell_override", "cores", "current", "default_folder", "default_workers",
+        "describe", "execution", "execution_record", "executor", "form_many", "key_of",
+        "resolution", "runs_at_once", "runs_of", "solver_options", "spare", "stopped_at",
+        "together", "tool_forces"],
+    "fenicsx_drape.trust": [
+        "GEO_DENIED", "GEO_READABLE", "TRUST_ENV", "UntrustedCodeError", "add_trust_option",
+        "apply_trust_option", "check_geo", "geo_defines", "geo_problems", "require_trust",
+        "set_trusted", "trusted", "trusting"],
+    "fenicsx_drape.unitcell": [
+        "EFFECTIVE_RATE_FACTOR", "UnitCellCurve", "bias_diagonal_strain", "bias_extension",
+        "bias_extension_shear_force", "curves", "diagonal_response",
+        "effective_strain_rate", "picture_frame", "picture_frame_displacement",
+        "picture_frame_lock_mm", "picture_frame_shear_angle", "picture_frame_shear_force",
+        "tensile"],
 }
 
 
