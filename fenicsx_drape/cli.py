@@ -185,7 +185,7 @@ def load_bundle_reported(path):
     command that reads a bundle reads it through here. The case files its forming tests
     name are read and checked with it.
     """
-    from fenicsx_drape.forming.case.format import case_for_test
+    from fenicsx_drape.forming.case import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
 
     bundle = load_bundle(path, read_case=case_for_test)

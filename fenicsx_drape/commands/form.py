@@ -14,12 +14,13 @@ Example::
 ``double_dome``, ``square_box``: every folder of ``meshes/`` with a ``case.toml``). The
 outputs are listed in :mod:`fenicsx_drape.forming.running.outputs`; the same is one call in Python:
 ``form_case(out, load_case("hemisphere", cell_mm=5))``. Options given on the command line
-override the case file's values (:func:`~fenicsx_drape.forming.case.format.with_overrides`) before
-the case is checked. A net fitted to the blank (a cell other than the one asked, or a side
-left partly out) is said in a note; the paper's numbers are printed only for a run under the
-paper's conditions (any other run on its tools says what differs). A set-up that breaks a
-symmetry plane of the case (a turned ply, an offset blank or punch) is formed without that
-plane, and the command says so.
+override the case file's values
+(:func:`~fenicsx_drape.forming.case.overrides.with_overrides`) before the case is checked. A
+net fitted to the blank (a cell other than the one asked, or a side left partly out) is said
+in a note; the paper's numbers are printed only for a run under the paper's conditions (any
+other run on its tools says what differs). A set-up that breaks a symmetry plane of the case
+(a turned ply, an offset blank or punch) is formed without that plane, and the command says
+so.
 """
 
 from __future__ import annotations
@@ -115,7 +116,7 @@ def _offsets(args: argparse.Namespace) -> dict:
 def _note_full(setup: dict, planes) -> None:
     from mpi4py import MPI
 
-    from fenicsx_drape.forming.case.format import SETUP_OVERRIDES, broken_planes
+    from fenicsx_drape.forming.case import SETUP_OVERRIDES, broken_planes
 
     broken = sorted(broken_planes(setup) & set(planes))
     if broken and MPI.COMM_WORLD.rank == 0:
@@ -129,7 +130,7 @@ def _note_full(setup: dict, planes) -> None:
 def _case(args: argparse.Namespace):
     import dataclasses
 
-    from fenicsx_drape.forming.case.format import case_file, load_case
+    from fenicsx_drape.forming.case import case_file, load_case
 
     path = case_file(args.case)
     if path.suffix.lower() != ".toml":

@@ -45,7 +45,7 @@ sliding), and the folder ``shear_ply<k>.png``, ``wrinkling_ply<k>.png`` and ``in
 The paper's hemisphere (``drape form hemisphere``, ``meshes/hemisphere/case.toml``: tools that
 are all builtin) is a case like any other. ``summary.json`` says whether a run on its tools
 had the paper's conditions (``paper_conditions``, and ``paper_differences``: what differs,
-:func:`~fenicsx_drape.forming.paper.numbers.paper_differences`); only then does its folder
+:func:`~fenicsx_drape.forming.running.conditions.paper_differences`); only then does its folder
 hold ``paths.png`` (shear along the diagonal path and wrinkling along the normal path, the
 paper's Figs. 10-11, with the kinematic drape beside the FE result) and does ``drape form
 hemisphere`` print the run beside the paper's numbers
@@ -64,7 +64,7 @@ from typing import Any
 
 import numpy as np
 
-from fenicsx_drape.forming.case.format import FormingCase, case_dict, write_case
+from fenicsx_drape.forming.case import FormingCase, case_dict, write_case
 from fenicsx_drape.forming.running.plots import (
     plot_interply,
     plot_paths,
@@ -273,7 +273,7 @@ def case_bundle(run: FormingRun, friction: float, grid_mm: float | None = None,
 
     The test's keys (``duration_s``, ``holder_force_N``, ``travel_mm``, ``grid_mm``) repeat
     the case's values; ``case_file`` is relative to the bundle folder (write the case there
-    with :func:`~fenicsx_drape.forming.case.format.write_case`). μ is the condition
+    with :func:`~fenicsx_drape.forming.case.writing.write_case`). μ is the condition
     ``friction_coefficient``. ``grid_mm`` None: :func:`default_grid_mm` of the net's cell.
     """
     case = run.case
@@ -328,7 +328,7 @@ def net_fit(case: FormingCase, grid: FormedGrid) -> dict[str, Any]:
     """The net's own cell and how much of the blank its cells cover, with a note when fitted.
 
     A rectangle with the tows along its sides gets whole cells along each half of its x
-    side (:meth:`~fenicsx_drape.forming.case.format.BlankSpec.grid`): the cell may differ
+    side (:meth:`~fenicsx_drape.forming.case.spec.BlankSpec.grid`): the cell may differ
     from the one asked, and the y side keeps the whole cells that fit. Returns ``cell_mm``
     (the net's), ``net`` (``cell_asked_mm``, ``area_share``: the share of the blank's area
     the net's cells cover, and ``note`` when the cell changed or a rectangle's side was
@@ -407,7 +407,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
 
     Args:
         out_dir: Output folder (created).
-        case: The forming case (:func:`~fenicsx_drape.forming.case.format.load_case`).
+        case: The forming case (:func:`~fenicsx_drape.forming.case.reading.load_case`).
         model: The material model (default: the case's, else the paper's).
         options: Solver options of the truss.
         tools: Built tools by name replacing the case's (see :func:`run_case`).
@@ -453,7 +453,7 @@ def form_case(out_dir: str | os.PathLike, case: FormingCase, model=None, options
         result = partial.update({**net_fit(case, run.grid), **case_summary(run)})
         paper = is_paper_hemisphere(case)
         if paper:
-            from fenicsx_drape.forming.paper.numbers import paper_differences
+            from fenicsx_drape.forming.running.conditions import paper_differences
 
             result["paper_differences"] = paper_differences(result, model)
             result["paper_conditions"] = not result["paper_differences"]
@@ -666,7 +666,7 @@ def write_case_tools(run: FormingRun, folder: str | os.PathLike) -> list[Path]:
     """
     import meshio
 
-    from fenicsx_drape.forming.case.format import _builtin_tools
+    from fenicsx_drape.forming.case.spec import _builtin_tools
     from fenicsx_drape.provenance import atomic_write_bytes
 
     folder = Path(folder)
