@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.case.format import PlySpec, load_case
+from fenicsx_drape.forming.case import PlySpec, load_case
 from fenicsx_drape.forming.running import interply_maps, plot_interply, plot_shear, run_case
 
 SCRIPT = "__file__" in globals()

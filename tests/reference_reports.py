@@ -81,7 +81,7 @@ def report_of(case: Case) -> dict:
     the reference holds wherever the repository is.
     """
     from fenicsx_drape.diagnosis import diagnose
-    from fenicsx_drape.forming.case.format import case_for_test
+    from fenicsx_drape.forming.case import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
     from fenicsx_drape.provenance import json_text
@@ -98,7 +98,7 @@ def report_of(case: Case) -> dict:
 def make_bundles(names) -> None:
     """Write the made bundles (module doc) of the cases ``names`` with the project's simulator."""
     from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
-    from fenicsx_drape.forming.case.format import PlySpec, load_case, with_overrides
+    from fenicsx_drape.forming.case import PlySpec, load_case, with_overrides
     from fenicsx_drape.model import default_model
 
     model = default_model()

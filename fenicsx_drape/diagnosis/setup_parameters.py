@@ -16,7 +16,7 @@ The set-up stage (:mod:`~fenicsx_drape.diagnosis.setup_stage`) fits each paramet
 All start from the test's stated value (:func:`stated`: the case's, with the test's keys;
 offsets 0) and are shared by the bundle's forming tests. A set-up that breaks a symmetry
 plane of the case is formed without it (:func:`applied`;
-:func:`~fenicsx_drape.forming.case.format.with_overrides` drops the plane): the full or half
+:func:`~fenicsx_drape.forming.case.with_overrides` drops the plane): the full or half
 model is chosen by the set-up, not by the user. Internally a point ``p`` is δθ (deg) for a
 ply angle, [x, y] (mm) for an offset, the factor on the stated force for ``holder_force_N``
 and μ itself for ``mu`` (:func:`stated_point`); :func:`fitted_of` and :func:`sd_of` give it in the
@@ -36,7 +36,7 @@ import numpy as np
 from fenicsx_drape.diagnosis.kinds import is_formed
 from fenicsx_drape.diagnosis.kinds.forming import case_of, forming_case_of, moved, names_case
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case.format import FormingCase, broken_planes, with_overrides
+from fenicsx_drape.forming.case import FormingCase, broken_planes, with_overrides
 
 if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test

@@ -18,7 +18,7 @@ import numpy as np
 from fenicsx_drape.runs import FULL_CELL_MM, form_many
 
 if TYPE_CHECKING:
-    from fenicsx_drape.forming.case.format import FormingCase
+    from fenicsx_drape.forming.case import FormingCase
     from fenicsx_drape.measurements.bundle import Test
     from fenicsx_drape.model import Model
 
@@ -33,7 +33,7 @@ def synthetic_forming_test(model: Model, *, test_id: str = "hemisphere",
     ``grid_mm`` (default: the cell), with noise of ``sd_mm`` per coordinate written as the
     ``position_sd_mm`` column; the quarter grid, or the full sheet by symmetry.
     """
-    from fenicsx_drape.forming.case.format import load_case
+    from fenicsx_drape.forming.case import load_case
     from fenicsx_drape.forming.tools.shapes import HemisphereTools
     from fenicsx_drape.measurements.bundle import Test
 
@@ -96,7 +96,7 @@ def write_case_bundle(name: str, tests: Sequence[Test], folder: str | Path, *,
     Each test's case is written (with its geometry files) at its ``case`` path inside the
     folder; the tests that name no case are written as they are.
     """
-    from fenicsx_drape.forming.case.format import write_case
+    from fenicsx_drape.forming.case import write_case
     from fenicsx_drape.measurements.bundle import Bundle, write_bundle
 
     folder = Path(folder)

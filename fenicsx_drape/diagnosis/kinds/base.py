@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 if TYPE_CHECKING:
-    from fenicsx_drape.forming.case.format import FormingCase
+    from fenicsx_drape.forming.case import FormingCase
     from fenicsx_drape.forming.running.post import FormedGrid
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model

@@ -105,8 +105,8 @@ def _axes(formed: np.ndarray, reach, cell: float) -> str | None:
 
 def _off_tools(case, formed: np.ndarray) -> float:
     """The share of formed positions farther than a cell from every tool at the end."""
-    from fenicsx_drape.forming.case.format import build_tools
     from fenicsx_drape.forming.running.geometry import _distance
+    from fenicsx_drape.forming.tools.build import build_tools
 
     tools = build_tools(case)
     end = case.duration_s

@@ -29,7 +29,7 @@ from fenicsx_drape.diagnosis.kinds.base import FitHook, Region
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds.base import Comparison
-    from fenicsx_drape.forming.case.format import FormingCase
+    from fenicsx_drape.forming.case import FormingCase
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 

@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case.format import FormingCase, case_file, case_for_test, with_overrides
+from fenicsx_drape.forming.case import FormingCase, case_file, case_for_test, with_overrides
 from fenicsx_drape.runs import Deferred, cell_override, spare
 
 if TYPE_CHECKING:

@@ -11,7 +11,7 @@ positions of the nodes of a grid drawn on the flat sheet (its ``file``). The kin
   names its case file
   (``case = "part.toml"``) forms that case
   (:func:`~fenicsx_drape.forming.running.run.run_case`) with the test's keys as overrides
-  (the bundle loader applied them, :func:`~fenicsx_drape.forming.case.format.case_for_test`),
+  (the bundle loader applied them, :func:`~fenicsx_drape.forming.case.case_for_test`),
   in the case's frame. The modelled part (quarter, half or whole blank, by the case's
   symmetry planes) is compared as it is when the measured grid lies in it, else mirrored
   through the planes to the whole sheet (:func:`sheet_for`); it is interpolated bilinearly
@@ -64,7 +64,7 @@ from fenicsx_drape.runs import form_many, stopped_at
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds.base import Comparison
-    from fenicsx_drape.forming.case.format import FormingCase
+    from fenicsx_drape.forming.case import FormingCase
     from fenicsx_drape.forming.running.post import FormedGrid
     from fenicsx_drape.measurements.bundle import Test
     from fenicsx_drape.model import Model

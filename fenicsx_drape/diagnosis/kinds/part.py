@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
-from fenicsx_drape.forming.case.format import case_key
+from fenicsx_drape.forming.case import case_key
 
 if TYPE_CHECKING:
-    from fenicsx_drape.forming.case.format import FormingCase
+    from fenicsx_drape.forming.case import FormingCase
     from fenicsx_drape.measurements.bundle import Test
 
 # Regions of the part a case forms (module doc): by what a point touches at the end and, on
@@ -37,7 +37,7 @@ _built_tools: dict[str, dict[str, Any]] = {}
 
 def _tools_of(case: FormingCase) -> dict[str, Any]:
     """The built tools of a case (cached by the case's content: meshing costs seconds)."""
-    from fenicsx_drape.forming.case.format import build_tools
+    from fenicsx_drape.forming.tools.build import build_tools
 
     key = case_key(case)
     if key not in _built_tools:

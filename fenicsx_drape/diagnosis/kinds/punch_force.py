@@ -32,7 +32,7 @@ from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds.base import Comparison, Region
-    from fenicsx_drape.forming.case.format import FormingCase
+    from fenicsx_drape.forming.case import FormingCase
     from fenicsx_drape.forming.running.measure import SheetMesh
     from fenicsx_drape.forming.running.post import FormedGrid
     from fenicsx_drape.measurements.bundle import Test

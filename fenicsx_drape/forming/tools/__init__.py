@@ -5,7 +5,8 @@
 - :mod:`~fenicsx_drape.forming.tools.surfaces`: triangle surfaces from Gmsh, CAD and STL;
 - :mod:`~fenicsx_drape.forming.tools.distance`: the smooth signed distance to a surface;
 - :mod:`~fenicsx_drape.forming.tools.motion`: a tool's prescribed rigid motion;
-- :mod:`~fenicsx_drape.forming.tools.drawing`: the builtin tools drawn as meshes (pictures).
+- :mod:`~fenicsx_drape.forming.tools.drawing`: the builtin tools drawn as meshes (pictures);
+- :mod:`~fenicsx_drape.forming.tools.build`: a case's tools built from its tables.
 """
 
 import importlib
@@ -20,6 +21,7 @@ _PUBLIC = {
     "RigidMotion": "motion",
     "Segment": "shapes",
     "TriangleSurface": "surfaces",
+    "build_tools": "build",
     "distance_field": "distance",
     "load_surface": "surfaces",
     "write_tool_meshes": "drawing",
