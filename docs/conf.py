@@ -154,15 +154,36 @@ def api_reference():
             for package in public_packages():
                 module = importlib.import_module(package)
                 summary = (module.__doc__ or "").strip().splitlines()[0]
+                names = [n for n in module.__all__ if not n.startswith("__")]
+                code = [n for n in names if callable(getattr(module, n))]
+                data = [n for n in names if n not in code]  # constants: named, not summed up
                 lines += [f".. rubric:: {package}", "", summary, "", ".. autosummary::", ""]
-                lines += [f"   ~{target(module, name)}" for name in module.__all__
-                          if not name.startswith("__")]
+                lines += [f"   ~{target(module, name)}" for name in code]
                 lines.append("")
+                if data:
+                    lines += ["Constants: " + ", ".join(f"``{n}``" for n in data) + ".", ""]
             node = nodes.container()
             self.state.nested_parse(StringList(lines, "drape-api"), self.content_offset, node)
             return node.children
 
     return PublicApi
+
+
+def skip_reexported(app, what, name, obj, skip, options):
+    """Document each class and function once, in the module that defines it.
+
+    A module that re-exports another's names (an old path kept for a release) lists them in
+    its ``__all__``; documenting them there too would give one name two targets.
+    """
+    import inspect
+
+    module = app.env.temp_data.get("autodoc:module")
+    home = getattr(obj, "__module__", None)
+    if (what == "module" and module and isinstance(home, str) and home != module
+            and home.startswith("fenicsx_drape") and (inspect.isclass(obj)
+                                                      or inspect.isfunction(obj))):
+        return True
+    return None
 
 
 def setup(app):
@@ -171,3 +192,4 @@ def setup(app):
                 lambda app, what, name, obj, options, lines: escape_bars(lines), priority=900)
     app.add_directive("drape-commands", cli_reference())
     app.add_directive("drape-api", api_reference())
+    app.connect("autodoc-skip-member", skip_reexported)
