@@ -96,7 +96,16 @@ def toml_text(data: dict, *, comment: str = "",
     """
     import tomli_w
 
-    text = _inline_arrays(tomli_w.dumps(_toml_plain(data)))
+    plain = _toml_plain(data)
+    # Arrays of tables as [[name]] blocks, as the formats' pages show them (tomli_w writes
+    # short ones inline): each table dumped under its own header, which then says [[name]].
+    tables = {k: v for k, v in plain.items()
+              if isinstance(v, list) and v and all(isinstance(t, dict) for t in v)}
+    chunks = [tomli_w.dumps({k: v for k, v in plain.items() if k not in tables})]
+    for name, items in tables.items():
+        chunks += [re.sub(rf"^\[{re.escape(name)}\]$", f"[[{name}]]",
+                          tomli_w.dumps({name: item}), count=1, flags=re.M) for item in items]
+    text = _inline_arrays("\n".join(c.strip("\n") + "\n" for c in chunks if c.strip()))
     if notes:
         table, lines = "", []
         for line in text.splitlines():

@@ -136,8 +136,12 @@ def _diagnose(truth, baseline, candidates, seed, holder_force_N=133.0):
 
 
 @pytest.mark.slow
+@pytest.mark.bench  # make test checks the same on the demo's bundle (test_demos_diagnosis.py)
 @pytest.mark.skip_in_parallel
 def test_diagnose_names_hidden_tow_buckling_in_a_forming_bundle(dolfinx):
+    """Hidden tow buckling on the hemisphere's grid at 20 mm, 0.3 mm noise. ``make test`` makes
+    these checks on the forming diagnosis demo's report (the same part, cells and noise, one
+    more candidate: ``test_demos_diagnosis.py``)."""
     from fenicsx_drape.model import default_model
 
     report = _diagnose(default_model(), default_model().without_effects("tow_buckling"),

@@ -179,6 +179,7 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
 
 
 @pytest.mark.parallel
+@pytest.mark.compares_ranks
 @pytest.mark.slow
 def test_a_case_gives_the_same_sheet_on_any_number_of_ranks(tight_solver):
     case = octagon(("x",), cell_mm=30.0)

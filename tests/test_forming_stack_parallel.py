@@ -45,6 +45,7 @@ def _numbers(faces):
 
 
 @pytest.mark.parallel
+@pytest.mark.compares_ranks
 def test_a_stack_forms_alike_on_any_number_of_ranks(reference):
     run = run_case(load_case(CASE, **COARSE), comm=MPI.COMM_WORLD)
     assert run.stopped is None and reference.stopped is None

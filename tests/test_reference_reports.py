@@ -55,8 +55,10 @@ def test_differences_are_found_field_by_field():
         "report: keys ['b', 'a', 'e'], the reference ['a', 'b', 'e']"]
 
 
+# The bench cases (minutes of runs) get a longer time limit than the suite's.
 CASE_PARAMETERS = [pytest.param(name, id=name, marks=[pytest.mark.slow] + (
-    [pytest.mark.bench] if case.bench else [])) for name, case in CASES.items()]
+    [pytest.mark.bench, pytest.mark.timeout(1200)] if case.bench else []))
+    for name, case in CASES.items()]
 
 
 @pytest.mark.skip_in_parallel
