@@ -31,7 +31,7 @@ SEGMENTS = 72  # and turned about the axis in 5° steps (the sphere within 0.04 
 
 def meridian(profile, r_max: float, h_min: float) -> np.ndarray:
     """Points (r, h) along a tool's profile, about CHORD_MM apart (endless lines clipped)."""
-    from fenicsx_drape.forming.tools.shapes import Arc
+    from fenicsx_drape.forming.tools import Arc
 
     out = []
     for piece in profile:
@@ -76,8 +76,8 @@ def write_stl(triangles: np.ndarray, path: Path) -> Path:
 
 def stl_case(folder: Path) -> Path:
     """The octagon's case with its tools as STL files: the closed-form tools tessellated."""
-    from fenicsx_drape.forming.case.format import load_case
-    from fenicsx_drape.forming.tools.shapes import HemisphereTools
+    from fenicsx_drape.forming import load_case
+    from fenicsx_drape.forming.tools import HemisphereTools
 
     folder.mkdir(parents=True, exist_ok=True)
     text = CASE.read_text()
@@ -147,8 +147,8 @@ def make(out: Path, seed: int = SEED, measurements=None, truth_model=None, stl: 
     STL copy; ``overrides`` change the truth's case (its net, step, set-up).
     """
     from fenicsx_drape import runs
-    from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
-    from fenicsx_drape.forming.case.format import load_case, with_overrides
+    from fenicsx_drape.diagnosis import lab_tables, write_lab_bundle
+    from fenicsx_drape.forming import load_case, with_overrides
     from fenicsx_drape.model import default_model
 
     model = truth_model or default_model()

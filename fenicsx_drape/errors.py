@@ -5,6 +5,9 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 
+__all__ = ["DrapeInputError", "InputFileError", "ParameterError", "SolverError",
+           "did_you_mean", "likely_typo"]
+
 
 class DrapeInputError(ValueError):
     """Bad input from the user: a file, a line, a parameter or an option.

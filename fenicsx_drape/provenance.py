@@ -16,6 +16,9 @@ from typing import Any
 
 from fenicsx_drape import __version__
 
+__all__ = ["atomic_write_bytes", "atomic_write_text", "file_digest", "json_text", "run_record",
+           "save_figure", "toml_text", "write_json", "write_provenance"]
+
 _digests: dict[tuple, str] = {}  # file digests by (path, size, modification time)
 
 

@@ -129,7 +129,8 @@ def test_the_lab_pages_probe_example_runs_as_printed(tmp_path, monkeypatch, caps
     reading of them: a bundle of the probed values against the run gives 0."""
     pytest.importorskip("dolfinx")
     from fenicsx_drape.cli import load_bundle_reported
-    from fenicsx_drape.diagnosis import lab_kind
+    from fenicsx_drape.diagnosis.kinds import GRID, kind_of
+    from fenicsx_drape.diagnosis.kinds.lab import match
 
     shutil.copytree(ROOT / "demos" / "probe", tmp_path / "demos" / "probe")
     monkeypatch.chdir(tmp_path)
@@ -173,13 +174,12 @@ def test_the_lab_pages_probe_example_runs_as_printed(tmp_path, monkeypatch, caps
         "shear_sd_deg = 1.0\nposition_sd_mm = 0.3\n")
     grid = measure.read_formed(dd).grid
     for source in (bundle, dd / "bundle"):  # ... and the bundle drape form wrote
-        tests = [t for t in load_bundle_reported(source).tests if lab_kind.is_lab(t)]
-        assert sorted(lab_kind.measurement_of(t) for t in tests) == ["outline",
-                                                                     "shear_points"]
+        tests = [t for t in load_bundle_reported(source).tests if kind_of(t) is not GRID]
+        assert sorted(kind_of(t).name for t in tests) == ["outline", "shear_points"]
         for test in tests:
-            got = lab_kind.match(test, grid)
-            assert not got["unmatched"].any()
-            assert np.abs(got["values"] - lab_kind.measured(test)).max() < 1e-9
+            got = match(kind_of(test), test, grid)
+            assert not got.unmatched.any()
+            assert np.abs(got.values - kind_of(test).measured(test)).max() < 1e-9
     capsys.readouterr()
 
 
