@@ -13,7 +13,7 @@ import sys
 import time
 
 from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
-from fenicsx_drape.diagnosis.diagnose import diagnose
+from fenicsx_drape.diagnosis import diagnose
 from fenicsx_drape.model import Model, default_parameters
 
 rows = int(sys.argv[1]) if len(sys.argv) > 1 else 150

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from fenicsx_drape.calibration.fit import fit
+from fenicsx_drape.calibration import fit
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import default_model
 

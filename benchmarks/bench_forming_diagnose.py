@@ -17,8 +17,8 @@ cores), the forming runs it made, the verdict and the errors.
 import time
 
 from fenicsx_drape import runs
-from fenicsx_drape.diagnosis import forming_kind as fc
-from fenicsx_drape.diagnosis.diagnose import diagnose
+from fenicsx_drape.diagnosis import diagnose
+from fenicsx_drape.diagnosis.synthetic import synthetic_forming_test
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model
 
@@ -34,7 +34,7 @@ def main() -> None:
     }
     print(f"forming workers: {runs.default_workers()}; cells {runs.FULL_CELL_MM:g} mm", flush=True)
     for hidden, (truth, baseline) in cases.items():
-        test = fc.synthetic_forming_test(truth, sd_mm=0.3, seed=7)
+        test = synthetic_forming_test(truth, sd_mm=0.3, seed=7)
         runs.current().forget()
         start = time.perf_counter()
         report = diagnose(Bundle(name=f"hidden-{hidden}", tests=(test,)), baseline,

@@ -37,11 +37,10 @@ def main() -> None:
     args = parser.parse_args()
 
     from fenicsx_drape import runs
-    from fenicsx_drape.diagnosis import forming_kind as fc
-    from fenicsx_drape.diagnosis import lab_kind
-    from fenicsx_drape.diagnosis.compare import evaluate
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose, evaluate
+    from fenicsx_drape.diagnosis.kinds import lab as lab_kind
     from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
+    from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
     from fenicsx_drape.forming.case.format import case_for_test, load_case, with_overrides
     from fenicsx_drape.forming.running import measure
     from fenicsx_drape.measurements.bundle import load_bundle
@@ -87,8 +86,8 @@ def main() -> None:
         report = diagnose(bundle, baseline, candidates=["tow_buckling"])
         lab_s = time.perf_counter() - t
         runs_lab = runs.current().in_memory()
-        test = fc.synthetic_case_test(truth, case, sd_mm=0.3, seed=1, full=True)
-        fc.write_case_bundle("grid", [test], Path(tmp) / "grid")
+        test = synthetic_case_test(truth, case, sd_mm=0.3, seed=1, full=True)
+        write_case_bundle("grid", [test], Path(tmp) / "grid")
         grid_bundle = load_bundle(Path(tmp) / "grid", read_case=case_for_test)
         runs.current().forget()
         t = time.perf_counter()

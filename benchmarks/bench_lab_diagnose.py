@@ -23,9 +23,9 @@ import time
 from pathlib import Path
 
 from fenicsx_drape import runs
-from fenicsx_drape.diagnosis import forming_kind as fk
-from fenicsx_drape.diagnosis.diagnose import diagnose
+from fenicsx_drape.diagnosis import diagnose
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
+from fenicsx_drape.diagnosis.synthetic import synthetic_case_test
 from fenicsx_drape.forming.case.format import case_for_test, load_case, with_overrides
 from fenicsx_drape.measurements.bundle import Bundle, load_bundle
 from fenicsx_drape.model import default_model
@@ -43,7 +43,7 @@ def main() -> None:
     paper = default_model()
     stated = load_case(CASE, cell_mm=args.cell_mm, step_mm=args.step_mm)
     truth = with_overrides(stated, ply_angle_deg=args.ply_angle_deg)
-    grid_test = fk.synthetic_case_test(paper, truth, sd_mm=0.3, seed=2028, full=True)
+    grid_test = synthetic_case_test(paper, truth, sd_mm=0.3, seed=2028, full=True)
     grid = Bundle(name="grid", tests=(dataclasses.replace(grid_test, forming_case=stated,
                                                           case_keys={}),))
     (sheet,) = runs.form_many([(truth, paper)])

@@ -1,17 +1,24 @@
-"""Stacks of plies against one ply: wall time, Newton iterations and time per iteration.
+"""Stacks of plies against one ply: time, Newton and Krylov iterations, factorisation flops.
 
     ./drape exec python3 benchmarks/bench_laminates.py                       # the double dome
+    ./drape exec python3 benchmarks/bench_laminates.py --plies 1 2 4 8 --solver plies
+    ./drape exec python3 benchmarks/bench_laminates.py --plies 1 2 4 8 --orderings
     ./drape exec python3 benchmarks/bench_laminates.py --case hemisphere --cell-mm 20
 
-The case at its own net (quarter model), one rank: the single ply, then stacks of two and four
-plies, all at 0° (a turned ply breaks the quarter symmetry), the die's gap the stack's. Every
-line: plies, nodes, wall time, steps, cut-backs, Newton iterations (per step), time per
-iteration, the ratio of the wall time to the single ply's, the process's CPU time and its
-ratio (steadier than the wall time on a shared machine), the factorisation's flops (MUMPS's
-estimate, RINFOG(3)) and which bending Jacobian the size chose, and each ply's maximum shear. The
-machine's load average comes first. Every case's tools are built before its clock starts
-(a stack's die sits at the stack's gap, another tool than the single ply's): the times are
-the forming's.
+The case at its own net (quarter model), one rank: the single ply, then stacks of two, four
+and eight plies, all at 0° (a turned ply breaks the quarter symmetry), the die's gap the
+stack's, the pairs following the plies (the default). ``--solver`` chooses the stack's linear
+solve (``SolverOptions.stack_solver``: ``direct``, the default, one factorisation of the stack;
+``plies``, GMRES preconditioned by each ply's factor and the stack moving as one,
+fe/stack_solver.py). ``--orderings`` factors each run's last Jacobian again with each of
+MUMPS's orderings and prints its flops and factor size.
+
+Every line: plies, nodes, wall and CPU time and their ratios to the single ply's (CPU is the
+steadier figure on a shared machine), steps, cut-backs, Newton iterations, Krylov iterations,
+the flops of one Jacobian's factorisations (MUMPS's estimates, RINFOG(3): the whole stack's, or
+the sum of the plies' and the coarse one's) and each ply's maximum shear. The machine's load
+average comes first. Every case's tools are built before its clock starts (a stack's die sits
+at the stack's gap, another tool than the single ply's): the times are the forming's.
 """
 
 import argparse
@@ -21,40 +28,86 @@ import time
 
 import numpy as np
 
-from fenicsx_drape.forming.case.format import PlySpec, build_tools, load_case
-from fenicsx_drape.forming.running.run import run_case
+from fenicsx_drape.forming.case import PlySpec, load_case
+from fenicsx_drape.forming.running.run import case_model, forming_options, run_case
+from fenicsx_drape.forming.tools.build import build_tools
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--case", default="double_dome")
 parser.add_argument("--cell-mm", type=float, default=None)
 parser.add_argument("--duration-s", type=float, default=None)
+parser.add_argument("--plies", type=int, nargs="+", default=[1, 2, 4, 8])
+parser.add_argument("--solver", default="direct", choices=["plies", "direct"])
+parser.add_argument("--orderings", action="store_true",
+                    help="factor each stack's last Jacobian again with MUMPS's orderings")
 args = parser.parse_args()
+
+ORDERINGS = {"AMD": 0, "AMF": 2, "PORD": 4, "QAMD": 6}
+"""MUMPS's orderings (ICNTL(7)) in Debian's build (METIS and SCOTCH fall back to AMF)."""
+
+
+def ordering_flops(A) -> str:
+    """MUMPS's flops (RINFOG(3)) and its factor's entries (INFOG(29)) for each ordering."""
+    from petsc4py import PETSc
+
+    out = []
+    for name, code in ORDERINGS.items():
+        ksp = PETSc.KSP().create(A.getComm())
+        ksp.setOperators(A)
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType("lu")
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
+        F = pc.getFactorMatrix()
+        F.setMumpsIcntl(7, code)
+        ksp.setUp()
+        out.append(f"{name} {F.getMumpsRinfog(3) / 1e6:.1f} Mflop, "
+                   f"{F.getMumpsInfog(29) / 1e3:.0f} k entries")
+        ksp.destroy()
+    return "; ".join(out)
+
+
+def flops(problem) -> float:
+    """MUMPS's flops of the last factorisations of the problem's Jacobian (all its factors)."""
+    ksps = [problem.newton.snes.getKSP()]
+    pre = getattr(problem, "stack_preconditioner", None)
+    if pre is not None:
+        ksps = [*pre._solvers, pre._coarse_solver]
+    total = 0.0
+    for ksp in ksps:
+        factor = ksp.getPC().getFactorMatrix()
+        total += factor.getMumpsRinfog(3) if factor.getType() == "mumps" else float("nan")
+    return total
+
 
 base = load_case(args.case, cell_mm=args.cell_mm, duration_s=args.duration_s)
 run_case(load_case(args.case, cell_mm=30.0))  # JIT warm-up
-print(f"load average {os.getloadavg()[0]:.2f}; case {base.name}, cell {base.blank.cell_mm:g} mm")
+print(f"load average {os.getloadavg()[0]:.2f}; case {base.name}, cell {base.blank.cell_mm:g} mm, "
+      f"stack solver {args.solver}")
 single = cpu_single = None
-for angles in ((0.0,), (0.0, 0.0), (0.0, 0.0, 0.0, 0.0)):
+for n in args.plies:
     # The die's gap is the stack's thickness (the double dome's offset_mm, the builtin tools'
     # ply_thickness_mm): a die closing on one ply's gap would squeeze the stack.
-    gap = {k: 0.3 * len(angles) for k in ("offset_mm", "ply_thickness_mm")
+    gap = {k: 0.3 * n for k in ("offset_mm", "ply_thickness_mm")
            if any(k in t.params for t in base.tools)}
     case = load_case(args.case, cell_mm=args.cell_mm, duration_s=args.duration_s, **gap)
-    if len(angles) > 1:
-        case = dataclasses.replace(case, plies=tuple(PlySpec(a, 0.3) for a in angles))
+    if n > 1:
+        case = dataclasses.replace(case, plies=(PlySpec(0.0, 0.3),) * n)
     build_tools(case)  # kept in the process (a meshed tool is read once)
+    options = forming_options(case_model(case), stack=case.stack, stack_solver=args.solver)
     start, cpu = time.perf_counter(), time.process_time()
-    run = run_case(case)
+    run = run_case(case, options=options)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     single, cpu_single = single or wall, cpu_single or cpu
     grids = run.plies or [run.grid]
     shear = ", ".join(f"{np.nanmax(np.abs(g.shear_deg())):.1f}" for g in grids)
-    nodes = run.problem.num_owned
-    factor = run.problem.newton.snes.getKSP().getPC().getFactorMatrix()
-    flops = factor.getMumpsRinfog(3) if factor.getType() == "mumps" else float("nan")
-    print(f"{len(angles)} plies: {nodes} nodes, {wall:.1f} s, {run.steps} steps, "
-          f"{run.cutbacks} cut-backs, {run.iterations} Newton ({run.iterations / run.steps:.2f} "
-          f"per step), {1e3 * wall / run.iterations:.1f} ms per iteration, "
-          f"{wall / single:.2f}x the single ply; CPU {cpu:.1f} s, {cpu / cpu_single:.2f}x; "
-          f"{flops / 1e6:.1f} Mflop a factorisation ({run.problem.bending_jacobian}); "
-          f"max shear per ply {shear} deg")
+    krylov = sum(s.krylov_iterations for s in run.problem.steps)
+    print(f"{n} plies: {run.problem.num_owned} nodes, wall {wall:.1f} s ({wall / single:.2f}x), "
+          f"CPU {cpu:.1f} s ({cpu / cpu_single:.2f}x); {run.steps} steps, {run.cutbacks} "
+          f"cut-backs, {run.iterations} Newton ({run.iterations / run.steps:.2f} a step), "
+          f"{krylov} Krylov; {flops(run.problem) / 1e6:.1f} Mflop a Jacobian's factors "
+          f"({run.problem.bending_jacobian}); max shear per ply {shear} deg", flush=True)
+    if args.orderings:
+        print(f"    the last Jacobian's factor by ordering: {ordering_flops(run.problem._A)}",
+              flush=True)

@@ -34,8 +34,8 @@ from test_forming_case_diagnosis import write_case
 
 from fenicsx_drape import runs
 from fenicsx_drape.cli import main as drape
-from fenicsx_drape.diagnosis import forming_kind as fc
-from fenicsx_drape.diagnosis.diagnose import diagnose
+from fenicsx_drape.diagnosis import diagnose
+from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
 from fenicsx_drape.forming.case.format import case_for_test, load_case
 from fenicsx_drape.measurements.bundle import load_bundle
 from fenicsx_drape.model import default_model
@@ -73,8 +73,8 @@ def main() -> None:
     scratch = tempfile.TemporaryDirectory(prefix="bench_scale_")  # removed when it goes
     tmp = Path(scratch.name)
     case = load_case(write_case(tmp / "part"))
-    test = fc.synthetic_case_test(paper, case, sd_mm=0.3, seed=3, full=True)
-    fc.write_case_bundle("octagon", [test], tmp / "bundle")
+    test = synthetic_case_test(paper, case, sd_mm=0.3, seed=3, full=True)
+    write_case_bundle("octagon", [test], tmp / "bundle")
     bundle = load_bundle(tmp / "bundle", read_case=case_for_test)
     (tmp / "baseline.toml").write_text(
         "effects = [" + ", ".join(f'"{e}"' for e in baseline.effects) + "]\n")

@@ -25,9 +25,9 @@ import time
 from pathlib import Path
 
 from fenicsx_drape import runs
-from fenicsx_drape.diagnosis import forming_kind as fk
-from fenicsx_drape.diagnosis.diagnose import diagnose
-from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS
+from fenicsx_drape.diagnosis import diagnose
+from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS
+from fenicsx_drape.diagnosis.synthetic import synthetic_case_test
 from fenicsx_drape.forming.case.format import load_case, with_overrides
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model
@@ -48,7 +48,7 @@ def main() -> None:
     paper = default_model()
     stated = load_case(CASE, cell_mm=args.cell_mm, step_mm=args.step_mm)
     truth = with_overrides(stated, ply_angle_deg=args.ply_angle_deg)
-    test = fk.synthetic_case_test(paper, truth, sd_mm=0.3, seed=2028, full=True)
+    test = synthetic_case_test(paper, truth, sd_mm=0.3, seed=2028, full=True)
     bundle = Bundle(name="ply", tests=(dataclasses.replace(test, forming_case=stated,
                                                             case_keys={}),))
     print(f"double dome, cells {stated.blank.cell_mm:g} mm, steps {stated.step_mm:g} mm, "

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 from study_setup_diagnose import measured_test
 
-from fenicsx_drape.diagnosis.diagnose import setup_rules
-from fenicsx_drape.diagnosis.setup import fit_setup
+from fenicsx_drape.diagnosis.decision import setup_rules
+from fenicsx_drape.diagnosis.setup_stage import fit_setup
 from fenicsx_drape.forming.case.format import load_case
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model
@@ -33,7 +33,7 @@ from fenicsx_drape.model import default_model
 def fit(test, model) -> dict:
     bundle = Bundle(name="coverage", tests=(test,))
     stage = fit_setup(bundle, model, setup_rules(), parameters=["blank_offset_mm"])
-    (entry,) = stage["setup"]
+    (entry,) = stage.entries
     return entry
 
 

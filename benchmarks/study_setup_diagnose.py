@@ -44,9 +44,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.diagnosis import forming_kind as fk
-from fenicsx_drape.diagnosis.diagnose import diagnose
-from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS, setup_summary
+from fenicsx_drape.diagnosis import diagnose
+from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS
+from fenicsx_drape.diagnosis.setup_words import setup_summary
+from fenicsx_drape.diagnosis.synthetic import write_case_bundle
 from fenicsx_drape.forming.case.format import load_case, with_overrides
 from fenicsx_drape.forming.running.run import NODE_ATOL_N, forming_options, run_case
 from fenicsx_drape.measurements.bundle import Test, load_bundle
@@ -148,7 +149,7 @@ def main() -> None:
                      if mu_tool else paper)
             test = measured_test(stated, setup, truth, name.replace("+", "-"), args.seed)
             folder = Path(tmp) / name
-            fk.write_case_bundle(f"hidden-{name}", [test], folder,
+            write_case_bundle(f"hidden-{name}", [test], folder,
                                  comment="set-up study (benchmarks/study_setup_diagnose.py)")
             bundle = load_bundle(folder)
             start = time.perf_counter()

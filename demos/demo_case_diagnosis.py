@@ -43,11 +43,17 @@ import time
 from pathlib import Path
 
 from fenicsx_drape import runs
-from fenicsx_drape.diagnosis import forming_kind as fc
-from fenicsx_drape.diagnosis.compare import evaluate, write_compare
-from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
-from fenicsx_drape.forming.case.format import case_for_test, load_case
-from fenicsx_drape.measurements.bundle import load_bundle
+from fenicsx_drape.diagnosis import (
+    diagnose,
+    evaluate,
+    summary,
+    synthetic_case_test,
+    write_case_bundle,
+    write_compare,
+    write_diagnosis,
+)
+from fenicsx_drape.forming import case_for_test, load_case
+from fenicsx_drape.measurements import load_bundle
 from fenicsx_drape.model import default_model
 from fenicsx_drape.trust import set_trusted
 
@@ -79,8 +85,8 @@ print(f"case {case.name!r}: {case.description}")
 print(f"  blank {case.blank.outline}, cells {case.blank.cell_mm:g} mm, symmetry "
       f"{list(case.planes) or 'none'}, {len(case.blank.grid().nodes)} nodes; "
       f"travel {case.total_travel_mm:g} mm in {case.duration_s:g} s")
-test = fc.synthetic_case_test(truth, case, sd_mm=SD_MM, seed=2007, full=True)
-fc.write_case_bundle(f"{case.name}-hidden-{HIDDEN}", [test], out / "bundle",
+test = synthetic_case_test(truth, case, sd_mm=SD_MM, seed=2007, full=True)
+write_case_bundle(f"{case.name}-hidden-{HIDDEN}", [test], out / "bundle",
                      comment=f"demo: {case.name} formed with {HIDDEN}, {SD_MM} mm noise per "
                              "coordinate, whole blank")
 bundle = load_bundle(out / "bundle", read_case=case_for_test)

@@ -38,10 +38,16 @@
 import sys
 from pathlib import Path
 
-from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
-from fenicsx_drape.diagnosis.compare import compare, write_compare
-from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
-from fenicsx_drape.diagnosis.ledger import history, table
+from fenicsx_drape.calibration import bias_test, synthetic_bundle, tensile_test
+from fenicsx_drape.diagnosis import (
+    compare,
+    diagnose,
+    history,
+    history_table,
+    summary,
+    write_compare,
+    write_diagnosis,
+)
 from fenicsx_drape.model import Model, default_parameters
 
 # As a page of the docs the demo is a notebook run in demos/, without arguments.
@@ -152,7 +158,7 @@ print(f"v3 ({', '.join(v3.effects)}): normalised error {result.normalised:.2f}")
 # normalised error version by version against the noise floor (`history/history.png`).
 
 versions = history([out / d for d in ("v1", "v2", "v2-wide", "v3-wide")], out / "history")
-print(table(versions))
+print(history_table(versions))
 
 # From a run of this demo (fenicsx_drape 0.1.0, 3.7 min on a busy two-core machine): the user
 # law named against the catalogue's candidates (`diagnose-v2-plugin/candidates.png`), and the

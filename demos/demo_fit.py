@@ -24,9 +24,8 @@
 import sys
 from pathlib import Path
 
-from fenicsx_drape.calibration.fit import fit, write_fit
-from fenicsx_drape.calibration.sensitivity import format_table
-from fenicsx_drape.measurements.bundle import load_bundle
+from fenicsx_drape.calibration import fit, format_table, write_fit
+from fenicsx_drape.measurements import load_bundle
 from fenicsx_drape.model import default_model, default_parameters
 
 # -

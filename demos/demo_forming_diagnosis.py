@@ -38,11 +38,16 @@ import sys
 from pathlib import Path
 
 from fenicsx_drape import runs
-from fenicsx_drape.diagnosis import forming_kind as fc
-from fenicsx_drape.diagnosis.compare import evaluate, write_compare
-from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
-from fenicsx_drape.forming.case.format import case_for_test
-from fenicsx_drape.measurements.bundle import Bundle, load_bundle, write_bundle
+from fenicsx_drape.diagnosis import (
+    diagnose,
+    evaluate,
+    summary,
+    synthetic_forming_test,
+    write_compare,
+    write_diagnosis,
+)
+from fenicsx_drape.forming import case_for_test
+from fenicsx_drape.measurements import Bundle, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
 
 # As a page of the docs the demo is a notebook run in demos/, without arguments.
@@ -61,7 +66,7 @@ CANDIDATES = ["tow_buckling", "tool_friction", "shear_tension_coupling"]
 
 # +
 truth, baseline = default_model(), default_model().without_effects("tow_buckling")
-test = fc.synthetic_forming_test(truth, cell_mm=cell_mm, grid_mm=10.0, sd_mm=0.3, seed=2007)
+test = synthetic_forming_test(truth, cell_mm=cell_mm, grid_mm=10.0, sd_mm=0.3, seed=2007)
 write_bundle(Bundle(name="hemisphere-hidden-buckling", tests=(test,)), out / "bundle",
              comment="demo: formed with tow_buckling, 0.3 mm noise per coordinate")
 bundle = load_bundle(out / "bundle", read_case=case_for_test)

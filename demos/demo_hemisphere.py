@@ -67,7 +67,7 @@ if rank0:
 # them all are `demos/study_*.py`).
 
 if rank0:
-    from fenicsx_drape.forming.paper.numbers import paper_comparison
+    from fenicsx_drape.forming.paper import paper_comparison
 
     print(paper_comparison(summary))  # the kinematic drape's maximum shear included
 

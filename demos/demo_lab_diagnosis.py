@@ -44,11 +44,17 @@ import time
 from pathlib import Path
 
 from fenicsx_drape import runs
-from fenicsx_drape.diagnosis.compare import evaluate, write_compare
-from fenicsx_drape.diagnosis.diagnose import diagnose, summary, write_diagnosis
-from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
-from fenicsx_drape.forming.case.format import case_for_test, load_case, with_overrides
-from fenicsx_drape.measurements.bundle import load_bundle
+from fenicsx_drape.diagnosis import (
+    diagnose,
+    evaluate,
+    lab_tables,
+    summary,
+    write_compare,
+    write_diagnosis,
+    write_lab_bundle,
+)
+from fenicsx_drape.forming import case_for_test, load_case, with_overrides
+from fenicsx_drape.measurements import load_bundle
 from fenicsx_drape.model import default_model
 from fenicsx_drape.trust import set_trusted
 

@@ -32,10 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.case.format import PlySpec, load_case
-from fenicsx_drape.forming.running.outputs import interply_maps
-from fenicsx_drape.forming.running.plots import plot_interply, plot_shear
-from fenicsx_drape.forming.running.run import run_case
+from fenicsx_drape.forming.case import PlySpec, load_case
+from fenicsx_drape.forming.running import interply_maps, plot_interply, plot_shear, run_case
 
 SCRIPT = "__file__" in globals()
 args = sys.argv[1:] if SCRIPT else []

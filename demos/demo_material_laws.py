@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape import default_model, unitcell
-from fenicsx_drape.commands.curves import write_curves
+from fenicsx_drape.curves import write_curves
 from fenicsx_drape.model import Model, parameter_info
 
 # As a page of the docs the demo is a notebook run in demos/, without arguments.

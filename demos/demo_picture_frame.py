@@ -17,7 +17,7 @@
 # the vector graphics of the paper's Figs. 28, 38 and 40 (its `bundle.toml` says how). This
 # demo fits the truss model's shear law to them jointly and asks whether one parameter set
 # explains every lab, frame size and test kind, with the leave-one-group-out check of
-# `fenicsx_drape.calibration.consistency`. On the command line:
+# `fenicsx_drape.calibration.agreement`. On the command line:
 #
 # ```
 # ./drape fit demos/bundles/cao2008-plain-frames --model MODEL.toml --out DIR --consistency
@@ -31,9 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape import unitcell
-from fenicsx_drape.calibration.consistency import consistency, lab_of, size_of
-from fenicsx_drape.calibration.fit import fit, write_fit
-from fenicsx_drape.measurements.bundle import load_bundle
+from fenicsx_drape.calibration import consistency, fit, lab_of, size_of, write_fit
+from fenicsx_drape.measurements import load_bundle
 from fenicsx_drape.model import Model
 from fenicsx_drape.provenance import save_figure, write_json
 
@@ -137,7 +136,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from fenicsx_drape.calibration.features import shear_curve
+from fenicsx_drape.calibration import shear_curve
 
 fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
 for i, test in enumerate(bundle.of_kind("picture_frame")):

@@ -9,7 +9,7 @@
 
 from pathlib import Path
 
-from fenicsx_drape.calibration.synthetic import standard_tests, synthetic_bundle
+from fenicsx_drape.calibration import standard_tests, synthetic_bundle
 from fenicsx_drape.model import default_model
 
 NOISE_REL = 0.02  # noise standard deviation: 2 % of the peak force of each test

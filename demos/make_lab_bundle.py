@@ -31,7 +31,7 @@ SEGMENTS = 72  # and turned about the axis in 5° steps (the sphere within 0.04 
 
 def meridian(profile, r_max: float, h_min: float) -> np.ndarray:
     """Points (r, h) along a tool's profile, about CHORD_MM apart (endless lines clipped)."""
-    from fenicsx_drape.forming.tools.shapes import Arc
+    from fenicsx_drape.forming.tools import Arc
 
     out = []
     for piece in profile:
@@ -76,8 +76,8 @@ def write_stl(triangles: np.ndarray, path: Path) -> Path:
 
 def stl_case(folder: Path) -> Path:
     """The octagon's case with its tools as STL files: the closed-form tools tessellated."""
-    from fenicsx_drape.forming.case.format import load_case
-    from fenicsx_drape.forming.tools.shapes import HemisphereTools
+    from fenicsx_drape.forming import load_case
+    from fenicsx_drape.forming.tools import HemisphereTools
 
     folder.mkdir(parents=True, exist_ok=True)
     text = CASE.read_text()
@@ -106,6 +106,39 @@ def stl_case(folder: Path) -> Path:
     return folder / "case.toml"
 
 
+DOUBLE_DOME = ROOT / "meshes" / "double_dome"
+
+
+def stack_stl_case(folder: Path, angles=(0.0, 45.0), cell_mm: float = 20.0,
+                   interply: str = "mu_ply = 0.2") -> Path:
+    """A lab's stack case: the double dome's whole blank as a stack, its punch and die as STL.
+
+    The punch and die are the shipped double dome's surfaces (Gmsh, 3 mm), the die at the
+    stack's gap, written as binary STL; the holder stays the plate of ``holder.geo``. One
+    ``[[ply]]`` of 0.3 mm per angle, ``interply`` the ``[interply]`` table's text.
+    """
+    from fenicsx_drape.forming.case import load_case
+    from fenicsx_drape.forming.tools.build import build_tools
+
+    folder.mkdir(parents=True, exist_ok=True)
+    source = DOUBLE_DOME / "case.toml"
+    built = build_tools(load_case(source, offset_mm=0.3 * len(angles)))
+    text = source.read_text()
+    for name in ("punch", "die"):
+        surface = built[name].surface
+        write_stl(surface.points[surface.triangles], folder / f"{name}.stl")
+        start = text.index(f'name = "{name}"')
+        end = text.index("mesh_mm = 3.0", start) + len("mesh_mm = 3.0")
+        text = (text[:start] + f'name = "{name}"\nrole = "{name}"\ngeometry = "{name}.stl"'
+                + text[end:])
+    (folder / "holder.geo").write_text((DOUBLE_DOME / "holder.geo").read_text())
+    text = text.replace('symmetry = ["x", "y"]', "symmetry = []").replace(
+        "cell_mm = 10.0", f"cell_mm = {cell_mm:g}")
+    text += "".join(f"\n[[ply]]\nangle_deg = {a:g}\nthickness_mm = 0.3\n" for a in angles)
+    (folder / "case.toml").write_text(text + f"\n[interply]\n{interply}\n")
+    return folder / "case.toml"
+
+
 def make(out: Path, seed: int = SEED, measurements=None, truth_model=None, stl: bool = True,
          **overrides) -> Path:
     """Form the truth and write the lab bundle at ``out`` (the module doc).
@@ -114,8 +147,8 @@ def make(out: Path, seed: int = SEED, measurements=None, truth_model=None, stl: 
     STL copy; ``overrides`` change the truth's case (its net, step, set-up).
     """
     from fenicsx_drape import runs
-    from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
-    from fenicsx_drape.forming.case.format import load_case, with_overrides
+    from fenicsx_drape.diagnosis import lab_tables, write_lab_bundle
+    from fenicsx_drape.forming import load_case, with_overrides
     from fenicsx_drape.model import default_model
 
     model = truth_model or default_model()

@@ -11,8 +11,8 @@
 import argparse
 from pathlib import Path
 
-from fenicsx_drape.forming.paper import numbers as paper
-from fenicsx_drape.forming.paper.studies import (
+from fenicsx_drape.forming import paper
+from fenicsx_drape.forming.paper import (
     DURATIONS_S,
     READINGS,
     Variant,

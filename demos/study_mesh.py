@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.paper import numbers as paper
-from fenicsx_drape.forming.paper.studies import (
+from fenicsx_drape.forming import paper
+from fenicsx_drape.forming.paper import (
     MESH_CELLS_MM,
     READINGS,
     Variant,

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.paper import numbers as paper
-from fenicsx_drape.forming.paper.studies import (
+from fenicsx_drape.forming import paper
+from fenicsx_drape.forming.paper import (
     DURATIONS_S,
     FORCES_N,
     MESH_CELLS_MM,
@@ -38,8 +38,8 @@ from fenicsx_drape.forming.paper.studies import (
     run_variants,
     write_rows,
 )
-from fenicsx_drape.forming.running.kinematic import kinematic_drape
-from fenicsx_drape.forming.tools.shapes import HemisphereTools
+from fenicsx_drape.forming.running import kinematic_drape
+from fenicsx_drape.forming.tools import HemisphereTools
 from fenicsx_drape.model import default_model
 from fenicsx_drape.provenance import atomic_write_text, write_provenance
 

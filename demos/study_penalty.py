@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape.forming import load_case
-from fenicsx_drape.forming.paper.studies import sweep, write_rows
+from fenicsx_drape.forming.paper import sweep, write_rows
 from fenicsx_drape.provenance import save_figure, write_provenance
 
 parser = argparse.ArgumentParser(description=__doc__)

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.paper.studies import (
+from fenicsx_drape.forming.paper import (
     READINGS,
     Variant,
     default_options,
@@ -39,7 +39,7 @@ from fenicsx_drape.forming.paper.studies import (
     run_variants,
     write_rows,
 )
-from fenicsx_drape.forming.tools.shapes import HemisphereTools
+from fenicsx_drape.forming.tools import HemisphereTools
 from fenicsx_drape.model import default_model
 from fenicsx_drape.provenance import atomic_write_text, write_provenance
 

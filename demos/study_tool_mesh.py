@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from fenicsx_drape.forming import load_case, run_case
-from fenicsx_drape.forming.case.format import build_tools
+from fenicsx_drape.forming.tools import build_tools
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--out", type=Path, default=Path("results/study_tool_mesh"))

@@ -189,7 +189,7 @@ mesh_mm = 10.0
 
 # +
 from fenicsx_drape.forming import load_case
-from fenicsx_drape.forming.tools.surfaces import load_surface
+from fenicsx_drape.forming.tools import load_surface
 
 
 def longest_edge(surface):

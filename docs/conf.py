@@ -114,8 +114,82 @@ def cli_reference():
     return CommandLine
 
 
+def public_packages() -> list[str]:
+    """The packages (and top-level modules) that declare their public names (``__all__``)."""
+    import importlib
+    import pkgutil
+
+    names = ["fenicsx_drape"]
+    for info in pkgutil.walk_packages(fenicsx_drape.__path__, "fenicsx_drape."):
+        if info.ispkg or info.name.count(".") == 1:
+            module = importlib.import_module(info.name)
+            if "__all__" in vars(module):
+                names.append(info.name)
+    return names
+
+
+def api_reference():
+    """A directive listing each package's public names (its ``__all__``), with their summaries.
+
+    A heading a package, its first docstring line, then an autosummary table of its
+    ``__all__``: each name links to where it is defined (the module pages below).
+    """
+    import importlib
+
+    from docutils import nodes
+    from docutils.statemachine import StringList
+    from sphinx.util.docutils import SphinxDirective
+
+    def target(module, name: str) -> str:
+        obj = getattr(module, name)
+        home = getattr(obj, "__module__", None)
+        if (callable(obj) and isinstance(home, str) and home.startswith("fenicsx_drape")
+                and hasattr(obj, "__qualname__")):
+            return f"{home}.{obj.__qualname__}"
+        return f"{module.__name__}.{name}"
+
+    class PublicApi(SphinxDirective):
+        def run(self):
+            lines = []
+            for package in public_packages():
+                module = importlib.import_module(package)
+                summary = (module.__doc__ or "").strip().splitlines()[0]
+                names = [n for n in module.__all__ if not n.startswith("__")]
+                code = [n for n in names if callable(getattr(module, n))]
+                data = [n for n in names if n not in code]  # constants: named, not summed up
+                lines += [f".. rubric:: {package}", "", summary, "", ".. autosummary::", ""]
+                lines += [f"   ~{target(module, name)}" for name in code]
+                lines.append("")
+                if data:
+                    lines += ["Constants: " + ", ".join(f"``{n}``" for n in data) + ".", ""]
+            node = nodes.container()
+            self.state.nested_parse(StringList(lines, "drape-api"), self.content_offset, node)
+            return node.children
+
+    return PublicApi
+
+
+def skip_reexported(app, what, name, obj, skip, options):
+    """Document each class and function once, in the module that defines it.
+
+    A module that re-exports another's names (an old path kept for a release) lists them in
+    its ``__all__``; documenting them there too would give one name two targets.
+    """
+    import inspect
+
+    module = app.env.temp_data.get("autodoc:module")
+    home = getattr(obj, "__module__", None)
+    if (what == "module" and module and isinstance(home, str) and home != module
+            and home.startswith("fenicsx_drape") and (inspect.isclass(obj)
+                                                      or inspect.isfunction(obj))):
+        return True
+    return None
+
+
 def setup(app):
-    """Run :func:`escape_bars` on the docstrings; add the ``drape-commands`` directive."""
+    """Run :func:`escape_bars` on the docstrings; add ``drape-commands`` and ``drape-api``."""
     app.connect("autodoc-process-docstring",
                 lambda app, what, name, obj, options, lines: escape_bars(lines), priority=900)
     app.add_directive("drape-commands", cli_reference())
+    app.add_directive("drape-api", api_reference())
+    app.connect("autodoc-skip-member", skip_reexported)

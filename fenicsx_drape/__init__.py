@@ -9,9 +9,8 @@ DOLFINx >= 0.10 and is imported only when used.
 __version__ = "0.1.0"
 
 # The public API, imported on first use so that ``drape --help`` stays fast and the NumPy
-# parts work without DOLFINx. ``fit``, ``compare`` and ``diagnose`` are modules of the same
-# names: call them as ``from fenicsx_drape.calibration.fit import fit`` (a package attribute
-# would be replaced by the submodule on its first import).
+# parts work without DOLFINx. Each package exports its own (``from fenicsx_drape.calibration
+# import fit``, ``from fenicsx_drape.diagnosis import compare, diagnose``).
 _LAZY = {
     "Model": "fenicsx_drape.model",
     "default_model": "fenicsx_drape.model",

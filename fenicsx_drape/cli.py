@@ -32,6 +32,7 @@ COMMANDS: dict[str, str] = {
     "diagnose": "find which physical effect a model is missing (REPORT.json contract)",
     "history": "the ledger of model versions and their errors",
     "form": "run a forming case (case.toml, or hemisphere): fields, pictures, a bundle",
+    "probe": "the model's shear, positions and draw-in at a lab's points, from drape form",
     "drape": "kinematic (pin-jointed net) drape of a case's formed surface",
     "mesh": "build a truss mesh of the woven sheet with Gmsh and write it",
 }
@@ -184,7 +185,7 @@ def load_bundle_reported(path):
     command that reads a bundle reads it through here. The case files its forming tests
     name are read and checked with it.
     """
-    from fenicsx_drape.forming.case.format import case_for_test
+    from fenicsx_drape.forming.case import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
 
     bundle = load_bundle(path, read_case=case_for_test)

@@ -301,21 +301,18 @@ class Model:
         """
         if self.n_sets is not None:
             raise ValueError("a model with arrays of parameter sets has no single MODEL.toml")
-        plugins = [str(_relative(p, relative_to)) for p in self.plugins]
-        lines = ["# fenicsx_drape model (MODEL.toml)",
-                 f"effects = {_toml_list(self.effects)}"]
-        if plugins:
-            lines.append(f"plugins = {_toml_list(plugins)}")
-        lines += ["", "[parameters]"]
-        width = max(len(n) for n in self.parameters)
-        for name, value in self.parameters.items():
-            unit = _unit(name)
-            lines.append(f"{name:<{width}} = {value!r}" + (f"  # {unit}" if unit else ""))
+        from fenicsx_drape.provenance import toml_text
+
+        data: dict = {"effects": list(self.effects)}
+        if self.plugins:
+            data["plugins"] = [str(_relative(p, relative_to)) for p in self.plugins]
+        data["parameters"] = {n: float(v) for n, v in self.parameters.items()}
         if self.fixed:
-            lines += ["", "[fit]", f"fixed = {_toml_list(self.fixed)}"]
+            data["fit"] = {"fixed": list(self.fixed)}
         if self.noise:
-            lines += ["", "[noise]"] + [f"{k} = {v!r}" for k, v in self.noise.items()]
-        return "\n".join(lines) + "\n"
+            data["noise"] = dict(self.noise)
+        units = {("parameters", n): _unit(n) for n in self.parameters if _unit(n)}
+        return toml_text(data, comment="fenicsx_drape model (MODEL.toml)", notes=units)
 
 
 def _unit(name: str) -> str:
@@ -332,11 +329,6 @@ def _relative(path: Path, folder: str | Path | None) -> Path:
         return path.relative_to(Path(folder).resolve())
     except ValueError:
         return path
-
-
-def _toml_list(items: Iterable[str]) -> str:
-    return "[" + ", ".join('"' + str(i).replace("\\", "\\\\").replace('"', '\\"') + '"'
-                           for i in items) + "]"
 
 
 def default_model() -> Model:

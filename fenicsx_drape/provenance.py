@@ -8,12 +8,16 @@ import json
 import math
 import os
 import platform
+import re
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
 from fenicsx_drape import __version__
+
+__all__ = ["atomic_write_bytes", "atomic_write_text", "file_digest", "json_text", "run_record",
+           "save_figure", "toml_text", "write_json", "write_provenance"]
 
 _digests: dict[tuple, str] = {}  # file digests by (path, size, modification time)
 
@@ -76,6 +80,81 @@ def json_text(obj: Any, *, indent: int | None = 2, sort_keys: bool = False) -> s
 def write_json(path: str | os.PathLike, obj: Any) -> Path:
     """Write ``obj`` as indented, valid JSON atomically (:func:`json_text`)."""
     return atomic_write_text(path, json_text(obj) + "\n")
+
+
+def toml_text(data: dict, *, comment: str = "",
+              notes: dict[tuple[str, str], str] | None = None) -> str:
+    """``data`` as TOML text (the one writer of the project's TOML files: cases, bundles, models).
+
+    Written by ``tomli_w``; NumPy values become Python ones, paths strings.
+
+    Args:
+        data: Tables as dicts (a list of dicts is an array of tables, ``[[test]]``).
+        comment: Lines written first as ``#`` comments.
+        notes: ``{(table, key): text}``: ``# text`` after that key's line (e.g. a unit);
+            ``table`` is the dotted table name as in its header, ``""`` at the top.
+    """
+    import tomli_w
+
+    plain = _toml_plain(data)
+    # Arrays of tables as [[name]] blocks, as the formats' pages show them (tomli_w writes
+    # short ones inline): each table dumped under its own header, which then says [[name]].
+    tables = {k: v for k, v in plain.items()
+              if isinstance(v, list) and v and all(isinstance(t, dict) for t in v)}
+    chunks = [tomli_w.dumps({k: v for k, v in plain.items() if k not in tables})]
+    for name, items in tables.items():
+        chunks += [re.sub(rf"^\[{re.escape(name)}\]$", f"[[{name}]]",
+                          tomli_w.dumps({name: item}), count=1, flags=re.M) for item in items]
+    text = _inline_arrays("\n".join(c.strip("\n") + "\n" for c in chunks if c.strip()))
+    if notes:
+        table, lines = "", []
+        for line in text.splitlines():
+            if m := re.match(r"^\[\[?([^\]]+)\]\]?$", line):
+                table = m.group(1)
+            elif (m := re.match(r"^([A-Za-z0-9_-]+) = ", line)) and (table, m.group(1)) in notes:
+                line += f"  # {notes[table, m.group(1)]}"
+            lines.append(line)
+        text = "\n".join(lines) + "\n"
+    return "".join(f"# {line}\n" for line in comment.splitlines()) + text
+
+
+# An array of scalars as ``tomli_w`` writes it: one item a line (no brackets in the items).
+_ARRAY = re.compile(r"\[\n((?:[ ]+[^\n\[\]{}]+,\n)+)[ ]*\]")
+
+
+def _inline_arrays(text: str) -> str:
+    """Arrays of scalars on one line (``size_mm = [300.0, 200.0]``) where it fits 100 columns.
+
+    ``tomli_w`` writes every array one item a line; the innermost arrays are joined first, so
+    that a list of points becomes one point a line.
+    """
+    def join(m: re.Match) -> str:
+        items = [line.strip().removesuffix(",") for line in m.group(1).splitlines()]
+        inline = "[" + ", ".join(items) + "]"
+        start = text.rfind("\n", 0, m.start()) + 1
+        end = text.find("\n", m.end())
+        rest = text[m.end():end if end >= 0 else len(text)]
+        return inline if len(text[start:m.start()]) + len(inline) + len(rest) <= 100 else \
+            m.group(0)
+
+    while True:
+        joined = _ARRAY.sub(join, text)
+        if joined == text:
+            return joined
+        text = joined
+
+
+def _toml_plain(obj: Any) -> Any:
+    """Plain TOML values: NumPy scalars and arrays as Python ones, paths as strings."""
+    if isinstance(obj, dict):
+        return {str(k): _toml_plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_toml_plain(v) for v in obj]
+    if isinstance(obj, Path):
+        return str(obj)
+    if hasattr(obj, "tolist"):
+        return _toml_plain(obj.tolist())
+    return obj
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 150) -> Path:

@@ -24,6 +24,10 @@ from pathlib import Path
 
 from fenicsx_drape.errors import DrapeInputError
 
+__all__ = ["GEO_DENIED", "GEO_READABLE", "TRUST_ENV", "UntrustedCodeError", "add_trust_option",
+           "apply_trust_option", "check_geo", "geo_defines", "geo_problems", "require_trust",
+           "set_trusted", "trusted", "trusting"]
+
 TRUST_ENV = "DRAPE_TRUST"
 
 

@@ -76,6 +76,23 @@ from fenicsx_drape.effects import shear_tension_factor
 from fenicsx_drape.errors import DrapeInputError, SolverError
 from fenicsx_drape.model import Model
 
+__all__ = [
+    "EFFECTIVE_RATE_FACTOR",
+    "UnitCellCurve",
+    "bias_diagonal_strain",
+    "bias_extension",
+    "bias_extension_shear_force",
+    "curves",
+    "diagonal_response",
+    "effective_strain_rate",
+    "picture_frame",
+    "picture_frame_displacement",
+    "picture_frame_lock_mm",
+    "picture_frame_shear_angle",
+    "picture_frame_shear_force",
+    "tensile",
+]
+
 EFFECTIVE_RATE_FACTOR = (3.0 * math.sqrt(2.0) + 5.0) / 8.0
 """The factor of eq. 23, 1.1553."""
 

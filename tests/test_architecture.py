@@ -49,11 +49,13 @@ LAYER_OF = (
     ("fenicsx_drape.effects", "model"),
     ("fenicsx_drape.model", "model"),
     ("fenicsx_drape.unitcell", "model"),
+    ("fenicsx_drape.curves", "model"),
     ("fenicsx_drape.nodal", "model"),
     ("fenicsx_drape.provenance", "provenance"),
     ("fenicsx_drape.errors", "base"),
     ("fenicsx_drape.trust", "base"),
     ("fenicsx_drape.limits", "base"),
+    ("fenicsx_drape._moved", "base"),
     ("fenicsx_drape", "base"),
 )
 
@@ -304,7 +306,7 @@ def test_the_walk_sees_the_package(graph):
     edges, _, _ = graph
     # a module-level, a function-level and a TYPE_CHECKING import of the real package
     assert "fenicsx_drape.fe.stepping" in edges["fenicsx_drape.fe.solver"]
-    assert "fenicsx_drape.calibration.fit" in edges["fenicsx_drape.diagnosis.coupon_kind"]
+    assert "fenicsx_drape.calibration.fitting" in edges["fenicsx_drape.diagnosis.kinds.coupon"]
     assert "fenicsx_drape.measurements.bundle" in edges["fenicsx_drape.diagnosis.kinds"]
     assert len(edges) > 60 and sum(map(len, edges.values())) > 150
     assert all(layer(m) for m in edges)  # every module is in a layer
@@ -380,10 +382,10 @@ def test_the_old_solver_stepping_circle_would_be_found(graph):
     injected = {k: set(v) for k, v in edges.items()}
     injected["fenicsx_drape.fe.stepping"].add("fenicsx_drape.fe.solver")  # before 4c390df
     assert ["fenicsx_drape.fe.solver", "fenicsx_drape.fe.stepping"] in cycles(injected)
-    # and the forming kind importing compare back (compare holds the table of kinds)
+    # and the grid kind importing compare back (compare reads the table of kinds)
     injected = {k: set(v) for k, v in edges.items()}
-    injected["fenicsx_drape.diagnosis.forming_kind"].add("fenicsx_drape.diagnosis.compare")
-    assert any({"fenicsx_drape.diagnosis.compare", "fenicsx_drape.diagnosis.forming_kind"}
+    injected["fenicsx_drape.diagnosis.kinds.grid"].add("fenicsx_drape.diagnosis.comparison")
+    assert any({"fenicsx_drape.diagnosis.comparison", "fenicsx_drape.diagnosis.kinds.grid"}
                <= set(c) for c in cycles(injected))
 
 
@@ -393,24 +395,24 @@ def test_layer_violations_are_found(graph):
     injected["fenicsx_drape.materials.tow"].add("fenicsx_drape.fe.grid")
     injected["fenicsx_drape.fe.output"].add("fenicsx_drape.measurements.bundle")
     injected["fenicsx_drape.measurements.bundle"].add("fenicsx_drape.forming.running.post")
-    injected["fenicsx_drape.forming.running.outputs"].add("fenicsx_drape.calibration.fit")
-    injected["fenicsx_drape.calibration.fit"].add("fenicsx_drape.diagnosis.compare")
+    injected["fenicsx_drape.forming.running.outputs"].add("fenicsx_drape.calibration.fitting")
+    injected["fenicsx_drape.calibration.fitting"].add("fenicsx_drape.diagnosis.comparison")
     injected["fenicsx_drape.model"].add("fenicsx_drape.commands.fit")
-    injected["fenicsx_drape.runs.runner"].add("fenicsx_drape.diagnosis.compare")
+    injected["fenicsx_drape.runs.runner"].add("fenicsx_drape.diagnosis.comparison")
     injected["fenicsx_drape.runs.store"].add("fenicsx_drape.calibration.fit")
     injected["fenicsx_drape.forming.running.run"].add("fenicsx_drape.runs.runner")
     assert layer_violations(injected) == [
-        "fenicsx_drape.calibration.fit (calibration) imports fenicsx_drape.diagnosis.compare "
-        "(diagnosis)",
+        "fenicsx_drape.calibration.fitting (calibration) imports "
+        "fenicsx_drape.diagnosis.comparison (diagnosis)",
         "fenicsx_drape.fe.output (fe) imports fenicsx_drape.measurements.bundle (measurements)",
-        "fenicsx_drape.forming.running.outputs (forming) imports fenicsx_drape.calibration.fit "
+        "fenicsx_drape.forming.running.outputs (forming) imports fenicsx_drape.calibration.fitting "
         "(calibration)",
         "fenicsx_drape.forming.running.run (forming) imports fenicsx_drape.runs.runner (runs)",
         "fenicsx_drape.materials.tow (materials) imports fenicsx_drape.fe.grid (fe)",
         "fenicsx_drape.measurements.bundle (measurements) imports "
         "fenicsx_drape.forming.running.post (forming)",
         "fenicsx_drape.model (model) imports fenicsx_drape.commands.fit (cli)",
-        "fenicsx_drape.runs.runner (runs) imports fenicsx_drape.diagnosis.compare (diagnosis)",
+        "fenicsx_drape.runs.runner (runs) imports fenicsx_drape.diagnosis.comparison (diagnosis)",
         "fenicsx_drape.runs.store (runs) imports fenicsx_drape.calibration.fit (calibration)",
     ]
 

@@ -188,9 +188,12 @@ def test_bad_toml(bundle_dir, old, new, phrase):
     assert len(err.problems) == 1
 
 
-def test_missing_table_file(bundle_dir):
-    (bundle_dir / "bundle.toml").write_text(TOML.replace("bias_10.csv", "missing.csv"))
-    expect(bundle_dir, "missing.csv", 0, "does not exist")
+def test_missing_table_file_is_named_at_its_key(bundle_dir):
+    text = TOML.replace("bias_10.csv", "missing.csv")
+    (bundle_dir / "bundle.toml").write_text(text)
+    err = expect(bundle_dir, "bundle.toml", line_of(text, 'file = "missing.csv"'),
+                 "file = 'missing.csv': no such file", str(bundle_dir / "missing.csv"))
+    assert ":0:" not in str(err)
 
 
 def test_toml_syntax_error(bundle_dir):

@@ -16,6 +16,7 @@ MESHES = Path(__file__).resolve().parents[1] / "meshes"
 
 
 @pytest.mark.parallel
+@pytest.mark.compares_ranks
 @pytest.mark.slow
 @pytest.mark.parametrize("case_file", ["double_dome/case.toml", "square_box/case.toml"])
 def test_serial_and_parallel_runs_agree(case_file, tight_solver):

@@ -8,16 +8,10 @@ import pytest
 
 from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
 from fenicsx_drape.cli import main
-from fenicsx_drape.diagnosis.compare import (
-    Comparison,
-    evaluate,
-    locate,
-    normalised_error,
-    trends,
-    where,
-)
-from fenicsx_drape.diagnosis.coupon_kind import _knees, _loading_phases
+from fenicsx_drape.diagnosis import evaluate
+from fenicsx_drape.diagnosis.comparison import Comparison, locate, normalised_error, trends, where
 from fenicsx_drape.diagnosis.kinds import Region
+from fenicsx_drape.diagnosis.kinds.coupon import _knees, _loading_phases
 from fenicsx_drape.measurements.noise import noise_from_sd, noise_from_second_differences
 from fenicsx_drape.model import Model, default_parameters, load_model
 

@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from fenicsx_drape.calibration.consistency import consistency, groups
-from fenicsx_drape.calibration.fit import fit
+from fenicsx_drape.calibration import consistency, fit
+from fenicsx_drape.calibration.agreement import groups
 from fenicsx_drape.calibration.synthetic import bias_test, picture_frame_test, synthetic_bundle
 from fenicsx_drape.model import Model
 
@@ -98,7 +98,7 @@ def test_command_line(tmp_path):
 def test_diagnosis_tells_a_lab_offset_from_missing_physics():
     """diagnose runs the check when a bundle has several labs: lab C's offset is named in
     the conclusion instead of a call for new physics (about 20 s)."""
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
 
     report = diagnose(_bundle(offset=1.4), Model(DRY))
     assert report["consistency"]["verdict"] == "lab_offset"

@@ -10,15 +10,11 @@ import pytest
 
 from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
 from fenicsx_drape.cli import main
-from fenicsx_drape.diagnosis.diagnose import (
-    CONTRACT,
-    EVIDENCE_THRESHOLD,
-    _without_rows,
-    candidate_names,
-    diagnose,
-    make_folds,
-    rank,
-)
+from fenicsx_drape.diagnosis import diagnose
+from fenicsx_drape.diagnosis.decision import EVIDENCE_THRESHOLD, rank
+from fenicsx_drape.diagnosis.folds import folds_of, without_rows
+from fenicsx_drape.diagnosis.refits import candidate_names
+from fenicsx_drape.diagnosis.report import CONTRACT
 from fenicsx_drape.effects import EFFECTS
 from fenicsx_drape.model import Model, default_parameters
 
@@ -41,7 +37,7 @@ def small_tests(speeds=(10.0, 40.0, 160.0)):
 
 def test_folds_predict_every_row_once():
     bundle = synthetic_bundle(Model(COUPON), small_tests(), noise_rel=0.02, seed=0)
-    folds, scheme = make_folds(bundle)
+    folds, scheme = folds_of(bundle)
     assert "leave-one-test-out over the 3 bias_extension tests" in scheme
     assert "tensile" in scheme and "interleaved" in scheme
     for test in bundle.tests:
@@ -63,7 +59,7 @@ def test_held_out_rows_get_infinite_sd_and_others_keep_their_weight():
     force = np.linspace(0, 10, 300) + rng.normal(0, 0.25, 300)
     test = dataclasses.replace(test, columns={**test.columns, "force_N": force})
     rows = np.arange(300) % 3 == 1
-    held = _without_rows(test, rows)
+    held = without_rows(test, rows)
     assert np.all(held.force_sd_N[rows] == np.inf)
     # Without force_sd_N, the other rows get the model-free noise estimate.
     assert np.all(held.force_sd_N[~rows] == held.force_sd_N[0])
@@ -72,13 +68,18 @@ def test_held_out_rows_get_infinite_sd_and_others_keep_their_weight():
 
 
 def test_ranking_prefers_the_parsimonious_near_best():
+    from fenicsx_drape.diagnosis.results import Candidate
+
     def cand(name, heldout, n):
-        return {"effect": name, "heldout_normalised": heldout, "_n_parameters": n}
+        return Candidate(effect=name, effects=(name,), acts_on="shear", summary="", parameters={},
+                         error_after={}, heldout_normalised=heldout, evidence=1.0,
+                         significant=False, sensitivity=1.0, where_after=(),
+                         setup_refitted=None, model=None, after=(), tests=(), n_parameters=n)
 
     ranked = rank([cand("a", 1.00, 4), cand("b", 1.04, 1), cand("c", 0.5 + 2, 0)])
-    assert [c["effect"] for c in ranked] == ["b", "a", "c"]  # b within 5 % of a, fewer params
+    assert [c.effect for c in ranked] == ["b", "a", "c"]  # b within 5 % of a, fewer params
     ranked = rank([cand("a", 1.00, 4), cand("b", 1.10, 1)])
-    assert [c["effect"] for c in ranked] == ["a", "b"]
+    assert [c.effect for c in ranked] == ["a", "b"]
     assert rank([]) == []
 
 

@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 
 from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle, tensile_test
-from fenicsx_drape.diagnosis.diagnose import ADEQUATE, diagnose
+from fenicsx_drape.diagnosis import diagnose
+from fenicsx_drape.diagnosis.decision import ADEQUATE
 from fenicsx_drape.model import Model, default_parameters
 
 COUPON = ("rate_dependence", "strain_dependent_viscosity", "decrimping", "tow_buckling")

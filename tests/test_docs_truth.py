@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from fenicsx_drape.cli import main
-from fenicsx_drape.diagnosis.diagnose import CONTRACT
+from fenicsx_drape.diagnosis.report import CONTRACT
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from fenicsx_drape.calibration import fit, write_fit
 from fenicsx_drape.calibration.coupons import simulate
-from fenicsx_drape.calibration.fit import fit, write_fit
 from fenicsx_drape.calibration.synthetic import (
     bias_test,
     standard_tests,

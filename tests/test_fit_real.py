@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
+from fenicsx_drape.calibration import fit
 from fenicsx_drape.calibration.coupons import Residuals, Variables
 from fenicsx_drape.calibration.coupons import test_noise as noise_of
-from fenicsx_drape.calibration.fit import fit
 from fenicsx_drape.calibration.identifiability import inside_ranges
 from fenicsx_drape.calibration.synthetic import bias_test, synthetic_bundle
 from fenicsx_drape.measurements.bundle import Bundle, load_bundle

@@ -37,19 +37,31 @@ def test_a_formed_bundle_is_data_and_compares_to_its_own_run(tmp_path, capsys):
     assert not trusted()
     out = tmp_path / "form"
     assert main(["form", "double_dome", "--cell-mm", "20", "--step-mm", "4", "--out",
-                 str(out), "--quiet", "--no-fields", "--grid-mm", "20"]) == 0
+                 str(out), "--quiet", "--no-fields", "--lab-lines"]) == 0
+    # The 300 × 200 mm blank takes 18.75 mm cells (16 along x) and 187.5 mm of its 200 mm
+    # along y: said, and the bundle's grid (the net's nodes) and case carry the true cell.
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["cell_mm"] == 18.75 and summary["net"]["area_share"] == 0.9375
+    assert "6.25 mm of the blank left out" in summary["net"]["note"]
+    assert "25 mm or 16.67 mm keeps the whole blank" in summary["net"]["note"]
+    assert "note: the net is fitted to the blank: cell 18.75 mm" in capsys.readouterr().out
     case_folder = out / "bundle" / "case"
     assert sorted(p.name for p in case_folder.iterdir()) == [
         "case.toml", "die.msh", "holder.msh", "punch.msh"]
     # Read as data (no --trust): the bundle's case runs no code.
     bundle = load_bundle(out / "bundle", read_case=case_for_test)
-    assert bundle.tests[0].forming_case.origin is not None
+    test = bundle.tests[0]
+    assert test.forming_case.origin is not None
+    assert test.forming["grid_mm"] == 18.75 and test.forming_case.blank.cell_mm == 18.75
     assert main(["compare", str(out / "bundle"), "--out", str(tmp_path / "cmp"),
                  "--no-fit"]) == 0
     report = json.loads((tmp_path / "cmp" / "compare.json").read_text())
-    (test,) = report["per_test"].values()
-    # The model on the bundle's case forms the part of the run again: the same tools.
-    assert test["rows"] > 50 and test["rmse"] < 1e-9
+    # The model on the bundle's case forms the part of the run again (the same tools), and
+    # reads its grid, its shear lines and its edge as the run wrote them.
+    rows = {key.split("/")[-1]: v for key, v in report["per_test"].items()}
+    assert sorted(rows) == ["file", "outline", "shear_points"]
+    assert rows["file"]["rows"] > 50 and rows["shear_points"]["rows"] > 30
+    assert all(v["rmse"] < 1e-9 for v in rows.values())
     capsys.readouterr()
 
 

@@ -182,7 +182,7 @@ def test_the_holders_friction_coefficient_has_one_name(tmp_path):
     """``mu``: the case's [holder] key, the override, drape form's option, the set-up
     candidate of the spec; the earlier override ``holder_mu`` is read as it, with a warning."""
     from fenicsx_drape.cli import command_parser
-    from fenicsx_drape.diagnosis.setup import SETUP_PARAMETERS
+    from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS
     from fenicsx_drape.forming.case.format import OVERRIDES, case_for_test, case_value
 
     assert "mu" in OVERRIDES and "mu" in SETUP_PARAMETERS and "holder_mu" not in OVERRIDES

@@ -16,7 +16,10 @@ import pytest
 
 from fenicsx_drape import runs
 from fenicsx_drape.cli import main
-from fenicsx_drape.diagnosis import forming_kind as fc
+from fenicsx_drape.diagnosis.kinds import grid as gk
+from fenicsx_drape.diagnosis.kinds.forming import case_of, forming_case_of, model_planes
+from fenicsx_drape.diagnosis.kinds.part import CASE_REGION_NAMES
+from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case.format import case_for_test, load_case
 from fenicsx_drape.forming.running.post import FormedGrid
@@ -97,21 +100,21 @@ def test_a_bundle_naming_a_case_loads_and_its_keys_override_the_case(tmp_path, m
         jobs.extend(batch)
         return [half_sheet() for _ in batch]
 
-    monkeypatch.setattr(fc, "form_many", fake_form_many)
+    monkeypatch.setattr(gk, "form_many", fake_form_many)
     model = types.SimpleNamespace(parameters={})
-    fc.simulate(test, model)
+    gk.simulate(test, model)
     with runs.resolution(30.0):
-        fc.simulate(test, model)
+        gk.simulate(test, model)
     (first, _), (coarse, _) = jobs
     assert first.duration_s == 10.0 and first.holder.force_N == 250.0
     assert first.blank.cell_mm == 20.0 and coarse.blank.cell_mm == 30.0
     assert coarse.duration_s == 10.0 and coarse.holder.force_N == 250.0
     # A test loaded before the forming layer registered its reader reads its case when run.
     late = dataclasses.replace(test, forming_case=None)
-    assert fc.forming_case_of(late) == case
+    assert forming_case_of(late) == case
 
     # Written back (with a copy of its case), the bundle loads the same case.
-    fc.write_case_bundle("again", bundle.tests, tmp_path / "again")
+    write_case_bundle("again", bundle.tests, tmp_path / "again")
     (again,) = load_bundle(tmp_path / "again", read_case=case_for_test).tests
     assert runs.case_key(again.forming_case) == runs.case_key(case)
     assert again.case == "part/case.toml" and dict(again.forming) == dict(test.forming)
@@ -125,7 +128,7 @@ def test_a_bundle_naming_the_hemisphere_case_file(tmp_path):
     case = test.forming_case
     assert case.tool("punch").params["punch_radius_mm"] == 50.0
     assert case.total_travel_mm == pytest.approx(60.0) and case.duration_s == 30.0
-    assert fc.case_of(test).blank.cell_mm == 10.0 and fc.model_planes(test) == ("x", "y")
+    assert case_of(test).blank.cell_mm == 10.0 and model_planes(test) == ("x", "y")
     # The same case read from two copies is the same run (cached by content, not path).
     shutil.copytree(tmp_path / "b", tmp_path / "c")
     (copy,) = load_bundle(tmp_path / "c", read_case=case_for_test).tests
@@ -217,14 +220,14 @@ def test_a_whole_measured_grid_is_matched_by_mirroring_the_modelled_part(planes)
     whole = part.full().drawn_grid(10.0)
     test = Test(id="t", kind="forming", file="t.csv",
                 columns={k: np.asarray(v, float) for k, v in whole.items()})
-    assert not fc.in_part(test, planes)
-    values = fc.sample(fc.sheet_for(test, part), fc.reference_points(test))
-    np.testing.assert_allclose(values, fc.measured_positions(test), atol=1e-12)
+    assert not gk.in_part(test, planes)
+    values = gk.sample(gk.sheet_for(test, part), gk.reference_points(test))
+    np.testing.assert_allclose(values, gk.measured_positions(test), atol=1e-12)
     # A grid of the modelled part is compared with the part itself.
     own = part.drawn_grid(10.0)
     test = Test(id="t", kind="forming", file="t.csv",
                 columns={k: np.asarray(v, float) for k, v in own.items()})
-    assert fc.in_part(test, planes) and fc.sheet_for(test, part) is part
+    assert gk.in_part(test, planes) and gk.sheet_for(test, part) is part
 
 
 def test_a_node_past_a_ragged_edge_takes_the_nearest_cells_map():
@@ -239,9 +242,9 @@ def test_a_node_past_a_ragged_edge_takes_the_nearest_cells_map():
     points = np.array([[45.0, 45.0], [50.0, 38.0], [12.0, 17.0], [55.0, 20.0]])
     exact = np.column_stack([points, np.zeros(4)]) @ A.T + [1.0, 2.0, 3.0]
     assert np.isnan(sheet.sample(points[:2])).all()
-    np.testing.assert_allclose(fc.sample(sheet, points), exact, atol=1e-12)
+    np.testing.assert_allclose(gk.sample(sheet, points), exact, atol=1e-12)
     with pytest.raises(DrapeInputError, match=r"more than 1\.5 cells"):
-        fc.sample(sheet, np.array([[90.0, 10.0]]), "t")
+        gk.sample(sheet, np.array([[90.0, 10.0]]), "t")
 
 
 def test_regions_of_a_case_are_named_by_the_tool_each_node_touches(tmp_path):
@@ -272,15 +275,15 @@ def test_regions_of_a_case_are_named_by_the_tool_each_node_touches(tmp_path):
                "position_sd_mm": np.full(7, 0.1)}
     test = Test(id="t", kind="forming", file="t.csv", columns=columns, case="part/case.toml",
                 forming_case=case)
-    names = [fc.CASE_REGION_NAMES[k] for k in fc.case_region_of_nodes(test)]
+    names = [CASE_REGION_NAMES[k] for k in gk.case_region_of_nodes(test)]
     assert names == [n[2] for n in nodes]
-    regions = fc.part_regions(test)
+    regions = gk.part_regions(test)
     np.testing.assert_array_equal(np.sum([r.rows for r in regions], axis=0), 1)  # a partition
     assert {r.variable for r in regions} == {"height_mm"}
     # A whole grid is folded into the half model: the mirror image of a wall node is a wall.
     mirrored = dict(columns, x_mm=-columns["x_mm"], x0_mm=-columns["x0_mm"])
     test = dataclasses.replace(test, columns=mirrored)
-    assert [fc.CASE_REGION_NAMES[k] for k in fc.case_region_of_nodes(test)] == names
+    assert [CASE_REGION_NAMES[k] for k in gk.case_region_of_nodes(test)] == names
 
 
 # --------------------------------------------------------------------------------------------
@@ -307,7 +310,7 @@ def test_compare_on_the_bundle_form_case_writes(tmp_path, capsys, dolfinx):
     assert entry["normalised"] < 1e-6 and entry["mean_distance_mm"] < 1e-6
     assert entry["noise_source"] == "fourth_differences"
     names = {e["says"] for e in same["regions"] if "region" in e}
-    assert names <= set(fc.CASE_REGION_NAMES) and "flange under the holder" in names
+    assert names <= set(CASE_REGION_NAMES) and "flange under the holder" in names
     # Against a model without tow buckling the error is far above the noise.
     (tmp_path / "model.toml").write_text(NO_BUCKLING)
     assert main(["compare", str(bundle), "--model", str(tmp_path / "model.toml"), "--no-fit",
@@ -330,21 +333,21 @@ def test_a_quarter_model_matches_a_whole_grid_of_the_whole_model(tmp_path, dolfi
     most (0.5 % of the corners' draw-in under the holder, whose friction is path-dependent
     and follows each model's own load steps): below a typical 0.3 mm grid noise.
     """
-    from fenicsx_drape.diagnosis.compare import evaluate
+    from fenicsx_drape.diagnosis import evaluate
     from fenicsx_drape.measurements.bundle import Bundle
     from fenicsx_drape.model import default_model
 
     path = write_case(tmp_path / "part", OCTAGON.replace('symmetry = ["x"]',
                                                         'symmetry = ["x", "y"]'))
     quarter, whole = load_case(path), load_case(path, symmetry=[])
-    mirrored = fc.synthetic_case_test(default_model(), quarter, sd_mm=0.0, full=True)
-    own = fc.synthetic_case_test(default_model(), whole, sd_mm=0.0)
+    mirrored = synthetic_case_test(default_model(), quarter, sd_mm=0.0, full=True)
+    own = synthetic_case_test(default_model(), whole, sd_mm=0.0)
     own = dataclasses.replace(own, forming_case=quarter)  # the quarter model against it
-    assert mirrored.n_rows == own.n_rows and not fc.in_part(own, ("x", "y"))
-    np.testing.assert_allclose(fc.simulate(mirrored, default_model()),
-                               fc.measured_positions(mirrored).ravel(), atol=1e-12)
-    values = fc.simulate(own, default_model()).reshape(-1, 3)
-    assert np.abs(values - fc.measured_positions(own)).max() < 0.2
+    assert mirrored.n_rows == own.n_rows and not gk.in_part(own, ("x", "y"))
+    np.testing.assert_allclose(gk.simulate(mirrored, default_model()),
+                               gk.measured_positions(mirrored).ravel(), atol=1e-12)
+    values = gk.simulate(own, default_model()).reshape(-1, 3)
+    assert np.abs(values - gk.measured_positions(own)).max() < 0.2
     result = evaluate(Bundle("b", (mirrored,)), default_model())
     assert result.tests[0].rmse < 1e-12
 
@@ -353,12 +356,12 @@ def test_a_quarter_model_matches_a_whole_grid_of_the_whole_model(tmp_path, dolfi
 @pytest.mark.skip_in_parallel
 def test_diagnose_names_a_hidden_effect_on_a_generic_case(tmp_path, dolfinx):
     """The octagon formed with tow buckling, 0.3 mm noise, whole grid; the model lacks it."""
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
     from fenicsx_drape.model import default_model
 
     case = load_case(write_case(tmp_path / "part"))
-    test = fc.synthetic_case_test(default_model(), case, sd_mm=0.3, seed=3, full=True)
-    fc.write_case_bundle("hidden", [test], tmp_path / "bundle")
+    test = synthetic_case_test(default_model(), case, sd_mm=0.3, seed=3, full=True)
+    write_case_bundle("hidden", [test], tmp_path / "bundle")
     bundle = load_bundle(tmp_path / "bundle", read_case=case_for_test)
     # Two candidates (no set-up stage), for time: the default path is test_lab_user_path.py's.
     report = diagnose(bundle, default_model().without_effects("tow_buckling"),
@@ -370,7 +373,7 @@ def test_diagnose_names_a_hidden_effect_on_a_generic_case(tmp_path, dolfinx):
     metrics = report["metrics"]
     assert metrics["tow_buckling"]["octagon"]["mean_distance_mm"] < \
         0.3 * metrics["baseline"]["octagon"]["mean_distance_mm"]
-    assert report["where"][0]["says"] in fc.CASE_REGION_NAMES
+    assert report["where"][0]["says"] in CASE_REGION_NAMES
     json.dumps(report)
 
 

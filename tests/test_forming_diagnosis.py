@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from fenicsx_drape import runs
-from fenicsx_drape.diagnosis import forming_kind as fc
-from fenicsx_drape.diagnosis.compare import KINDS, compare_tests, normalised_error
+from fenicsx_drape.diagnosis.comparison import compare_tests, normalised_error
+from fenicsx_drape.diagnosis.kinds import GRID
+from fenicsx_drape.diagnosis.kinds import grid as gk
+from fenicsx_drape.diagnosis.synthetic import synthetic_forming_test
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.measurements.bundle import Bundle, Test
 
@@ -43,24 +45,24 @@ def grid_test(sheet: FormedGrid, grid_mm: float, sd_mm: float = 0.0, seed: int =
 def test_coarser_measured_grid_matches_a_finer_mesh_by_interpolation():
     fine = smooth_sheet(5.0)
     test = grid_test(fine, 20.0)  # the drawn grid is 4 times coarser than the mesh
-    simulated = fine.sample(fc.reference_points(test)).ravel()
-    np.testing.assert_allclose(simulated, KINDS["forming"].measured(test), atol=1e-12)
+    simulated = fine.sample(gk.reference_points(test)).ravel()
+    np.testing.assert_allclose(simulated, GRID.measured(test), atol=1e-12)
     # A 10 mm mesh of the same map, bilinear between its nodes, is within the bilinear
     # interpolation error h²/8 (|f_xx| + |f_yy|) of the map (|f''| <= 2 · 70 / 60² per mm²).
     coarse = smooth_sheet(10.0)
-    error = coarse.sample(fc.reference_points(test)).ravel() - simulated
+    error = coarse.sample(gk.reference_points(test)).ravel() - simulated
     assert np.abs(error).max() < 1e-12  # the 20 mm grid's nodes are 10 mm mesh nodes
     off = grid_test(fine, 15.0)  # 15 mm points fall between the 10 mm nodes
-    error = coarse.sample(fc.reference_points(off)) - fine.sample(fc.reference_points(off))
+    error = coarse.sample(gk.reference_points(off)) - fine.sample(gk.reference_points(off))
     assert 1e-3 < np.abs(error).max() < 10.0**2 / 8 * 2 * (2 * 70 / 60.0**2)
 
 
 def test_full_grid_is_matched_by_mirroring_the_quarter():
     sheet = smooth_sheet(10.0)
     full = grid_test(sheet, 10.0, full=True)
-    assert not fc.is_quarter(full) and fc.is_quarter(grid_test(sheet, 10.0))
-    values = fc.sheet_for(full, sheet).sample(fc.reference_points(full)).ravel()
-    np.testing.assert_allclose(values, KINDS["forming"].measured(full), atol=1e-12)
+    assert not gk.is_quarter(full) and gk.is_quarter(grid_test(sheet, 10.0))
+    values = gk.sheet_for(full, sheet).sample(gk.reference_points(full)).ravel()
+    np.testing.assert_allclose(values, GRID.measured(full), atol=1e-12)
     # 4 quadrants sharing the axes: (2n - 1)² nodes of the n × n quarter.
     assert full.n_rows == (2 * 13 - 1) ** 2
 
@@ -68,11 +70,11 @@ def test_full_grid_is_matched_by_mirroring_the_quarter():
 def test_noise_from_position_sd_and_model_free_estimate_recovers_it():
     sheet = smooth_sheet(5.0)
     with_sd = grid_test(sheet, 5.0, sd_mm=0.3, seed=3)
-    assert fc.noise(with_sd) == (pytest.approx(0.3), "position_sd_mm")
+    assert gk.noise(with_sd) == (pytest.approx(0.3), "position_sd_mm")
     columns = {k: v for k, v in with_sd.columns.items() if k != "position_sd_mm"}
     bare = Test(id="dome", kind="forming", file="dome.csv", columns=columns,
                 geometry="hemisphere", forming=with_sd.forming)
-    level, source = fc.noise(bare)
+    level, source = gk.noise(bare)
     assert source == "fourth_differences"
     assert level == pytest.approx(0.3, rel=0.15)  # 625 nodes: the median's scatter is ~5 %
 
@@ -80,16 +82,16 @@ def test_noise_from_position_sd_and_model_free_estimate_recovers_it():
 def test_regions_partition_the_part_and_shares_sum_to_the_error():
     sheet = smooth_sheet(5.0)
     test = grid_test(sheet, 10.0, sd_mm=0.3, seed=1)
-    regions = fc.part_regions(test)
-    assert [r.says for r in regions] == list(fc.REGION_NAMES)
+    regions = gk.part_regions(test)
+    assert [r.says for r in regions] == list(gk.REGION_NAMES)
     masks = np.array([r.rows for r in regions])
     np.testing.assert_array_equal(masks.sum(axis=0), 1)  # each value in exactly one region
     # An error placed only on the apex nodes is all in the apex region.
-    truth = KINDS["forming"].measured(test)
+    truth = GRID.measured(test)
     shifted = truth.copy()
     shifted[regions[0].rows] += 2.0
     (c,) = compare_tests([test], {"dome": shifted})
-    from fenicsx_drape.diagnosis.compare import locate
+    from fenicsx_drape.diagnosis.comparison import locate
 
     entries = {e["says"]: e["share_of_error"] for e in locate([c])}
     assert entries["apex"] == pytest.approx(1.0, abs=0.01)
@@ -99,12 +101,12 @@ def test_regions_partition_the_part_and_shares_sum_to_the_error():
 def test_paper_measures_mean_distance_and_percent():
     sheet = smooth_sheet(10.0)
     test = grid_test(sheet, 10.0)
-    exact = KINDS["forming"].measured(test)
+    exact = GRID.measured(test)
     moved = exact + np.tile([0.0, 0.0, 1.5], test.n_rows)  # every node 1.5 mm off
-    m = fc.metrics(test, moved)
+    m = gk.metrics(test, moved)
     assert m["mean_distance_mm"] == pytest.approx(1.5)
-    P = fc.reference_points(test)
-    d = np.linalg.norm(fc.measured_positions(test) - np.column_stack([P, 0 * P[:, 0]]), axis=1)
+    P = gk.reference_points(test)
+    d = np.linalg.norm(gk.measured_positions(test) - np.column_stack([P, 0 * P[:, 0]]), axis=1)
     assert m["percent_of_displacement"] == pytest.approx(100 * 1.5 / d.mean())
 
 
@@ -124,18 +126,22 @@ LIGHT_HOLDER_N = 133.0 / 4
 
 def _diagnose(truth, baseline, candidates, seed, holder_force_N=133.0):
     """Data formed and diagnosed on the same coarse 20 mm mesh (4× cheaper than 10 mm)."""
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
 
     with runs.resolution(runs.SCREEN_CELL_MM):
-        test = fc.synthetic_forming_test(truth, seed=seed, sd_mm=0.3,
+        test = synthetic_forming_test(truth, seed=seed, sd_mm=0.3,
                                          cell_mm=runs.SCREEN_CELL_MM,
                                          holder_force_N=holder_force_N)
         return diagnose(Bundle(name="hidden", tests=(test,)), baseline, candidates=candidates)
 
 
 @pytest.mark.slow
+@pytest.mark.bench  # make test checks the same on the demo's bundle (test_demos_diagnosis.py)
 @pytest.mark.skip_in_parallel
 def test_diagnose_names_hidden_tow_buckling_in_a_forming_bundle(dolfinx):
+    """Hidden tow buckling on the hemisphere's grid at 20 mm, 0.3 mm noise. ``make test`` makes
+    these checks on the forming diagnosis demo's report (the same part, cells and noise, one
+    more candidate: ``test_demos_diagnosis.py``)."""
     from fenicsx_drape.model import default_model
 
     report = _diagnose(default_model(), default_model().without_effects("tow_buckling"),
@@ -182,14 +188,14 @@ def test_diagnose_names_hidden_tool_friction_in_a_forming_bundle(dolfinx):
 def test_mixed_bundle_reports_coupons_and_forming_and_names_the_forming_effect(dolfinx):
     """Coupons and a formed part in one bundle; the hidden effect acts on the part only."""
     from fenicsx_drape.calibration.synthetic import standard_tests, synthetic_bundle
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
     from fenicsx_drape.model import default_model
 
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
     coupons = synthetic_bundle(truth, standard_tests(bias_speeds_mm_per_min=(10.0, 160.0)),
                                noise_rel=0.02, seed=5)
     with runs.resolution(runs.SCREEN_CELL_MM):
-        formed = fc.synthetic_forming_test(truth, seed=14, sd_mm=0.3, cell_mm=runs.SCREEN_CELL_MM,
+        formed = synthetic_forming_test(truth, seed=14, sd_mm=0.3, cell_mm=runs.SCREEN_CELL_MM,
                                            holder_force_N=LIGHT_HOLDER_N)
         bundle = Bundle(name="mixed", tests=(*coupons.tests, formed))
         # One candidate (and so no set-up stage), for time: the default path on forming

@@ -134,6 +134,7 @@ def test_formed_quarter_zero_shear_at_apex_and_wrinkling_on_the_tow_axes(quarter
 
 
 @pytest.mark.parallel
+@pytest.mark.compares_ranks
 @pytest.mark.slow
 def test_serial_and_parallel_runs_agree(tight_solver):
     """The coarse quarter on all ranks equals the same run on one process."""

@@ -33,13 +33,18 @@ def test_form_command_writes_summary_bundle_fields_and_pictures(tmp_path):
     assert test.forming_case.blank.symmetry == ("x", "y")
     assert test.conditions["friction_coefficient"] == 0.25
     assert test.forming["holder_force_N"] == 133.0 and test.forming["duration_s"] == 8.0
-    # The 10 mm drawn grid of the quarter: 13 × 13 points, the apex on the punch's top.
-    assert len(test.columns["i"]) == 169
+    # The drawn grid of the quarter: 10 mm is no whole number of 30 mm cells, so the net's
+    # own nodes (5 × 5, with their shear), the apex on the punch's top.
+    assert test.forming["grid_mm"] == 30.0 and len(test.columns["i"]) == 25
+    assert "shear_deg" in test.columns
     apex = (test.columns["i"] == 0) & (test.columns["j"] == 0)
     assert test.columns["z_mm"][apex][0] == pytest.approx(80.0, abs=0.05)
-    for name in ("shear.png", "wrinkling.png", "paths.png", "fields.xdmf", "provenance.json",
-                 "tools/punch.vtk", "tools/die.vtk", "tools/holder.vtk"):
+    for name in ("shear.png", "wrinkling.png", "fields.xdmf", "provenance.json",
+                 "tools/punch.vtk", "tools/die.vtk", "tools/holder.vtk", "formed_sheet.csv"):
         assert (out / name).stat().st_size > 0
+    # 30 mm cells, 8 s and μ = 0.25 are not the paper's conditions: not compared, no paths.
+    assert summary["paper_conditions"] is False and not (out / "paths.png").exists()
+    assert summary["paper_differences"] == ["cell 30 mm", "8 s", "mu 0.25"]
 
 
 def test_bad_options_are_input_errors(tmp_path, capsys):

@@ -92,20 +92,49 @@ def test_the_kinematic_drape_reads_the_cap_position():
 
 
 def test_paper_comparison_prints_ours_beside_the_paper():
+    from fenicsx_drape.forming.case.format import case_dict, load_case
+    from fenicsx_drape.model import default_model
+
+    case = case_dict(load_case("hemisphere"))
     summary = {"max_shear_deg": 52.43, "total_wrinkling_strain": -0.01125,
                "total_wrinkling_engineering": -0.0131, "min_wrinkling_strain": -0.298,
-               "case": {"cell_mm": 10.0, "holder_force_N": 133.0, "duration_s": 40.0}}
+               "case": case, "cell_mm": 10.0}
+    assert paper.paper_differences(summary, default_model()) == []
     text = paper.paper_comparison(summary)
     lines = text.splitlines()
-    assert "this run:" not in lines[0]
+    assert lines[0] == "compared with the paper (section 4: 10 mm cells, 133 N, 40 s)"
     shear = next(line for line in lines if line.startswith("maximum shear"))
     assert shear.split()[-3:] == ["52.4°", "51.4°", "50.2°"]
     wrinkling = next(line for line in lines if line.startswith("minimum wrinkling"))
     assert wrinkling.split()[-3:] == ["-0.30", "-0.21", "-0.31"]
     assert "-1.12 %" in text and "-0.55 %" in text and "-1.31 %" in text
     assert "kinematic" not in text  # not in this summary
-    other = paper.paper_comparison({**summary, "case": {"duration_s": 8.0}})
-    assert "this run: duration_s 8" in other.splitlines()[0]
+
+
+def test_a_run_under_other_conditions_is_not_compared_with_the_paper():
+    """A 20 mm, 8 s two-ply stack on the hemisphere: the paper's numbers are not printed
+    beside it, and the line says what differs (the net's own cell, not the one asked)."""
+    from fenicsx_drape.forming.case.format import case_dict, load_case
+    from fenicsx_drape.model import default_model
+
+    case = case_dict(load_case("hemisphere", cell_mm=20.0, duration_s=8.0))
+    case["ply"] = [{"angle_deg": 0.0, "thickness_mm": 0.3}, {"angle_deg": 45.0,
+                                                              "thickness_mm": 0.3}]
+    summary = {"max_shear_deg": 40.0, "case": case, "cell_mm": 20.0}
+    text = paper.paper_comparison(summary)
+    assert text.startswith("not compared with the paper") and "\n" not in text
+    assert "cell 20 mm, 8 s, a stack of 2 plies" in text
+    assert "51.4" not in text
+    model = default_model().without_effects("tow_buckling").with_parameters(mu=0.25)
+    same = case_dict(load_case("hemisphere"))
+    assert paper.paper_differences({"case": same, "cell_mm": 10.0}, model) == [
+        "without tow_buckling", "mu 0.25"]
+    offset = case_dict(load_case("hemisphere", blank_offset_mm=(0.0, 7.0)))
+    assert "blank centre [0, 7] mm" in paper.paper_differences({"case": offset,
+                                                                "cell_mm": 10.0})
+    other = case_dict(load_case("hemisphere", punch_radius_mm=50.0, holder_force_N=200.0))
+    differs = paper.paper_differences({"case": other, "cell_mm": 10.0})
+    assert "holder force 200 N" in differs and "punch punch_radius_mm 50" in differs
 
 
 def test_misfit_on_the_paper_itself_is_the_model_experiment_spread():

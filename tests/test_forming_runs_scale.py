@@ -315,34 +315,54 @@ def test_a_second_compare_forms_nothing_and_reports_the_same(tmp_path, dolfinx, 
     assert json.loads(first)["per_test"] == json.loads(second)["per_test"]
 
 
-@pytest.mark.slow
-@pytest.mark.skip_in_parallel
-def test_the_same_report_whichever_executor_and_workers(tmp_path, dolfinx):
-    """compare.json of a bundle: one process, two and three workers, mpi4py.futures."""
+def compare_report(bundle: Path, out: Path, *launcher: str, workers: int | None = None) -> dict:
+    """compare.json of ``drape compare BUNDLE`` in a process of its own, without provenance."""
+    futures = ["-m", "mpi4py.futures"] if launcher else []  # launcher: mpiexec -n N
+    command = [*launcher, sys.executable, *futures, "-m", "fenicsx_drape", "compare",
+               str(bundle), "--no-cache", "--out", str(out)]
+    if workers is not None:
+        command += ["--workers", str(workers)]
+    subprocess.run(command, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                   timeout=600, capture_output=True)
+    report = json.loads((out / "compare.json").read_text())
+    report.pop("provenance", None)
+    return report
+
+
+@pytest.fixture(scope="module")
+def one_worker(tmp_path_factory):
+    """A formed part's bundle and its compare.json on one worker."""
+    pytest.importorskip("dolfinx")
     from fenicsx_drape.forming.case.format import load_case
     from fenicsx_drape.forming.running.outputs import form_case
     from fenicsx_drape.model import default_model
 
-    case = load_case(write_case(tmp_path / "part"))
-    form_case(tmp_path / "formed", case, default_model().with_parameters(mu=0.35),
+    folder = tmp_path_factory.mktemp("executors")
+    case = load_case(write_case(folder / "part"))
+    form_case(folder / "formed", case, default_model().with_parameters(mu=0.35),
               fields=False, pictures=False)
-    bundle = tmp_path / "formed" / "bundle"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    compare = ["-m", "fenicsx_drape", "compare", str(bundle), "--no-cache"]
-    commands = {f"{n} workers": [sys.executable, *compare, "--workers", str(n)]
-                for n in (1, 2, 3)}
-    if shutil.which("mpiexec"):
-        commands["mpi4py.futures"] = ["mpiexec", "-n", "3", sys.executable, "-m",
-                                      "mpi4py.futures", *compare]
-    reports = {}
-    for label, command in commands.items():
-        out = tmp_path / label.replace(" ", "_")
-        subprocess.run([*command, "--out", str(out)], check=True, env=env, timeout=600,
-                       capture_output=True)
-        reports[label] = json.loads((out / "compare.json").read_text())
-        reports[label].pop("provenance", None)
-    first = reports.pop("1 workers")
-    assert first["per_test"] and all(r == first for r in reports.values())
+    bundle = folder / "formed" / "bundle"
+    return bundle, compare_report(bundle, folder / "one", workers=1)
+
+
+@pytest.mark.slow
+@pytest.mark.skip_in_parallel
+@pytest.mark.parametrize("executor", [
+    "mpi4py.futures",
+    # the runs on 2 and 3 workers are the one worker's, bit for bit (the test above)
+    pytest.param("2 workers", marks=pytest.mark.bench),
+    pytest.param("3 workers", marks=pytest.mark.bench)])
+def test_the_same_report_whichever_executor_and_workers(one_worker, executor, tmp_path):
+    """compare.json of a bundle: the same on one worker as on two and three, and under
+    mpi4py.futures (3 processes)."""
+    bundle, first = one_worker
+    if executor == "mpi4py.futures":
+        if not shutil.which("mpiexec"):
+            pytest.skip("needs mpiexec")
+        report = compare_report(bundle, tmp_path / "out", "mpiexec", "-n", "3")
+    else:
+        report = compare_report(bundle, tmp_path / "out", workers=int(executor.split()[0]))
+    assert first["per_test"] and report == first
 
 
 @pytest.mark.skip_in_parallel

@@ -176,8 +176,11 @@ def test_the_hemisphere_with_every_set_up_is_formed(tmp_path):
                      blank_offset_mm=(0.0, 7.0), tool_offset_mm=(2.0, 0.0))
     assert case.planes == ()  # every plane broken: the full sheet, unasked
     _, result = form_case(tmp_path / "h", case, fields=False)
-    for f in ("summary.json", "shear.png", "paths.png", "bundle/bundle.toml"):
+    for f in ("summary.json", "shear.png", "bundle/bundle.toml"):
         assert (tmp_path / "h" / f).is_file()
+    # Not the paper's conditions: no paper paths, and the summary says what differs.
+    assert not (tmp_path / "h" / "paths.png").exists()
+    assert {"ply at 4°", "blank centre [0, 7] mm"} <= set(result["paper_differences"])
     assert result["mirror_asymmetry_deg"] > 1.0
 
 

@@ -18,8 +18,6 @@ from mpi4py import MPI
 import numpy as np
 
 from fenicsx_drape.cli import main
-from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.fe.grid import TrussGrid
 from fenicsx_drape.fe.plies import PlyContact, ply_of, stack_plies, stack_sheet
 from fenicsx_drape.fe.solver import TrussProblem
 from fenicsx_drape.forming.case.format import load_case
@@ -45,6 +43,7 @@ def _numbers(faces):
 
 
 @pytest.mark.parallel
+@pytest.mark.compares_ranks
 def test_a_stack_forms_alike_on_any_number_of_ranks(reference):
     run = run_case(load_case(CASE, **COARSE), comm=MPI.COMM_WORLD)
     assert run.stopped is None and reference.stopped is None
@@ -102,36 +101,17 @@ def test_drape_form_writes_the_summary_of_one_rank(reference, tmp_path):
 
 
 @pytest.mark.parallel
-def test_pairs_that_follow_the_plies_stay_on_one_rank():
-    """``follow=True`` re-makes pairs across the partition: refused on several ranks, by name."""
-    plies = stack_plies([TrussGrid(4, 2, 10.0, (0.0, 0.0), False)] * 2, [0.2, 0.2])
-    contact = PlyContact(plies, InterplyLaw(), 2000.0, follow=True)
-    sheet = stack_sheet(plies, MPI.COMM_WORLD)
-    if MPI.COMM_WORLD.size == 1:
-        TrussProblem(sheet, default_model(), [contact])
-        assert len(contact.a) == 15  # every node of ply 2 paired
-    else:
-        with pytest.raises(DrapeInputError, match=r"follow=True\) runs on one rank"):
-            TrussProblem(sheet, default_model(), [contact])
-
-
-@pytest.mark.parallel
 def test_a_stack_is_split_by_columns():
-    """Each rank holds a column of the stack (every ply), so few pairs cross the ranks.
-
-    A graph partitioner gave a ply to a rank: on two ranks, 541 and 521 of the 541 pairs of
-    the hemisphere's 10 mm [0/90, ±45] stack. Bisecting the plane: 582 held in all on two
-    ranks (289 and 293), 613 on three (the pairs along the cuts are held twice).
-    """
+    """Each rank holds a column of the stack (every ply), so few inter-ply blocks of the
+    Jacobian join nodes of two ranks (a graph partitioner gave a ply to a rank: every pair
+    then joined two ranks). Every rank holds every pair (the pairs follow the plies)."""
     comm = MPI.COMM_WORLD
     case = load_case(CASE)
     plies = stack_plies([b.grid() for b in case.ply_blanks()],
                         [p.thickness_mm for p in case.plies])
     contact = PlyContact(plies, InterplyLaw(), 2000.0)
     problem = TrussProblem(stack_sheet(plies, comm), default_model(), [contact])
-    held = comm.allreduce(len(contact.a))
-    assert contact.pairs_global == 541
-    assert contact.pairs_global <= held <= 1.2 * contact.pairs_global
+    assert contact.pairs_global == len(contact.a) == 541
     owned = np.bincount(ply_of(plies, problem.X[: problem.num_owned]), minlength=2)
     every = np.array(comm.allgather(owned))  # (ranks, plies)
     assert (every.sum(axis=0) == [625, 541]).all()

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from fenicsx_drape.cli import main
-from fenicsx_drape.diagnosis import ledger
-from fenicsx_drape.diagnosis.compare import CompareResult
+from fenicsx_drape.diagnosis import CompareResult, ledger
 from fenicsx_drape.diagnosis.kinds import Comparison
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements.bundle import Bundle
@@ -45,7 +44,7 @@ def test_ledger_records_versions_in_order_with_changes(tmp_path):
     saved = json.loads((tmp_path / "history" / "history.json").read_text())
     assert [e["version"] for e in saved] == ["v1", "v2", "v3", "v4"]
     assert (tmp_path / "history" / "provenance.json").is_file()
-    text = ledger.table(history)
+    text = ledger.history_table(history)
     assert "+rate_dependence" in text and text.count("\n") == 5
 
 

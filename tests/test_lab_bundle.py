@@ -113,8 +113,10 @@ BAD = [
     # (keys, files, line, fragments)
     ("", {}, 4, ["needs file", "shear_points, surface, outline, punch_force"]),
     ('shear_points = "force.csv"\n', {"force.csv": FORCE}, 1,
-     ["force.csv:1:", "needs the columns x_mm, y_mm, z_mm, shear_deg", "punch_force table"]),
-    ('surface = "scan.vtk"\n', {"scan.vtk": "x"}, 0, ["scan.vtk:0:", "must be a .csv, .stl"]),
+     ["force.csv:1:", "needs the columns x_mm, y_mm, z_mm, shear_deg", "missing x0_mm",
+      "its columns are those of a punch_force table"]),
+    ('surface = "scan.vtk"\n', {"scan.vtk": "x"}, 8, ["bundle.toml:8:", "surface = 'scan.vtk'",
+                                                   "must be a .csv, .stl"]),
     ('shear_points = "shear.csv"\n', {"shear.csv": SHEAR.replace("4.0,A", "nan,A")}, 5,
      ["shear.csv:5:", "shear_deg", "not a finite number"]),
     ('shear_points = "shear.csv"\n', {"shear.csv": SHEAR.replace("6.0,A", "95.0,A")}, 6,
@@ -125,7 +127,8 @@ BAD = [
      ["force.csv:4:", "force_N", "not a finite number"]),
     ('shear_points = "shear.csv"\n', {"shear.csv": SHEAR.replace(",A,0.0", ",A,0.0,7")}, 3,
      ["shear.csv:3:", "7 cells, but the header has 6 columns"]),
-    ('outline = "missing.csv"\n', {}, 0, ["missing.csv", "no such file"]),
+    ('outline = "missing.csv"\n', {}, 8, ["bundle.toml:8:", "outline = 'missing.csv'",
+                                          "no such file", "relative to the bundle folder"]),
     ('punch_force = "force.csv"\nforce_tool = "ram"\n', {"force.csv": FORCE}, 9,
      ["force_tool = 'ram' is not a tool of the case"]),
 ]

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fenicsx_drape.diagnosis.compare import OUTLIER_SD, evaluate, write_compare
+from fenicsx_drape.diagnosis import evaluate, write_compare
+from fenicsx_drape.diagnosis.comparison import OUTLIER_SD
 from fenicsx_drape.diagnosis.lab_synthetic import lab_tables, write_lab_bundle
 from fenicsx_drape.forming.case.format import case_for_test
 from fenicsx_drape.measurements.bundle import load_bundle
@@ -121,7 +122,7 @@ def test_a_scan_in_another_frame_is_registered_with_its_uncertainty(tmp_path, pa
     assert np.allclose(reg["translation_mm"], t, atol=0.5)
     assert max(reg["sd_rotation_deg"]) < 0.1 and max(reg["sd_translation_mm"]) < 0.1
     # A ball of points is another part: no registration brings it onto this sheet.
-    from fenicsx_drape.diagnosis.lab_kind import register, sheet_mesh
+    from fenicsx_drape.diagnosis.kinds.lab import register, sheet_mesh
 
     rng = np.random.default_rng(0)
     ball = rng.normal(size=(500, 3))

@@ -47,7 +47,7 @@ def lab_bundle(tmp_path_factory):
 
 
 def test_a_hidden_effect_is_named_from_lab_data_with_a_wild_row_listed(lab_bundle):
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
     from fenicsx_drape.model import default_model
 
     # One candidate (no set-up stage): this test is about the wild row; the default path on
@@ -67,7 +67,7 @@ def test_a_hidden_effect_is_named_from_lab_data_with_a_wild_row_listed(lab_bundl
 
 
 def test_the_model_that_formed_it_stays_null(lab_bundle):
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
     from fenicsx_drape.model import default_model
 
     # One candidate, as above; every kind alone on the default path: test_lab_user_path.py.

@@ -1,5 +1,6 @@
-"""What a lab measures, taken from a formed sheet (fenicsx_drape.forming.running.measure): closest
-points, shear within the cell, the blank's edge and draw-in, on sheets with known answers."""
+"""What a lab measures, taken from a formed sheet (fenicsx_drape.forming.running.measure):
+closest points, shear by the lab's definition (each cell's own angle at its centre), the
+blank's edge and draw-in, on sheets with known answers."""
 
 import math
 
@@ -35,24 +36,123 @@ def test_closest_points_of_a_lifted_flat_sheet_are_straight_below():
     assert np.allclose(far.distance, [10.0, 10.0 * math.sqrt(2)])
 
 
-def test_shear_is_interpolated_within_the_cell_not_taken_at_the_nearest_node():
-    grid = sheet(shear_deg=20.0)  # uniform simple shear: the angle is 20° everywhere
-    P = np.array([[3.0, 4.0], [-17.0, 22.0]])
+def turned_net(θ_deg: float, F: np.ndarray, cell_mm: float = 10.0, half_mm: float = 60.0,
+               clip_mm: float | None = 45.0) -> FormedGrid:
+    """A net with its tows at θ to x, mapped by the plane affine map F, clipped to a square
+    (absent nodes NaN, as a turned ply's net)."""
+    θ = math.radians(θ_deg)
+    R = np.array([[math.cos(θ), -math.sin(θ)], [math.sin(θ), math.cos(θ)]])
+    s = np.arange(-half_mm, half_mm + 1e-9, cell_mm)
+    ij = np.stack(np.meshgrid(s, s, indexing="ij"), axis=-1)
+    X2 = ij @ R.T
+    X = np.concatenate([X2, np.zeros((*X2.shape[:2], 1))], axis=-1)
+    x = np.concatenate([X2 @ F.T, np.full((*X2.shape[:2], 1), 3.0)], axis=-1)
+    if clip_mm is not None:
+        cells = np.all(np.abs(X2) <= clip_mm, axis=-1)
+        keep = np.zeros(cells.shape, bool)  # the nodes of cells with four corners inside
+        whole = cells[:-1, :-1] & cells[1:, :-1] & cells[:-1, 1:] & cells[1:, 1:]
+        for di in (0, 1):
+            for dj in (0, 1):
+                keep[di:di + whole.shape[0], dj:dj + whole.shape[1]] |= whole
+        X[~keep], x[~keep] = np.nan, np.nan
+    return FormedGrid(X, x, False)
+
+
+def formed(quarter: bool = False, cell_mm: float = 10.0) -> FormedGrid:
+    """A non-affine formed sheet: a dome with a twist (each cell its own shear)."""
+    s = np.arange(0.0 if quarter else -60.0, 60.0 + 1e-9, cell_mm)
+    X = np.stack([*np.meshgrid(s, s, indexing="ij"), np.zeros((s.size, s.size))], axis=-1)
+    r2 = X[..., 0] ** 2 + X[..., 1] ** 2
+    x = X.copy()
+    # Odd in x and in y (symmetric in both planes), so a quarter is a part of it.
+    x[..., 0] += 4e-3 * X[..., 0] * X[..., 1] ** 2 / 10.0
+    x[..., 1] += 2e-3 * X[..., 1] * X[..., 0] ** 2 / 10.0
+    x[..., 2] = 30.0 * np.exp(-r2 / 2000.0)
+    return FormedGrid(X, x, quarter)
+
+
+def centres(grid: FormedGrid) -> np.ndarray:
+    """The flat positions of the cell centres (n_i − 1, n_j − 1, 2)."""
+    X = grid.X[..., :2]
+    return 0.25 * (X[:-1, :-1] + X[1:, :-1] + X[:-1, 1:] + X[1:, 1:])
+
+
+def test_every_definition_gives_the_exact_angle_on_a_homogeneously_sheared_sheet():
+    """Simple shear of 20°, and a turned, clipped net under a general plane map: each
+    cell's own angle, the node means and the value anywhere on the blank are the angle
+    between the mapped tows, 90° − ∠(F a, F b)."""
+    grid = sheet(shear_deg=20.0)
+    rng = np.random.default_rng(1)
+    P = rng.uniform(-50.0, 50.0, (300, 2))
     assert np.allclose(measure.shear_at_flat(grid, P), 20.0, atol=1e-9)
-    # A field varying within a cell: shear only in the cells x > 0 (a kink at x = 0).
-    g = sheet()
-    x = g.x.copy()
-    right = g.X[..., 0] > 0
-    x[..., 0] = np.where(right, g.X[..., 0] + math.tan(math.radians(10)) * g.X[..., 1],
-                         g.X[..., 0])
-    kinked = FormedGrid(g.X, x, False)
-    nodal = kinked.shear_nodes()
-    at = np.array([[2.5, 1.0], [7.5, 1.0]])  # a quarter and three quarters into one cell
-    i0 = 5  # node x = 0
-    expected = nodal[i0, 5] + np.array([0.25, 0.75]) * (nodal[i0 + 1, 5] - nodal[i0, 5])
-    got = measure.shear_at_flat(kinked, at)
-    assert np.allclose(got, expected, atol=0.1 * abs(expected[1] - expected[0]))
-    assert got[1] - got[0] > 1.0  # differs within the cell
+    assert np.allclose(grid.shear_deg(), 20.0, atol=1e-9)
+    assert np.allclose(grid.shear_nodes(), 20.0, atol=1e-9)
+    F = np.array([[1.1, 0.35], [-0.05, 0.9]])
+    for θ in (0.0, 30.0):
+        net = turned_net(θ, F)
+        t = math.radians(θ)
+        a, b = F @ [math.cos(t), math.sin(t)], F @ [-math.sin(t), math.cos(t)]
+        exact = 90.0 - math.degrees(math.acos(a @ b / np.linalg.norm(a) / np.linalg.norm(b)))
+        Q = rng.uniform(-45.0, 45.0, (400, 2))
+        got = measure.shear_at_flat(net, Q)
+        on = np.isfinite(got)
+        assert on.mean() > 0.5  # the square's corners beyond the turned net's cells are off
+        assert np.allclose(got[on], exact, atol=1e-9)
+        assert np.allclose(net.shear_deg()[np.isfinite(net.shear_deg())], exact, atol=1e-9)
+        assert np.allclose(net.shear_nodes()[net.present], exact, atol=1e-9)
+        assert np.isnan(measure.shear_at_flat(net, np.array([[80.0, 0.0]]))).all()
+
+
+def test_the_shear_at_a_cell_centre_is_that_cells_own_angle():
+    """On a formed sheet (non-affine: every cell its own angle) the value at each centre
+    is the cell's own angle to 1e-9, not a mean of its nodes' means; between two centres it
+    is their mean, and at a node the mean of the cells around it (the grid's shear_deg)."""
+    grid = formed()
+    γ = grid.shear_deg()
+    C = centres(grid)
+    got = measure.shear_at_flat(grid, C.reshape(-1, 2)).reshape(γ.shape)
+    assert np.abs(got - γ).max() < 1e-9
+    nodal = grid.shear_nodes()
+    old = 0.25 * (nodal[:-1, :-1] + nodal[1:, :-1] + nodal[:-1, 1:] + nodal[1:, 1:])
+    assert np.abs(old - γ).max() > 0.1  # the node means' value there is another one
+    mid = 0.5 * (C[3, 4] + C[4, 4])
+    assert measure.shear_at_flat(grid, mid[None])[0] == pytest.approx(
+        0.5 * (γ[3, 4] + γ[4, 4]), abs=1e-9)
+    nodes = grid.X[..., :2].reshape(-1, 2)
+    assert np.allclose(measure.shear_at_flat(grid, nodes), nodal.ravel(), atol=1e-9)
+    # A quarter model: its mirrored cells count, so it is the whole sheet's field, 0 on
+    # the symmetry planes.
+    quarter = formed(quarter=True)
+    Cq = centres(quarter).reshape(-1, 2)
+    assert np.allclose(measure.shear_at_flat(quarter, Cq), quarter.shear_deg().ravel(),
+                       atol=1e-9)
+    assert np.allclose(measure.shear_at_flat(quarter, Cq), measure.shear_at_flat(grid, Cq),
+                       atol=1e-9)
+    assert np.allclose(measure.shear_at_flat(quarter, [[0.0, 17.0], [23.0, 0.0]]), 0.0,
+                       atol=1e-12)
+    # A clipped net: at each present cell's centre, its angle; an absent cell is off.
+    F = np.array([[1.0, 0.2], [0.0, 1.0]])
+    net = turned_net(30.0, F)
+    bent = FormedGrid(net.X, net.x + np.stack([0.002 * net.X[..., 1] ** 2,
+                                               np.zeros(net.X.shape[:2]),
+                                               0.01 * net.X[..., 0] ** 2], -1), False)
+    γb, Cb = bent.shear_deg(), centres(bent)
+    ok = np.isfinite(γb)
+    assert np.abs(measure.shear_at_flat(bent, Cb[ok]) - γb[ok]).max() < 1e-9
+    assert np.isnan(measure.shear_at_flat(bent, Cb[~ok & np.isfinite(Cb[..., 0])])).all()
+
+
+def test_the_shear_at_a_formed_point_is_the_closest_material_points():
+    grid = formed()
+    mesh = measure.SheetMesh.of(grid)
+    C = centres(grid).reshape(-1, 2)
+    on_sheet = grid.sample(C)  # formed images of the centres (bilinear within the cell)
+    near = measure.closest_points(mesh, on_sheet)
+    values, _ = measure.shear_at_formed(grid, on_sheet, mesh)
+    assert np.allclose(values, measure.shear_at_flat(grid, near.flat[:, :2]), atol=1e-12)
+    # The bilinear image of a centre lies off the triangulated sheet of a curved cell: its
+    # closest point's material position is within a tenth of the cell of the centre.
+    assert np.abs(near.flat[:, :2] - C).max() < 0.1 * grid.cell_mm
 
 
 def test_the_edge_and_draw_in_of_a_shrunk_blank():

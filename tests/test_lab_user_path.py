@@ -211,8 +211,8 @@ def test_a_set_up_is_read_off_one_lab_kind_and_sized_with_its_sd(tmp_path, kind,
     pytest.importorskip("dolfinx")
     import numpy as np
 
-    from fenicsx_drape.diagnosis.diagnose import setup_rules
-    from fenicsx_drape.diagnosis.setup import fit_setup
+    from fenicsx_drape.diagnosis.decision import setup_rules
+    from fenicsx_drape.diagnosis.setup_stage import fit_setup
     from fenicsx_drape.forming.case.format import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model
@@ -221,8 +221,8 @@ def test_a_set_up_is_read_off_one_lab_kind_and_sized_with_its_sd(tmp_path, kind,
                                   cell_mm=20.0, step_mm=2.0, stl=False, **{parameter: truth})
     stage = fit_setup(load_bundle(folder, read_case=case_for_test), default_model(),
                       setup_rules(), parameters=[parameter])
-    assert stage["setup_error"] == parameter
-    (entry,) = stage["setup"]
+    assert stage.setup_error == parameter
+    (entry,) = stage.entries
     fitted, sd = (np.atleast_1d(np.asarray(v, float)) for v in (entry["fitted"], entry["sd"]))
     # within 3 sd, or a quarter of the cell's shear-free slack (the scan's 0.13 mm)
     assert np.all(np.abs(fitted - np.atleast_1d(truth)) <= np.maximum(3.0 * sd, 0.25)), entry

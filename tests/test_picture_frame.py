@@ -7,9 +7,9 @@ import pytest
 from scipy.integrate import quad
 
 from fenicsx_drape import unitcell
-from fenicsx_drape.calibration import fit as fitting
+from fenicsx_drape.calibration import fit, fitting
 from fenicsx_drape.calibration.coupons import simulate
-from fenicsx_drape.calibration.fit import fit, normalised_error
+from fenicsx_drape.calibration.fitting import normalised_error
 from fenicsx_drape.calibration.synthetic import bias_test, picture_frame_test, synthetic_bundle
 from fenicsx_drape.cli import main
 from fenicsx_drape.measurements.bundle import BundleError, load_bundle

@@ -30,19 +30,19 @@ pytestmark = pytest.mark.skip_in_parallel  # a cache folder of one process
 def intact(tmp_path_factory):
     """The bundle, the model, and the intact cache and report of its ``compare``."""
     pytest.importorskip("dolfinx")
-    from fenicsx_drape.diagnosis import forming_kind as fc
+    from fenicsx_drape.diagnosis import synthetic_case_test, write_case_bundle
     from fenicsx_drape.forming.case.format import load_case, with_overrides
     from fenicsx_drape.model import default_model
 
     tmp = tmp_path_factory.mktemp("run_cache")
     case = load_case(write_case(tmp / "part"))
     truth = default_model().with_parameters(mu=0.45)
-    tests = [fc.synthetic_case_test(truth, with_overrides(case, holder_force_N=force,
+    tests = [synthetic_case_test(truth, with_overrides(case, holder_force_N=force,
                                                           step_mm=5.0),  # 11 steps a run
                                     test_id=f"oct{force:g}", sd_mm=0.3, seed=k,
                                     case_file=f"c{force:g}/case.toml")
              for k, force in enumerate((100.0, 400.0))]
-    fc.write_case_bundle("two forces", tests, tmp / "bundle")
+    write_case_bundle("two forces", tests, tmp / "bundle")
     model = default_model().without_effects("tow_buckling")
     (tmp / "model.toml").write_text(
         "effects = [" + ", ".join(f'"{e}"' for e in model.effects) + "]\n")

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fenicsx_drape.diagnosis import forming_kind as fk
-from fenicsx_drape.diagnosis import setup as st
+from fenicsx_drape.diagnosis import setup_fit, setup_parameters, setup_stage
+from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
+from fenicsx_drape.diagnosis.synthetic import synthetic_case_test
 from fenicsx_drape.forming.case.format import load_case, with_overrides
 from fenicsx_drape.measurements.bundle import Bundle, BundleError, Test, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
@@ -35,25 +36,27 @@ def grid_test(case, X0=None) -> Test:
 def test_each_set_up_is_applied_to_the_case_on_the_model_it_needs():
     case = load_case(CASE, **COARSE)
     test, model = grid_test(case), default_model()
-    t, shift = st.applied(test, "ply_angle_deg", [4.0], model)
+    t, shift = setup_parameters.applied(test, "ply_angle_deg", [4.0], model)
     assert t.forming_case.blank.ply_angle_deg == 4.0 and t.forming_case.planes == ()
-    t, shift = st.applied(test, "blank_offset_mm", [6.0, 0.0], model)
+    t, shift = setup_parameters.applied(test, "blank_offset_mm", [6.0, 0.0], model)
     # An offset is fitted in x and y: the whole blank at every value, the stated one too.
     assert t.forming_case.blank.centre_mm == (6.0, 0.0) and t.forming_case.planes == ()
     np.testing.assert_array_equal(shift, [6.0, 0.0])
-    t, _ = st.applied(test, "tool_offset_mm", [0.0, 2.0], model)
+    t, _ = setup_parameters.applied(test, "tool_offset_mm", [0.0, 2.0], model)
     assert t.forming_case.tool("punch").motion.y_mm == (2.0, 2.0)
     assert t.forming_case.planes == ()
-    t, _ = st.applied(test, "tool_offset_mm", [0.0, 0.0], model)
+    t, _ = setup_parameters.applied(test, "tool_offset_mm", [0.0, 0.0], model)
     assert t.forming_case.planes == ()
-    t, _ = st.applied(test, "holder_force_N", [2.0], model)
+    t, _ = setup_parameters.applied(test, "holder_force_N", [2.0], model)
     assert t.forming_case.holder.force_N == 400.0 and t.forming_case.planes == ("x", "y")
-    t, _ = st.applied(test, "mu", [0.45], model)
+    t, _ = setup_parameters.applied(test, "mu", [0.45], model)
     assert t.forming_case.holder.mu == 0.45
-    assert st.stated(test, "mu", model) == 0.3 and st.stated(test, "holder_force_N", model) == 200
-    assert st.stated(test, "blank_offset_mm", model) == [0.0, 0.0]
+    assert setup_parameters.stated(test, "mu", model) == 0.3
+    assert setup_parameters.stated(test, "holder_force_N", model) == 200
+    assert setup_parameters.stated(test, "blank_offset_mm", model) == [0.0, 0.0]
     # The grid of a moved blank is read where the material lay: flat positions + offset.
-    moved = st.corrected(Bundle(name="b", tests=(test,)), "blank_offset_mm", [6.0, -1.0], model)
+    moved = setup_parameters.corrected(Bundle(name="b", tests=(test,)), "blank_offset_mm",
+                                       [6.0, -1.0], model)
     np.testing.assert_allclose(moved.tests[0].columns["x0_mm"], [6.0, 26.0, 6.0])
     np.testing.assert_allclose(moved.tests[0].columns["y0_mm"], [-1.0, -1.0, 19.0])
     assert moved.tests[0].forming_case.blank.centre_mm == (6.0, -1.0)
@@ -64,20 +67,20 @@ def test_a_part_without_holder_cannot_have_a_holder_set_up_error():
     free = dataclasses.replace(case, holder=None, tools=tuple(t for t in case.tools
                                                               if t.role != "holder"))
     test = grid_test(free)
-    assert "no blank holder" in st._why_not("holder_force_N", [test])
-    assert "no blank holder" in st._why_not("mu", [test])
-    assert st._why_not("ply_angle_deg", [test]) is None
-    assert st._why_not("tool_offset_mm", [test]) is None
+    assert "no blank holder" in setup_parameters.why_not("holder_force_N", [test])
+    assert "no blank holder" in setup_parameters.why_not("mu", [test])
+    assert setup_parameters.why_not("ply_angle_deg", [test]) is None
+    assert setup_parameters.why_not("tool_offset_mm", [test]) is None
 
 
 def test_a_hemisphere_test_gets_its_case():
     test = Test(
         id="h", kind="forming", file="h.csv", columns=grid_test(None).columns,
         geometry="hemisphere", forming={"duration_s": 40.0, "holder_force_N": 133.0})
-    (named,) = st.forming_tests(Bundle(name="b", tests=(test,)))
-    case = fk.forming_case_of(named)
+    (named,) = setup_parameters.forming_tests(Bundle(name="b", tests=(test,)))
+    case = forming_case_of(named)
     assert case.name == "hemisphere" and case.planes == ("x", "y")
-    t, _ = st.applied(named, "tool_offset_mm", [2.0, 0.0], default_model())
+    t, _ = setup_parameters.applied(named, "tool_offset_mm", [2.0, 0.0], default_model())
     assert t.forming_case.tool("punch").params["punch_x_mm"] == 2.0
     assert t.forming_case.planes == ()
 
@@ -101,8 +104,8 @@ def test_a_set_up_key_means_the_same_on_a_hemisphere_test_and_on_a_case_test(tmp
         (folder / "bundle.toml").write_text(text)
         from fenicsx_drape.forming.case.format import case_for_test
 
-        (test,) = st.forming_tests(load_bundle(folder, read_case=case_for_test))
-        cases[name] = fk.forming_case_of(test)
+        (test,) = setup_parameters.forming_tests(load_bundle(folder, read_case=case_for_test))
+        cases[name] = forming_case_of(test)
         assert test.conditions == {}
     for case in cases.values():
         assert case.blank.ply_angle_deg == 4.0
@@ -126,25 +129,31 @@ def test_the_report_and_the_ledger_record_the_set_up(tmp_path):
               "candidates": [{"effects": ["tool_friction"],
                               "error_after": {**error, "normalised": 1.1}}],
               "missing_effect": "tool_friction"}
-    stage = {"setup": [{"parameter": "ply_angle_deg", "stated": 0.0, "fitted": 4.1, "sd": 0.3,
-                        "error_after": {"normalised": 2.4}, "evidence": 2.5,
-                        "significant": True}],
-             "setup_error": "ply_angle_deg", "stated_error": error,
-             "stated_heldout_normalised": 6.0,
-             "untestable": [{"effect": "mu", "setup": True, "reason": "r"}]}
-    st.add_setup(report, stage)
+    from fenicsx_drape.diagnosis.ledger import record_history
+    from fenicsx_drape.diagnosis.results import SetupResult
+    from fenicsx_drape.diagnosis.setup_words import setup_fields, setup_sentence
+
+    nothing = Bundle(name="b", tests=())
+    stage = SetupResult(
+        entries=({"parameter": "ply_angle_deg", "stated": 0.0, "fitted": 4.1, "sd": 0.3,
+                  "error_after": {"normalised": 2.4}, "evidence": 2.5, "significant": True},),
+        setup_error="ply_angle_deg", stated_error=error, stated_heldout_normalised=6.0,
+        untestable=({"effect": "mu", "setup": True, "reason": "r"},), scheme="s", rule="r",
+        resolution=None, model_note=None, best=None, bundle=nothing,
+        stated_model=default_model(), corrected=nothing)
+    report |= setup_fields(stage)
+    report["conclusion"] = setup_sentence(stage) + report["conclusion"]
     assert report["setup_error"] == "ply_angle_deg" and report["setup"][0]["fitted"] == 4.1
-    assert report["untestable"][-1]["effect"] == "mu"
     assert report["conclusion"].startswith("Set-up error: ply_angle_deg fitted 4.1 ± 0.3")
-    st.record_history(report, tmp_path)
+    assert "setup_resolution" not in report
+    record_history(report, tmp_path)
     versions = history([tmp_path])
     assert [v.entry["normalised"] for v in versions] == [6.0, 2.5, 1.1]
     assert versions[1].change == "setup ply_angle_deg = 4.1"
     assert versions[2].change == "+tool_friction"
     assert "setup ply_angle_deg = 4.1" in table(versions)
-    empty = {"untestable": []}
-    st.add_setup(empty, None)
-    assert empty["setup"] == [] and empty["setup_error"] is None
+    assert setup_fields(None) == {"setup": [], "setup_error": None}
+    assert setup_sentence(None) == ""
     json.dumps(report)
 
 
@@ -155,13 +164,13 @@ def test_a_bundle_states_the_offsets_as_x_y_pairs(tmp_path):
     keys = "blank_offset_mm = [6.0, -2]\ntool_offset_mm = [0, 1.5]\n"
     bundle = load_bundle(write_bundle_toml(tmp_path / "b", keys))
     (test,) = bundle.tests
-    case = fk.forming_case_of(test)
+    case = forming_case_of(test)
     assert case.blank.origin_mm == (6.0, -2.0) and case.planes == ()
     assert case.tool("punch").params["punch_y_mm"] == 1.5
     assert test.forming["blank_offset_mm"] == [6.0, -2.0]
     # Written (next to its case) and read again: the same set-up.
     again = load_bundle(write_bundle(bundle, tmp_path / "b"))
-    assert fk.forming_case_of(again.tests[0]).blank.origin_mm == (6.0, -2.0)
+    assert forming_case_of(again.tests[0]).blank.origin_mm == (6.0, -2.0)
     # A wrong length or a non-number: the file and the line of the key (after case = ...).
     for bad in ("[6.0]", "[1, 2, 3]", '["a", 1.0]', "4.0"):
         folder = write_bundle_toml(tmp_path / "b", f"blank_offset_mm = {bad}\n")
@@ -176,11 +185,11 @@ def test_a_note_when_the_stated_set_up_forms_unlike_on_the_case_model():
     # The double dome at 20 mm: the whole blank slides on frictionless tools (docs).
     whole, quarter = {"stated_on_model": 9.82, "model": "full"}, {"stated_on_model": 4.71,
                                                                   "model": "x/y symmetry"}
-    note = st._model_note([(quarter, {}), (whole, {})], 4.71)
+    note = setup_stage.model_note([(quarter, {}), (whole, {})], 4.71)
     assert "whole-blank model is 9.82 × the noise" in note and "against 4.71" in note
-    assert st._model_note([(quarter, {})], 4.71) is None
+    assert setup_stage.model_note([(quarter, {})], 4.71) is None
     # Both near the noise: no note, however their ratio.
-    assert st._model_note([({"stated_on_model": 1.9, "model": "full"}, {})], 0.5) is None
+    assert setup_stage.model_note([({"stated_on_model": 1.9, "model": "full"}, {})], 0.5) is None
 
 
 class _LinearRuns:
@@ -212,32 +221,32 @@ class _LinearRuns:
 
 
 def test_a_candidate_with_nothing_to_gain_stops_at_the_stated_set_up():
-    axes = [(i, v) for i in range(2) for v in st.SCAN["blank_offset_mm"]]
+    axes = [(i, v) for i in range(2) for v in setup_parameters.SCAN["blank_offset_mm"]]
     start = np.zeros(2)
     for d, other in (([0.0, 0.0], 0.0), ([0.0, 0.0], 3.0)):
         runs = _LinearRuns(d, other)
         scanned = [runs.point(start + v * np.eye(2)[i]) for i, v in axes]
-        out = st._nothing_to_gain(runs, start, runs.point(start)["r"], scanned, axes,
+        out = setup_fit.nothing_to_gain(runs, start, runs.point(start)["r"], scanned, axes,
                                   lambda line: None)
-        assert out is not None and np.array_equal(out["p"], start) and out["evidence"] == 1.0
+        assert out is not None and np.array_equal(out.p, start)
         # The step not taken widens the sd; the secants of a linear model give its sd.
-        assert np.all(out["sd_internal"] >= out["sd_fit"])
+        assert np.all(out.sd_internal >= out.sd_fit)
         J = runs.A / np.sqrt(runs.n)
-        expected = st._sd_of(runs, J, runs.point(start)["r"])
-        np.testing.assert_allclose(out["sd_fit"], expected, rtol=1e-9)
+        expected = setup_fit.fit_sd(runs, J, runs.point(start)["r"])
+        np.testing.assert_allclose(out.sd_fit, expected, rtol=1e-9)
     # A 3 mm offset: both scan points (±8 mm) are worse than the stated one, but the secant
     # fit finds it: the candidate goes on to its Gauss-Newton fit.
     runs = _LinearRuns([3.0, 0.0])
     scanned = [runs.point(start + v * np.eye(2)[i]) for i, v in axes]
     r0 = runs.point(start)["r"]
     assert all(runs.residual(v) @ runs.residual(v) > r0 @ r0 for v in scanned)
-    assert st._nothing_to_gain(runs, start, r0, scanned, axes, lambda line: None) is None
+    assert setup_fit.nothing_to_gain(runs, start, r0, scanned, axes, lambda line: None) is None
 
 
 def _bundle(model, stated, seed, **setup) -> Bundle:
     """The coarse double dome formed with a hidden set-up, its test naming the stated case."""
     truth = with_overrides(stated, **setup)
-    test = fk.synthetic_case_test(model, truth, sd_mm=0.3, seed=seed, full=True)
+    test = synthetic_case_test(model, truth, sd_mm=0.3, seed=seed, full=True)
     return Bundle(name="hidden", tests=(dataclasses.replace(test, forming_case=stated,
                                                             case_keys={}),))
 
@@ -249,14 +258,14 @@ def test_a_mirrored_set_up_is_read_from_its_image_run():
     pytest.importorskip("dolfinx")
     model = default_model()
     stated = load_case(CASE, **COARSE)
-    tests = st.forming_tests(_bundle(model, stated, 43))
+    tests = setup_parameters.forming_tests(_bundle(model, stated, 43))
     for name, p, plane in (("ply_angle_deg", (-4.0,), "x"), ("blank_offset_mm", (0.0, -8.0), "y"),
                            ("tool_offset_mm", (-1.0, 0.0), "x")):
-        runs = st._Runs(tests, model, name)
-        image = st._mirrored(name, p, plane)
+        runs = setup_fit.SetupRuns(tests, model, name)
+        image = setup_fit.mirrored(name, p, plane)
         mirrored = runs.values([np.array(p), np.array(image)], mirror=True)[0]
         assert runs.formed == 1  # the image only
-        direct = st._Runs(tests, model, name).values([np.array(p)])[0]
+        direct = setup_fit.SetupRuns(tests, model, name).values([np.array(p)])[0]
         d = mirrored[tests[0].id] - direct[tests[0].id]
         # The two runs differ as any two whole-blank runs of a coarse net do: the ply's by
         # 0.27 mm at 20 mm cells and 1 mm steps, 0.40 mm at this test's 4 mm steps (their
@@ -264,7 +273,7 @@ def test_a_mirrored_set_up_is_read_from_its_image_run():
         assert np.sqrt(np.nanmean(d**2)) < 0.5, name
     # A case modelled whole has no plane to mirror in: every point is formed.
     whole = dataclasses.replace(tests[0], forming_case=with_overrides(stated, symmetry=[]))
-    runs = st._Runs([whole], model, "ply_angle_deg")
+    runs = setup_fit.SetupRuns([whole], model, "ply_angle_deg")
     assert runs.planes == [] and runs._images([(-4.0,), (4.0,)]) == {}
 
 
@@ -274,23 +283,23 @@ def test_a_turned_ply_is_named_with_its_angle_and_a_null_bundle_stays_null():
     pytest.importorskip("dolfinx")
     model = default_model()
     stated = load_case(CASE, **COARSE)
-    from fenicsx_drape.diagnosis import diagnose as dg
+    from fenicsx_drape.diagnosis.decision import setup_rules
 
-    rules = dg.setup_rules(iterations=1)
-    out = st.fit_setup(_bundle(model, stated, 41, ply_angle_deg=4.0), model, rules,
+    rules = setup_rules(iterations=1)
+    out = setup_stage.fit_setup(_bundle(model, stated, 41, ply_angle_deg=4.0), model, rules,
                        parameters=["ply_angle_deg"])
-    assert out["setup_error"] == "ply_angle_deg"
-    best = out["setup"][0]
+    assert out.setup_error == "ply_angle_deg"
+    best = out.entries[0]
     assert abs(best["fitted"] - 4.0) <= 2 * best["sd"] and best["sd"] < 1.0
     assert best["evidence"] > 1.2 and best["error_after"]["normalised"] < 1.5
-    assert out["stated_error"]["normalised"] > 3.0
+    assert out.stated_error["normalised"] > 3.0
     # The null bundle on the quarter's own set-ups: μ is reported from the force's fit
     # (μF, eq. 1), with no runs of its own.
-    null = st.fit_setup(_bundle(model, stated, 42), model, rules,
+    null = setup_stage.fit_setup(_bundle(model, stated, 42), model, rules,
                         parameters=["holder_force_N", "mu"])
-    assert null["setup_error"] is None
-    assert all(s["evidence"] < 1.2 for s in null["setup"])
-    force, mu = (next(s for s in null["setup"] if s["parameter"] == n)
+    assert null.setup_error is None
+    assert all(s["evidence"] < 1.2 for s in null.entries)
+    force, mu = (next(s for s in null.entries if s["parameter"] == n)
                  for n in ("holder_force_N", "mu"))
     assert mu["runs"] == 0 and mu["tied_to"] == "holder_force_N"
     assert mu["fitted"] == pytest.approx(0.3 * force["fitted"] / 200.0)
@@ -300,7 +309,7 @@ def test_a_turned_ply_is_named_with_its_angle_and_a_null_bundle_stays_null():
 def force_and_friction(truth, seed: int) -> Bundle:
     """The quarter double dome formed by ``truth`` with 400 N where the case says 200 N."""
     stated = load_case(CASE, **COARSE)
-    test = fk.synthetic_case_test(truth, with_overrides(stated, holder_force_N=400.0),
+    test = synthetic_case_test(truth, with_overrides(stated, holder_force_N=400.0),
                                   sd_mm=0.1, seed=seed, full=True)
     return Bundle(name="b", tests=(dataclasses.replace(test, forming_case=stated,
                                                        case_keys={}),))
@@ -316,8 +325,9 @@ def test_the_set_up_is_fitted_again_with_a_candidate_effect():
     """
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
     bundle = force_and_friction(truth, seed=11)
-    p = st.refit_setup(bundle, "holder_force_N", [1.0], truth)
-    assert st.fitted_value(bundle, "holder_force_N", p, truth) == pytest.approx(400.0, rel=0.05)
+    p = setup_fit.refit_setup(bundle, "holder_force_N", [1.0], truth)
+    fitted = setup_parameters.fitted_value(bundle, "holder_force_N", p, truth)
+    assert fitted == pytest.approx(400.0, rel=0.05)
 
 
 @pytest.mark.slow
@@ -331,7 +341,7 @@ def test_a_set_up_error_and_a_missing_effect_are_both_named():
     friction forms nearly the same part (measured: 1806 N with μ_tool 0.25 for the truth's
     400 N and 0.8; docs/setup-diagnosis.md), so only the verdicts are asserted.
     """
-    from fenicsx_drape.diagnosis.diagnose import diagnose
+    from fenicsx_drape.diagnosis import diagnose
 
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
     bundle = force_and_friction(truth, seed=12)

@@ -383,13 +383,13 @@ def test_a_grid_mm_that_disagrees_names_the_key_in_bundle_toml(tmp_path):
 
 
 def test_a_grid_without_noise_asks_for_position_sd_instead_of_dividing_by_zero(tmp_path):
-    from fenicsx_drape.diagnosis import forming_kind
+    from fenicsx_drape.diagnosis.kinds import grid
 
     write_bundle(tmp_path, flat_grid(n=6, z=lambda i, j: 0.5 * i * j), test_keys=HEMISPHERE_KEYS)
     (test,) = load_bundle(tmp_path, read_case=case_for_test).tests
     with pytest.raises(DrapeInputError, match=r"test 't': the grid's positions show no noise"
                                               r".*give position_sd_mm"):
-        forming_kind.noise(test)
+        grid.noise(test)
 
 
 def test_every_json_written_is_valid_json(tmp_path):

@@ -18,7 +18,7 @@ fit started from one guess cannot tell a poor minimum from the best the model al
    :data:`FTOL` (relative), when its damping exceeds :data:`LAMBDA_MAX`, or after
    :data:`ITERATIONS` iterations.
 3. **Result** (:class:`Search`). The local minima, each with its start, cost and error; the
-   caller (:func:`fenicsx_drape.calibration.fit.global_stage_search`) refines the lowest
+   caller (:func:`fenicsx_drape.calibration.fitting.global_stage_search`) refines the lowest
    distinct ones by the local least squares and keeps the best. The spread of the minima and
    the starts that reached the best (within :data:`SAME_MINIMUM` of its error) are reported:
    a best reached from several independent starts is the evidence that the fit is at the

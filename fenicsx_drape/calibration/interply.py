@@ -82,8 +82,10 @@ class InterplyFit:
 
     def toml(self) -> str:
         """An ``[interply]`` table for a case file."""
-        lines = ["[interply]"] + [f"{n} = {float(getattr(self.law, n))!r}" for n in FITTED]
-        return "\n".join([*lines, f"slip_mm = {self.law.slip_mm!r}"]) + "\n"
+        from fenicsx_drape.provenance import toml_text
+
+        values = {n: float(getattr(self.law, n)) for n in FITTED}
+        return toml_text({"interply": {**values, "slip_mm": float(self.law.slip_mm)}})
 
 
 def fit_interply(tests: Sequence, start: InterplyLaw | None = None) -> InterplyFit:

@@ -28,7 +28,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Fit, compare, write the outputs and print the summary; returns the exit status."""
     from fenicsx_drape.cli import forming_runs_setting, load_bundle_reported
-    from fenicsx_drape.diagnosis.compare import compare, conclusion, write_compare
+    from fenicsx_drape.diagnosis import compare, write_compare
+    from fenicsx_drape.diagnosis.comparison import conclusion
     from fenicsx_drape.model import default_model, load_model
 
     bundle = load_bundle_reported(args.bundle)

@@ -40,7 +40,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Diagnose, write the report and print its summary; returns the exit status."""
     from fenicsx_drape.cli import forming_runs_setting, load_bundle_reported
-    from fenicsx_drape.diagnosis.diagnose import confirm, diagnose, summary, write_diagnosis
+    from fenicsx_drape.diagnosis import confirm, diagnose, summary, write_diagnosis
     from fenicsx_drape.errors import DrapeInputError
     from fenicsx_drape.model import default_model, load_model
     from fenicsx_drape.runs import resolution

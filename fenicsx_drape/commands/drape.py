@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
                "direction_deg": args.direction_deg, "ply_angle_deg": args.ply_angle_deg,
                "generator": args.generator, "locking_angle_deg": args.locking_angle_deg,
                "warn": False}
-    from fenicsx_drape.forming.case.format import case_dict, case_file, load_case
+    from fenicsx_drape.forming.case import case_dict, case_file, load_case
 
     path = case_file(args.case)
     if path.suffix.lower() != ".toml":

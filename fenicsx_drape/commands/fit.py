@@ -1,7 +1,7 @@
 """``drape fit BUNDLE [--model MODEL.toml] --out DIR``: identify a model's parameters.
 
 The same in Python: ``write_fit(fit(load_bundle(BUNDLE), load_model(MODEL)), DIR)``; with
-``--consistency``, also ``consistency(bundle, result)`` (calibration.consistency). A bundle's
+``--consistency``, also ``consistency(bundle, result)`` (calibration.agreement). A bundle's
 ``interply_friction`` tests are fitted by ``calibration.interply.fit_interply`` and written as
 the ``[interply]`` table of a stack's case file (``interply.toml``, ``interply.json``).
 """
@@ -35,7 +35,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Fit, print progress and the errors, write the outputs."""
-    from fenicsx_drape.calibration.fit import fit, write_fit
+    from fenicsx_drape.calibration.fitting import fit, write_fit
     from fenicsx_drape.calibration.sensitivity import format_table
     from fenicsx_drape.cli import load_bundle_reported
     from fenicsx_drape.effects import COUPON_KINDS
@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     out = write_fit(result, args.out)
     print(f"wrote {out}/model.toml, report.json, sensitivity.csv, fit_*.png")
     if args.consistency is not None:
-        from fenicsx_drape.calibration.consistency import GROUPINGS, consistency
+        from fenicsx_drape.calibration.agreement import GROUPINGS, consistency
         from fenicsx_drape.provenance import write_json
 
         report = consistency(bundle, result, by=args.consistency or GROUPINGS, progress=print)

@@ -8,14 +8,19 @@ Example::
     ./drape --np 2 form hemisphere --out results/full --full --cell-mm 5
     ./drape form hemisphere --out results/ply3 --full --ply-angle-deg 3
     ./drape form meshes/double_dome/case.toml --out out --blank-offset-mm 8 0 --tool-offset-mm 0 2
+    ./drape form double_dome --out out --lab-lines      # the bundle with shear lines and edge
 
 ``hemisphere`` is the paper's, ``meshes/hemisphere/case.toml``, formed like any case (and
 ``double_dome``, ``square_box``: every folder of ``meshes/`` with a ``case.toml``). The
 outputs are listed in :mod:`fenicsx_drape.forming.running.outputs`; the same is one call in Python:
 ``form_case(out, load_case("hemisphere", cell_mm=5))``. Options given on the command line
-override the case file's values (:func:`~fenicsx_drape.forming.case.format.with_overrides`) before
-the case is checked. A set-up that breaks a symmetry plane of the case (a turned ply, an
-offset blank or punch) is formed without that plane, and the command says so.
+override the case file's values
+(:func:`~fenicsx_drape.forming.case.overrides.with_overrides`) before the case is checked. A
+net fitted to the blank (a cell other than the one asked, or a side left partly out) is said
+in a note; the paper's numbers are printed only for a run under the paper's conditions (any
+other run on its tools says what differs). A set-up that breaks a symmetry plane of the case
+(a turned ply, an offset blank or punch) is formed without that plane, and the command says
+so.
 """
 
 from __future__ import annotations
@@ -75,8 +80,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="out-of-plane stabilisation stiffness (N/mm; default: the case's)")
     parser.add_argument("--step-mm", type=float, default=None,
                         help="travel of the fastest tool per load step (mm; default: the case's)")
-    parser.add_argument("--grid-mm", type=positive_float, default=10.0,
-                        help="spacing of the drawn grid written to the bundle (mm)")
+    parser.add_argument("--grid-mm", type=positive_float, default=None,
+                        help="spacing of the drawn grid written to the bundle (mm; default: "
+                        "10 when the net's nodes lie on it, else the net's own cell)")
+    parser.add_argument("--lab-lines", action="store_true",
+                        help="the bundle's test also holds the model's shear along three "
+                        "measuring lines and the blank's edge, as a lab's shear_points and "
+                        "outline (docs/lab-measurements.md)")
     parser.add_argument("--no-fields", action="store_true",
                         help="skip the XDMF fields and tool meshes")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -106,7 +116,7 @@ def _offsets(args: argparse.Namespace) -> dict:
 def _note_full(setup: dict, planes) -> None:
     from mpi4py import MPI
 
-    from fenicsx_drape.forming.case.format import SETUP_OVERRIDES, broken_planes
+    from fenicsx_drape.forming.case import SETUP_OVERRIDES, broken_planes
 
     broken = sorted(broken_planes(setup) & set(planes))
     if broken and MPI.COMM_WORLD.rank == 0:
@@ -120,7 +130,7 @@ def _note_full(setup: dict, planes) -> None:
 def _case(args: argparse.Namespace):
     import dataclasses
 
-    from fenicsx_drape.forming.case.format import case_file, load_case
+    from fenicsx_drape.forming.case import case_file, load_case
 
     path = case_file(args.case)
     if path.suffix.lower() != ".toml":
@@ -172,8 +182,9 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         case = _case(args)
-        _, result = form_case(args.out, case, _model(args, case_model(case)),
-                              grid_mm=args.grid_mm, fields=not args.no_fields,
+        model = _model(args, case_model(case))
+        _, result = form_case(args.out, case, model, grid_mm=args.grid_mm,
+                              lab_lines=args.lab_lines, fields=not args.no_fields,
                               progress=None if args.quiet else progress)
     except SolverError as err:
         if rank0:
@@ -189,23 +200,32 @@ def run(args: argparse.Namespace) -> int:
               f"{result['min_wrinkling_strain']:.3f}, {result['steps']} steps, "
               f"{result['snes_iterations']} Newton iterations, {result['wall_time_s']:.1f} s",
               file=sys.stderr if args.quiet else sys.stdout)
+        if "note" in result.get("net", {}):
+            print(f"note: {result['net']['note']}")
         hemisphere = is_paper_hemisphere(case)
+        compared = hemisphere and result.get("paper_conditions", False)
         partial = not result.get("kinematic_complete", True)
         if hemisphere and not args.quiet:
             from fenicsx_drape.forming.paper.numbers import paper_comparison
 
-            print(paper_comparison(result))  # the kinematic drape's shear among its rows
-        if (not hemisphere or partial) and result.get("kinematic_max_shear_deg") is not None:
+            # The table (the kinematic drape's shear among its rows) under the paper's
+            # conditions only; otherwise one line saying what differs.
+            print(paper_comparison(result, model))
+        if (not compared or partial) and result.get("kinematic_max_shear_deg") is not None:
             print(f"kinematic drape (pin-jointed net) on the same tools: "
                   f"{kinematic_text(result)}"
                   + (" (the tools end before the blank, or the net locks)" if partial else ""))
         for note in result.get("tool_force_notes", []):
             print(f"note: {note}")
+        for name, why in result.get("outputs_left_out", {}).items():
+            print(f"note: {name} left out ({why}); the other outputs are written")
         pictures = ["shear.png", "wrinkling.png", "kinematic_shear.png",
-                    *(["paths.png"] if hemisphere else [])]
+                    *(["paths.png"] if compared else [])]
         for k in range(1, len(result.get("plies", [])) + 1):  # a stack: each ply, the slip
             pictures += [f"shear_ply{k}.png", f"wrinkling_ply{k}.png"]
         pictures += ["interply.png"] if result.get("plies") else []
+        pictures = [p for p in pictures if (args.out / p).is_file()]
         print(f"pictures: {', '.join(str(args.out / p) for p in pictures)}; summary: "
-              f"{args.out / 'summary.json'}")
+              f"{args.out / 'summary.json'}; formed sheet (drape probe): "
+              f"{args.out / result.get('sheet_file', 'formed_sheet.csv')}")
     return 0

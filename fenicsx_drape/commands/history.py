@@ -15,9 +15,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the table of versions and write the plot; returns the exit status."""
-    from fenicsx_drape.diagnosis.ledger import history, table
+    from fenicsx_drape.diagnosis import history, history_table
 
     versions = history(args.dirs, out_dir=args.out)
-    print(table(versions))
+    print(history_table(versions))
     print(f"written to {args.out}/history.png")
     return 0

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from fenicsx_drape.provenance import atomic_write_text
+from fenicsx_drape.provenance import atomic_write_text, toml_text
 
 SHEAR_SD_DEG = 1.0  # a protractor or fibre-angle sensor
 SCAN_SD_MM = 0.15  # a structured-light scanner
@@ -140,34 +140,29 @@ def write_lab_bundle(folder: str | Path, case, tables: Mapping[str, Mapping[str,
     ``measurements`` picks some of the tables (default all); ``keys`` are added to the test
     (process overrides, ``shear_magnitude``, noise keys); ``frame`` is its [test.frame].
     """
-    from fenicsx_drape.forming.case.format import write_case
+    from fenicsx_drape.forming.case import write_case
 
     folder = Path(folder)
     write_case(case, folder / "case", comment=comment)
     chosen = [m for m in (measurements or ("shear_points", "surface", "outline",
                                            "punch_force")) if m in tables]
-    lines = [f"# {line}" for line in comment.splitlines()]
-    lines += ["[bundle]", f'name = "{name}"', "", "[[test]]", f'id = "{test_id}"',
-              'kind = "forming"', 'case = "case/case.toml"']
+    test: dict[str, Any] = {"id": test_id, "kind": "forming", "case": "case/case.toml"}
     files = {"shear_points": "shear.csv", "surface": "scan.csv", "outline": "edge.csv",
              "punch_force": "force.csv"}
     for m in chosen:
         atomic_write_text(folder / files[m], _table(tables[m], comment))
-        lines.append(f'{m} = "{files[m]}"')
+        test[m] = files[m]
     noise = tables.get("_noise", {})
     if "shear_points" in chosen:
-        lines.append(f"shear_sd_deg = {noise.get('shear_sd_deg', SHEAR_SD_DEG)!r}")
+        test["shear_sd_deg"] = noise.get("shear_sd_deg", SHEAR_SD_DEG)
     if "surface" in chosen:
-        lines.append(f"position_sd_mm = {noise.get('position_sd_mm', SCAN_SD_MM)!r}")
+        test["position_sd_mm"] = noise.get("position_sd_mm", SCAN_SD_MM)
     if "punch_force" in chosen:
-        lines.append(f"force_sd_N = {float(noise.get('force_sd_N', 1.0))!r}")
-    for k, v in dict(keys).items():
-        lines.append(f"{k} = " + ("true" if v is True else "false" if v is False
-                                  else f'"{v}"' if isinstance(v, str) else repr(v)))
+        test["force_sd_N"] = float(noise.get("force_sd_N", 1.0))
+    test.update(keys)
     if frame:
-        lines.append("[test.frame]")
-        for k, v in frame.items():
-            lines.append(f"{k} = " + ("true" if v is True else "false" if v is False
-                                      else repr([float(a) for a in v])))
-    atomic_write_text(folder / "bundle.toml", "\n".join(lines) + "\n")
+        test["frame"] = {k: v if isinstance(v, bool) else [float(a) for a in v]
+                         for k, v in frame.items()}
+    atomic_write_text(folder / "bundle.toml",
+                      toml_text({"bundle": {"name": name}, "test": [test]}, comment=comment))
     return folder

@@ -4,7 +4,9 @@ Every ``drape compare --out DIR`` appends one line to ``DIR/ledger.jsonl``: when
 which model (effects, plugins, fitted parameters) and its errors. :func:`history` gathers the
 ledgers of several folders (or of one folder compared into repeatedly), orders the versions in
 time, says what changed from one version to the next, and plots the normalised error version
-by version against the noise floor.
+by version against the noise floor. ``drape diagnose --out DIR`` records the versions a
+diagnosis went through (:func:`record_history`: the set-up as stated, the set-up fitted, the
+effect added).
 """
 
 from __future__ import annotations
@@ -151,7 +153,7 @@ def _value(v) -> str:
     return f"[{v[0]:.3g}, {v[1]:.3g}]" if isinstance(v, list) else f"{v:.4g}"
 
 
-def table(history: Sequence[Version]) -> str:
+def history_table(history: Sequence[Version]) -> str:
     """The history as a text table."""
     rows = [("version", "bundle", "normalised", "rmse", "noise", "change", "folder")]
     for v in history:
@@ -162,6 +164,9 @@ def table(history: Sequence[Version]) -> str:
     lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+table = history_table  # the earlier name, kept for one release
 
 
 def plot(history: Sequence[Version], path: str | Path) -> Path:
@@ -211,3 +216,36 @@ def history(dirs: Iterable[str | Path], out_dir: str | Path | None = None) -> li
                                           for v in result])
         write_provenance(out, ledgers=[str(Path(d).resolve()) for d in dirs])
     return result
+
+
+def record_history(report: dict[str, Any], out_dir, bundle: Bundle | None = None) -> list[dict]:
+    """Record a diagnosis's model versions in ``out_dir``'s ledger (``drape history``).
+
+    In order: the model with the set-up as stated (when set-up candidates were tried), with
+    the set-up error fitted, and with the missing effect added: the error falls version by
+    version as the set-up is corrected, then as the effect is added.
+    """
+    if "error" not in report.get("baseline", {}) or "noise_floor" not in report:
+        return []
+    base = report["baseline"]
+    model = {k: base[k] for k in ("effects", "plugins", "parameters") if k in base}
+    noise = report["noise_floor"]
+    name = report.get("bundle", bundle.name if bundle else "")
+    entries = []
+    setup = None
+    if report.get("setup"):
+        stated = report["setup_stated"]["error"]
+        entries.append(record_version(out_dir, name, model, stated, noise, bundle=bundle))
+        if report.get("setup_error"):
+            best = report["setup"][0]
+            setup = {best["parameter"]: best["fitted"]}
+    if setup or not entries:
+        entries.append(record_version(out_dir, name, model, base["error"], noise,
+                                      bundle=bundle, setup=setup))
+    if report.get("missing_effect"):
+        c = report["candidates"][0]
+        added = {**model, "effects": list(dict.fromkeys([*model.get("effects", []),
+                                                         *c["effects"]]))}
+        entries.append(record_version(out_dir, name, added, c["error_after"], noise,
+                                      bundle=bundle, setup=setup))
+    return entries

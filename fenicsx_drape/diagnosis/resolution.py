@@ -29,10 +29,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis import forming_kind as fk
-from fenicsx_drape.diagnosis.forming_fit import FORMING
-from fenicsx_drape.diagnosis.forming_runs import cell_override, resolution
+from fenicsx_drape.diagnosis.kinds import is_formed, kind_of
+from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
 from fenicsx_drape.errors import DrapeInputError, SolverError
+from fenicsx_drape.runs import cell_override, resolution
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds import Comparison
@@ -47,7 +47,7 @@ MAX_HALVINGS = 4
 
 def cell_of(test: Test) -> float:
     """The unit cell (mm) the test's runs are formed on."""
-    return float(cell_override() or fk.forming_case_of(test).blank.cell_mm)
+    return float(cell_override() or forming_case_of(test).blank.cell_mm)
 
 
 def check_resolution(tests: Sequence[Test], model: Model, comparisons: Sequence[Comparison],
@@ -69,7 +69,7 @@ def check_resolution(tests: Sequence[Test], model: Model, comparisons: Sequence[
     """
     say = progress or (lambda line: None)
     checked = [(t, c) for t, c in zip(tests, comparisons)
-               if t.kind == "forming" and c.normalised > adequate]
+               if is_formed(t) and c.normalised > adequate]
     by_cell: dict[float, list] = {}
     for t, c in checked:
         by_cell.setdefault(cell_of(t), []).append((t, c))
@@ -83,7 +83,7 @@ def check_resolution(tests: Sequence[Test], model: Model, comparisons: Sequence[
                      "noise": c.noise, "unit": c.unit}
             try:
                 with resolution(fine):
-                    values = np.asarray(FORMING.simulate(t, model), float)
+                    values = np.asarray(kind_of(t).simulate(t, model), float)
             except (SolverError, DrapeInputError) as err:
                 out.append({**entry, "discretisation_error": None, "explains": False,
                             "suggested_cell_mm": None,

@@ -182,43 +182,203 @@ def _partners(lower: TrussGrid, xy: np.ndarray, tol: float = 1e-9):
     return corners, _bilinear(np.clip(ξ, 0, 1), np.clip(η, 0, 1)), lo
 
 
+def _catmull_rom(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weights (n, 4) of the Catmull-Rom curve through points −1, 0, 1, 2 at t ∈ [0, 1].
+
+    The curve passes through points 0 and 1 with the tangents (p₁ − p₋₁)/2 and (p₂ − p₀)/2,
+    so that the pieces of neighbouring intervals join with a continuous tangent (C¹). Also
+    the weights' derivatives in t.
+    """
+    t2, t3 = t * t, t * t * t
+    w = 0.5 * np.column_stack([-t3 + 2 * t2 - t, 3 * t3 - 5 * t2 + 2, -3 * t3 + 4 * t2 + t,
+                               t3 - t2])
+    dw = 0.5 * np.column_stack([-3 * t2 + 4 * t - 1, 9 * t2 - 10 * t, -9 * t2 + 8 * t + 1,
+                                3 * t2 - 2 * t])
+    return w, dw
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=1)[:, None]
+
+
+class _Surface:
+    """The smooth surface of one ply at given node positions (C¹ across its cells).
+
+    The tensor product of Catmull-Rom curves along the ply's warp and weft lines: it passes
+    through every node, and its position and tangents are continuous from cell to cell, so
+    the gap and the normal of a node sliding over it vary smoothly where the bilinear cells
+    of the net would kink. Each cell uses the 4 × 4 nodes around it; beyond the ply's edge
+    the lattice is extended linearly (mirrored on a symmetry plane), and a cell whose 4 × 4
+    nodes cannot be completed (the ragged edge of a turned ply) is its bilinear cell.
+    """
+
+    def __init__(self, grid: TrussGrid, lattice: np.ndarray, x: np.ndarray) -> None:
+        self.grid = grid
+        nx, ny = grid.nx, grid.ny
+        P = np.full((nx + 3, ny + 3, 3), np.nan)
+        there = lattice >= 0
+        P[1:-1, 1:-1][there] = x[lattice[there]]
+        planes = grid.planes
+        for _ in range(2):  # twice: the corners of the extension need both directions
+            for axis, plane in ((0, "x"), (1, "y")):
+                Q = np.moveaxis(P, axis, 0)  # a view: filling Q fills P
+                miss = np.isnan(Q[..., 0])
+                ahead = np.full_like(Q, np.nan)
+                ahead[:-2] = 2 * Q[1:-1] - Q[2:]
+                behind = np.full_like(Q, np.nan)
+                behind[2:] = 2 * Q[1:-1] - Q[:-2]
+                guess = np.where(np.isfinite(ahead), ahead, behind)
+                if plane in planes:  # the lattice mirrored in the plane x = 0 (or y = 0)
+                    mirror = Q[2].copy()
+                    mirror[..., axis] *= -1.0
+                    guess[0] = mirror
+                Q[miss] = guess[miss]
+        self.P = P
+
+    def at(self, cell: np.ndarray, q: np.ndarray):
+        """Point, tangents along ξ and η, and the bilinear cell's point at (cell, q).
+
+        Returns S, S_ξ, S_η and S_bilinear, each (p, 3).
+        """
+        i, j = cell[:, 0], cell[:, 1]
+        wi, dwi = _catmull_rom(q[:, 0])
+        wj, dwj = _catmull_rom(q[:, 1])
+        k = np.arange(4)
+        st = self.P[(i[:, None] + k)[:, :, None], (j[:, None] + k)[:, None, :]]  # (p, 4, 4, 3)
+        c00, c10, c11, c01 = st[:, 1, 1], st[:, 2, 1], st[:, 2, 2], st[:, 1, 2]
+        ξ, η = q[:, :1], q[:, 1:]
+        bil = (1 - ξ) * (1 - η) * c00 + ξ * (1 - η) * c10 + ξ * η * c11 + (1 - ξ) * η * c01
+        smooth = np.isfinite(st).all(axis=(1, 2, 3))
+        st = np.where(smooth[:, None, None, None], st, 0.0)
+        S = np.einsum("pa,pb,pabk->pk", wi, wj, st)
+        Su = np.einsum("pa,pb,pabk->pk", dwi, wj, st)
+        Sv = np.einsum("pa,pb,pabk->pk", wi, dwj, st)
+        rough = ~smooth[:, None]
+        S = np.where(rough, bil, S)
+        Su = np.where(rough, (1 - η) * (c10 - c00) + η * (c11 - c01), Su)
+        Sv = np.where(rough, (1 - ξ) * (c01 - c00) + ξ * (c11 - c10), Sv)
+        return S, Su, Sv, bil
+
+    def project(self, xa: np.ndarray, cell: np.ndarray, q: np.ndarray, walks: int = 6):
+        """The point of the surface nearest each point ``xa`` (p, 3), from cells and (ξ, η).
+
+        Gauss-Newton in the cell, then a step to the neighbouring cell while (ξ, η) leaves
+        [0, 1]² (up to ``walks`` cells). Returns the cells and (ξ, η), outside [0, 1]² where
+        the point lies beyond the ply's edge (:func:`overlap`).
+        """
+        grid = self.grid
+        cell, q = cell.copy(), q.copy()
+        todo = np.ones(len(xa), bool)
+        for _ in range(walks):
+            idx = np.flatnonzero(todo)
+            if not len(idx):
+                break
+            c, s = cell[idx], q[idx]
+            for _ in range(3):
+                S, Su, Sv, _ = self.at(c, s)
+                r = S - xa[idx]
+                a, b, d = (np.einsum("pi,pi->p", u, v) for u, v in ((Su, Su), (Su, Sv),
+                                                                    (Sv, Sv)))
+                ga, gb = np.einsum("pi,pi->p", Su, r), np.einsum("pi,pi->p", Sv, r)
+                det = a * d - b * b
+                det = np.where(np.abs(det) > 1e-300, det, 1.0)
+                s = np.clip(s - np.column_stack([d * ga - b * gb, a * gb - b * ga]) / det[:, None],
+                            -1.0, 2.0)
+            step = np.where(s < 0.0, -1, np.where(s >= 1.0, 1, 0))
+            new = np.clip(c + step, 0, [grid.nx - 1, grid.ny - 1])
+            new = np.where(grid.cells[new[:, 0], new[:, 1]][:, None], new, c)
+            moved = (new != c).any(axis=1)
+            s[moved] -= (new - c)[moved]
+            cell[idx], q[idx] = new, s
+            todo[idx[~moved]] = False
+        return cell, q
+
+
+def overlap(grid: TrussGrid, cell: np.ndarray, q: np.ndarray,
+            sides: np.ndarray | None = None) -> np.ndarray:
+    """The share of each upper node's area that lies over the ply below (p,), in [0, 1].
+
+    A node at (ξ, η) of a cell of the lower ply's net has its area from ξ − l to ξ + r (and
+    alike in η; ``sides`` (p, 4) the node's (l_ξ, r_ξ, l_η, r_η) in cells: ½ where its own ply
+    has cells on that side, else 0; default ½ each, a node inside its ply). Beyond the lower
+    ply's edge (a side of the cell with no cell beyond it, other than a symmetry plane) that
+    part is not over the ply. So a node fades out of the contact over a cell as it slides
+    off the ply, and the shares of a sliding ply's nodes add up to the area over the ply
+    below, as under a pull-out's plates.
+    """
+    i, j = cell[:, 0], cell[:, 1]
+    c = np.pad(grid.cells, 1)  # cell (i, j) at [i + 1, j + 1]; none beyond the net
+    planes = grid.planes
+    if "x" in planes:
+        c[0, :] = c[1, :]
+    if "y" in planes:
+        c[:, 0] = c[:, 1]
+    sides = np.full((len(cell), 4), 0.5) if sides is None else sides
+    ω = np.ones(len(cell))
+    for k, before, after in ((0, c[i, j + 1], c[i + 2, j + 1]), (1, c[i + 1, j], c[i + 1, j + 2])):
+        left, right = q[:, k] - sides[:, 2 * k], q[:, k] + sides[:, 2 * k + 1]
+        width = right - left
+        lo = np.where(before, left, np.maximum(left, 0.0))  # cut at the lower ply's edges
+        hi = np.where(after, right, np.minimum(right, 1.0))
+        ω = ω * np.clip(hi - lo, 0.0, None) / np.where(width > 0, width, 1.0)
+    return ω * grid.cells[i, j]
+
+
+def _sides(upper: TrussGrid, lower: TrussGrid) -> np.ndarray:
+    """Each node of ``upper``: how far (cells) its area reaches along ``lower``'s ±ξ, ±η.
+
+    ½ where the upper ply has cells on that side, else 0, when the two nets are parallel;
+    ½ every way otherwise (the area of a turned net is not a box of the lower net's).
+    """
+    n = len(upper.nodes)
+    if abs(upper.rotation_deg - lower.rotation_deg) > 1e-9:
+        return np.full((n, 4), 0.5)
+    c = np.pad(upper.cells, 1)
+    planes = upper.planes
+    if "x" in planes:
+        c[0, :] = c[1, :]
+    if "y" in planes:
+        c[:, 0] = c[:, 1]
+    i, j = upper.ij.T
+    return 0.5 * np.column_stack([c[i, j] | c[i, j + 1], c[i + 1, j] | c[i + 1, j + 1],
+                                  c[i, j] | c[i + 1, j], c[i, j + 1] | c[i + 1, j + 1]])
+
+
 class PlyContact:
     """Contact and inter-ply friction between the adjacent plies of a stack.
 
     A coupling term of :class:`~fenicsx_drape.fe.solver.TrussProblem` (module docstring): like
     a nodal term it gives forces, and its stiffness couples nodes of two plies, given as
     3 × 3 blocks (``values``) on the pattern ``pattern`` (CSR over the owned nodes, columns
-    global node indices), which grows (``pattern_version``) when the pairs follow the plies.
-    Under MPI its pair arrays (``a``, ``J``, ``state``, ...) hold the rank's pairs, in global
-    node indices; :meth:`summary` gives every pair.
+    global node indices), which grows (``pattern_version``) as the pairs follow the plies.
+    Every rank holds every pair (arrays over the whole stack, in the stack's order: ply 2's
+    nodes in grid order, then ply 3's, ...); ``active`` marks the pairs whose node lies over
+    the ply below.
 
     Args:
         plies: The stack (:func:`stack_plies`), as meshed by :func:`stack_sheet`.
         law: The inter-ply law (one for every interface).
         normal_stiffness_N_per_mm: The penalty k_n on a node's gap (N/mm).
-        follow: Re-pair the nodes after every step with the point now under them
-            (:meth:`follow`); by default a pair keeps its partner point of the flat stack
-            (following, on the hemisphere's 30 mm net, let two frictionless plies at 0° form
-            unalike, 26° and 34° of shear where each forms as one ply, 31°: a node sliding
-            on the coarse facets of the ply below).
-            One rank only (a :class:`~fenicsx_drape.errors.DrapeInputError` on more).
+        follow: Re-pair the nodes after every step with the point of the ply below that is
+            now nearest them (:meth:`follow`; bonded plies keep their partners, they do not
+            slide). False: a pair keeps its partner point of the flat stack (right while the
+            plies slide by less than a cell).
     """
 
     def __init__(self, plies: list[Ply], law: InterplyLaw,
-                 normal_stiffness_N_per_mm: float, follow: bool = False) -> None:
+                 normal_stiffness_N_per_mm: float, follow: bool = True) -> None:
         if not (np.isfinite(normal_stiffness_N_per_mm) and normal_stiffness_N_per_mm > 0):
             raise DrapeInputError(f"PlyContact: normal_stiffness_N_per_mm = "
                                   f"{normal_stiffness_N_per_mm} must be > 0")
         self.plies = list(plies)
         self.law = law
         self.k_n = float(normal_stiffness_N_per_mm)
-        self.follows = bool(follow)
+        self.follows = bool(follow) and law.interply_friction
 
     def bind(self, X: np.ndarray, owned: np.ndarray, comm) -> None:
         """Pair every node of ply k + 1 with its partner point on ply k (reference stack).
 
-        Pairs are made over the whole stack, by global node index (the same on every rank);
-        a rank keeps the pairs that touch a node it owns (module docstring, MPI).
+        Pairs are made over the whole stack, by global node index, the same on every rank.
         """
         from scipy.spatial import cKDTree
 
@@ -227,10 +387,6 @@ class PlyContact:
         if self.comm is None:
             self.n_owned, first, self._local_global = len(X), 0, None
         else:
-            if self.follows:
-                raise DrapeInputError("PlyContact(follow=True) runs on one rank (re-made "
-                                      "pairs would cross the partition); run without "
-                                      "mpirun or without follow")
             self.n_owned = int(np.count_nonzero(owned))
             first = self.comm.exscan(self.n_owned) or 0
             self._counts = np.array(self.comm.allgather(3 * self.n_owned))
@@ -238,11 +394,13 @@ class PlyContact:
         n = len(self.X)
         self.owned_range = (first, first + self.n_owned)
         tree = cKDTree(self.X)
+        cell_mm = self.plies[0].grid.cell_mm
         if self.comm is not None:  # the global index of each local node (ghosts by place)
             dist, self._local_global = tree.query(X)
-            if (dist > 1e-6 * self.plies[0].grid.cell_mm).any():
+            if (dist > 1e-6 * cell_mm).any():
                 raise DrapeInputError("PlyContact: the mesh is not the stack of these plies")
-        local = []  # each ply's nodes (grid order) → global node index
+        self._lattice = []  # each ply's lattice (nx + 1, ny + 1) → global node index, or −1
+        local = []
         for ply in self.plies:
             xyz = ply.grid.nodes.copy()
             xyz[:, 2] = ply.z_mm
@@ -250,47 +408,59 @@ class PlyContact:
             if (dist > 1e-6 * ply.grid.cell_mm).any():
                 raise DrapeInputError("PlyContact: the mesh is not the stack of these plies")
             local.append(idx)
-        self._local = local
-        a, J, w, cell, area, h, face = [], [], [], [], [], [], []
+            lattice = np.full((ply.grid.nx + 1, ply.grid.ny + 1), -1, dtype=np.int64)
+            ij = ply.grid.ij
+            lattice[ij[:, 0], ij[:, 1]] = idx
+            self._lattice.append(lattice)
+        a, cell, q, active, area, h, face, side = [], [], [], [], [], [], [], []
         for k in range(1, len(self.plies)):
             upper, lower = self.plies[k], self.plies[k - 1]
-            corners, weights, lo = _partners(lower.grid, upper.grid.nodes[:, :2])
-            keep = corners[:, 0] >= 0
-            a.append(local[k][keep])
-            J.append(local[k - 1][corners[keep]])
-            w.append(weights[keep])
-            cell.append(lo[keep])
-            area.append(node_areas(upper.grid)[keep])
-            h.append(np.full(keep.sum(), upper.z_mm - lower.z_mm))
-            face.append(np.full(keep.sum(), k - 1))
-        self.a = np.concatenate(a) if a else np.zeros(0, int)
-        self.J = np.concatenate(J) if J else np.zeros((0, 4), int)
-        self.w = np.concatenate(w) if w else np.zeros((0, 4))
-        self.cell = np.concatenate(cell) if cell else np.zeros((0, 2), int)  # partner's (i, j)
-        self.area = np.concatenate(area) if area else np.zeros(0)
-        self.h = np.concatenate(h) if h else np.zeros(0)
-        # The interface of each pair: 0 between plies 1 and 2, ...
-        self.interface = np.concatenate(face) if face else np.zeros(0, int)
-        self.pair_id = np.arange(len(self.a))  # the pair's place in the whole stack's list
-        if self.comm is not None:  # the pairs that touch an owned node, in the stack's order
-            mine = ((self.J >= first) & (self.J < first + self.n_owned)).any(axis=1)
-            mine |= (self.a >= first) & (self.a < first + self.n_owned)
-            for name in ("a", "J", "w", "cell", "area", "h", "interface", "pair_id"):
-                setattr(self, name, getattr(self, name)[mine])
-        self.pairs_global = int(sum(len(i) for i in a))
-        self.d0 = self.X[self.a] - np.einsum("pj,pji->pi", self.w, self.X[self.J])
-        self.state = self.law.initial_state(len(self.a), 3)
-        self._trial = None
-        self._keys = np.zeros(0, dtype=np.int64)
+            _, _, lo = _partners(lower.grid, upper.grid.nodes[:, :2])
+            ij = lower.grid.grid_coordinates(upper.grid.nodes[:, :2])
+            a.append(local[k])
+            cell.append(lo)
+            q.append(ij - lo)
+            side.append(_sides(upper.grid, lower.grid))
+            active.append(overlap(lower.grid, lo, ij - lo, side[-1]))
+            area.append(node_areas(upper.grid))
+            h.append(np.full(len(local[k]), upper.z_mm - lower.z_mm))
+            face.append(np.full(len(local[k]), k - 1))
+
+        def joined(parts, empty):
+            return np.concatenate(parts) if parts else empty
+
+        self.a = joined(a, np.zeros(0, np.int64))
+        self.cell = joined(cell, np.zeros((0, 2), int))  # partner's cell (i, j) on the ply below
+        self.q = joined(q, np.zeros((0, 2)))  # and its local coordinates (ξ, η) there
+        self.overlap = joined(active, np.zeros(0))  # the share of a's area over the ply below
+        self.sides = joined(side, np.zeros((0, 4)))  # how far a's area reaches (overlap)
+        self.active = self.overlap > 0.0
+        self.area = joined(area, np.zeros(0))
+        self.h = joined(h, np.zeros(0))
+        self.interface = joined(face, np.zeros(0, int))  # 0 between plies 1 and 2, ...
+        p = len(self.a)
+        self.pairs_global = int(self.active.sum())
+        self.state = self.law.initial_state(p, 3)
+        self.pressure_MPa = np.zeros(p)
+        self.slip_mm = np.zeros((p, 3))
         self._n = n
+        self._keys = np.zeros(0, dtype=np.int64)
         self.pattern_version = 0  # grows by one when the pattern grows (pairs followed)
-        self._build_pattern()
-        self._normals(self.X)
-        self.pressure_MPa = np.zeros(len(self.a))
-        self.slip_mm = np.zeros((len(self.a), 3))
-        if self.comm is not None:  # the last commit's pairs over all ranks (summary)
-            self._x_committed = self.X
-            self._gathered = self._gather_pairs()
+        self._trial = None
+        self._dt_last = 0.0
+        self._partner(self.X)
+        self.d0 = self._gap_vector(self.X)
+        self._x_committed = self.X
+        # The stack moving as one: each node of ply 2, 3, ... on ply 1 (stack_solver).
+        self._first = local[0]
+        self._upper = np.concatenate(local[1:]) if len(local) > 1 else np.zeros(0, np.int64)
+        first = self.plies[0].grid
+        upper_xy = np.concatenate([p.grid.nodes[:, :2] for p in self.plies[1:]]) \
+            if len(local) > 1 else np.zeros((0, 2))
+        _, _, lo = _partners(first, upper_xy)
+        self._to_first_cell = lo
+        self._to_first_q = first.grid_coordinates(upper_xy) - lo
+        self._map_to_first(self.X)
 
     def _gather(self, x: np.ndarray) -> np.ndarray:
         """The owned rows of ``x`` (n, 3) of every rank, in global node order (collective)."""
@@ -298,15 +468,59 @@ class PlyContact:
         self.comm.Allgatherv(np.ascontiguousarray(x[: self.n_owned]), [out, self._counts])
         return out
 
+    def _partner(self, x: np.ndarray, before: np.ndarray | None = None) -> None:
+        """Corners, weights, correction and normal of every pair's point at positions ``x``.
+
+        The partner point is x_p = Σ w_J x_J + δ: the bilinear point of its cell plus the
+        smooth surface's offset from it (δ, and the normal n, are those of the positions
+        ``x``, the last converged step's; over the next step the normal turns on at the rate
+        it turned from the positions ``before``, the step before), then :meth:`_build_pattern`.
+        """
+        p = len(self.a)
+        self.J = np.zeros((p, 4), np.int64)
+        self.w = np.zeros((p, 4))
+        self.delta = np.zeros((p, 3))
+        self.n = np.tile([0.0, 0.0, 1.0], (p, 1))  # the smooth surface's, last step
+        self.n_rate = np.zeros((p, 3))  # and its change over that step
+        for k in range(1, len(self.plies)):
+            on = np.flatnonzero((self.interface == k - 1) & self.active)
+            if not len(on):
+                continue
+            grid, lattice = self.plies[k - 1].grid, self._lattice[k - 1]
+            i, j = self.cell[on].T
+            self.J[on] = np.column_stack([lattice[i, j], lattice[i + 1, j],
+                                          lattice[i + 1, j + 1], lattice[i, j + 1]])
+            q = np.clip(self.q[on], 0.0, 1.0)  # beyond the edge: the edge's point
+            self.w[on] = _bilinear(*q.T)
+            S, Su, Sv, bil = _Surface(grid, lattice, x).at(self.cell[on], q)
+            self.delta[on] = S - bil
+            self.n[on] = _unit(np.cross(Su, Sv))
+            if before is not None:  # the same points of the ply below a step earlier
+                _, Su, Sv, _ = _Surface(grid, lattice, before).at(self.cell[on], q)
+                self.n_rate[on] = self.n[on] - _unit(np.cross(Su, Sv))
+        self._on = np.flatnonzero(self.active)
+        self._build_pattern()
+
+    def _gap_vector(self, x: np.ndarray) -> np.ndarray:
+        """The gap vectors d = x_a − x_p (p, 3) (zero for the pairs that are not active)."""
+        return np.where(self.active[:, None], x[self.a] - np.einsum(
+            "pj,pji->pi", self.w, x[self.J]) - self.delta, 0.0)
+
     def _build_pattern(self) -> None:
-        """The blocks the pairs couple, added to the pattern (which only grows).
+        """The blocks the active pairs couple, added to the pattern (which only grows).
 
         A pair couples its node and the partner's corners of nonzero weight with each other
-        (for identical nets, at first only the node under it: less fill).
+        (for identical nets, at first only the node under it: less fill). Unchanged pairs
+        keep the pattern as it is.
         """
         n, (first, end) = self._n, self.owned_range
-        nodes = np.column_stack([self.a, self.J])  # (p, 5)
-        live = np.column_stack([np.ones(len(self.a), bool), self.w > 1e-12])
+        on = self._on
+        nodes = np.column_stack([self.a[on], self.J[on]])  # (p, 5)
+        live = np.column_stack([np.ones(len(on), bool), self.w[on] > 1e-12])
+        key = (nodes.tobytes(), live.tobytes())
+        if key == getattr(self, "_pattern_key", None):
+            return
+        self._pattern_key = key
         rows_live = live & (nodes >= first) & (nodes < end)  # a rank fills its own rows
         self._live = rows_live[:, :, None] & live[:, None, :]  # (p, 5, 5)
         rows = np.broadcast_to(nodes[:, :, None] - first, self._live.shape)[self._live]
@@ -327,47 +541,30 @@ class PlyContact:
         slot = np.searchsorted(self._keys, keys)
         self._to_slots = csr_matrix((np.ones(len(slot)), (slot, np.arange(len(slot)))),
                                     shape=(len(self._keys), len(slot)))
-        self._c, self._G = np.zeros((len(self.a), 5)), np.zeros((len(self.a), 3, 3))
+        self._c, self._G = np.zeros((len(on), 5)), np.zeros((len(on), 3, 3))
 
     def follow(self, x: np.ndarray) -> None:
-        """Re-pair every node with the point of the ply below that lies under it now.
+        """Re-pair every node with the point of the ply below nearest it now (positions ``x``).
 
-        The slip carries over (the new partner's reference gap is set so that s is
-        unchanged); a node that slid more than half a cell off the ply below loses its pair.
+        The slip carries over: the new partner's reference gap d₀ is set so that the slip
+        s = P (d − d₀) is unchanged. A node beyond the edge of the ply below (more than half
+        a cell) loses its pair; one that comes back over it is paired again, unslipped.
         """
-        keep = np.ones(len(self.a), bool)
+        was = self.active.copy()
         for k in range(1, len(self.plies)):
             on = np.flatnonzero(self.interface == k - 1)
             if not len(on):
                 continue
-            grid, local = self.plies[k - 1].grid, self._local[k - 1]
-            cell = self.cell[on].copy()
-            for _ in range(3):  # walk to the cell under the node
-                corners = local[_corners(grid, cell[:, 0], cell[:, 1])]
-                q = _local_coordinates(x[corners], x[self.a[on]])
-                step = np.floor(q).astype(int)
-                cell = np.clip(cell + step, 0, [grid.nx - 1, grid.ny - 1])
-            corners = local[_corners(grid, cell[:, 0], cell[:, 1])]
-            q = _local_coordinates(x[corners], x[self.a[on]])
-            # Kept while the node's half cell still overlaps the ply below (at its edge the
-            # partner point stays on the edge).
-            inside = ((q > -0.5) & (q < 1.5)).all(axis=1) & grid.cells[cell[:, 0], cell[:, 1]]
-            keep[on[~inside]] = False
-            self.cell[on], self.J[on] = cell, corners
-            self.w[on] = _bilinear(*np.clip(q, 0.0, 1.0).T)
-        d = x[self.a] - np.einsum("pj,pji->pi", self.w, x[self.J])
-        self.d0 = d - self.slip_mm
-        if not keep.all():
-            for name in ("a", "J", "w", "cell", "area", "h", "interface", "d0", "state",
-                         "pressure_MPa", "slip_mm"):
-                setattr(self, name, getattr(self, name)[keep])
-        self._build_pattern()
-
-    def _normals(self, x: np.ndarray) -> None:
-        """Unit normals of the partner cells (cross product of their diagonals)."""
-        xj = x[self.J]
-        nrm = np.cross(xj[:, 2] - xj[:, 0], xj[:, 3] - xj[:, 1])
-        self.n = nrm / np.linalg.norm(nrm, axis=1)[:, None]
+            grid = self.plies[k - 1].grid
+            surface = _Surface(grid, self._lattice[k - 1], x)
+            cell, q = surface.project(x[self.a[on]], self.cell[on], self.q[on])
+            self.cell[on], self.q[on] = cell, q
+            self.overlap[on] = overlap(grid, cell, q, self.sides[on])
+        self.active = self.overlap > 0.0
+        fresh = self.active & ~was
+        self.state[fresh] = 0.0
+        self.slip_mm[fresh] = 0.0
+        self.pressure_MPa[~self.active] = 0.0
 
     def forces(self, x: np.ndarray, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Forces (n, 3) in N; the stiffness goes to :attr:`values` (the diagonal is zero)."""
@@ -375,41 +572,50 @@ class PlyContact:
         x = x if self.comm is None else self._gather(x)
         nn = len(x)
         f = np.zeros((nn, 3))
-        p_count = len(self.a)
+        on = self._on
+        p_count = len(on)
         if not p_count:
+            self._trial = (x.copy(), self.state[on], np.zeros(0), np.zeros((0, 3)), dt)
             self.f = f if self.comm is None else f[self._local_global]
             return self.f, np.zeros((local, 3, 3))
-        n = self.n
-        d = x[self.a] - np.einsum("pj,pji->pi", self.w, x[self.J])
-        g = np.einsum("pi,pi->p", n, d) - self.h
+        a, J, w = self.a[on], self.J[on], self.w[on]
+        ω, h = self.overlap[on], self.h[on]
+        area = self.area[on] * ω  # the node's area over the ply below
+        # The normal over the step: the last step's, turned on at the rate it turned then
+        # (a normal lagged by a step pushed plies that wrap a tool along each other).
+        n = self.n[on] + (dt / self._dt_last if self._dt_last else 0.0) * self.n_rate[on]
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        d = x[a] - np.einsum("pj,pji->pi", w, x[J]) - self.delta[on]
+        g = np.einsum("pi,pi->p", n, d) - h
         bonded = not self.law.interply_friction
         # Touching plies (g ≤ 0, and within 1e-6 of h above: the flat stack starts so) keep
         # the penalty's stiffness, so a stack that only just touches is not singular.
-        touch = np.ones(p_count, bool) if bonded else g < 1e-6 * self.h
-        f_n = np.where(touch, -self.k_n * np.minimum(g, 0.0) if not bonded else -self.k_n * g, 0.0)
-        p = np.maximum(f_n, 0.0) / self.area
+        touch = np.ones(p_count, bool) if bonded else g < 1e-6 * h
+        k_n = self.k_n * ω  # a penalty per area: the pressure does not grow as ω fades
+        f_n = np.where(touch, -k_n * np.minimum(g, 0.0) if not bonded else -k_n * g, 0.0)
+        p = np.maximum(f_n, 0.0) / area
         P = np.eye(3) - np.einsum("pi,pj->pij", n, n)
-        s = np.einsum("pij,pj->pi", P, d - self.d0)
-        state = self.state.copy()
+        s = np.einsum("pij,pj->pi", P, d - self.d0[on])
+        state = self.state[on].copy()
         state[:, :3] = np.einsum("pij,pj->pi", P, state[:, :3])
         state[:, 3:] = np.einsum("pij,pj->pi", P, state[:, 3:])
         out = self.law.traction(s, p, dt, state)
-        f_a = f_n[:, None] * n - self.area[:, None] * out.tau
+        f_a = f_n[:, None] * n - area[:, None] * out.tau
         # G = −∂f_a/∂d: penalty, friction through s and through the pressure.
-        k_touch = np.where(touch, self.k_n, 0.0)[:, None, None]
+        k_touch = np.where(touch, k_n, 0.0)[:, None, None]
         nn_T = np.einsum("pi,pj->pij", n, n)
         pressed = (f_n > 0.0)[:, None, None]
-        G = (k_touch * nn_T + self.area[:, None, None] * np.einsum("pik,pkj->pij", out.dtau_ds, P)
+        G = (k_touch * nn_T + area[:, None, None] * np.einsum("pik,pkj->pij", out.dtau_ds, P)
              - pressed * k_touch * np.einsum("pi,pj->pij", out.dtau_dp, n))
-        c = np.column_stack([np.ones(p_count), -self.w])  # ∂d/∂x of the five nodes
-        nodes = np.concatenate([self.a, self.J.ravel()])
-        forces = np.concatenate([f_a, (-self.w[:, :, None] * f_a[:, None, :]).reshape(-1, 3)])
+        c = np.column_stack([np.ones(p_count), -w])  # ∂d/∂x of the five nodes
+        nodes = np.concatenate([a, J.ravel()])
+        forces = np.concatenate([f_a, (-w[:, :, None] * f_a[:, None, :]).reshape(-1, 3)])
         for i in range(3):  # a scatter-add (bincount is much faster than ufunc.at)
             f[:, i] = np.bincount(nodes, forces[:, i], minlength=nn)
         self._c, self._G = c, G  # the blocks are made when the Jacobian asks (values)
-        self._trial = (x.copy(), out.state, p, s)
+        self._trial = (x.copy(), out.state, p, s, dt)
         # The forces of the last evaluation (N), also on constrained nodes; on the local
-        # nodes, whole on the owned ones (a ghost's may lack pairs other ranks hold).
+        # nodes (every pair is on every rank: whole on ghosts too).
         self.f = f if self.comm is None else f[self._local_global]
         return self.f, np.zeros((local, 3, 3))
 
@@ -423,61 +629,77 @@ class PlyContact:
         return (self._to_slots @ blocks).reshape(-1, 3, 3)
 
     def commit(self) -> None:
-        """Keep the pairs' slip; the normals follow the converged plies."""
-        if self._trial is not None:
-            x, self.state, self.pressure_MPa, self.slip_mm = self._trial
-            self._trial = None
-            if self.follows and len(self.a):
-                self.follow(x)
-            if len(self.a):
-                self._normals(x)
-            if self.comm is not None:
-                self._x_committed = x
-        if self.comm is not None:  # every rank commits (a rank may hold no pair)
-            self._gathered = self._gather_pairs()
+        """Keep the pairs' slip; the pairs follow the converged plies, and so do δ and n."""
+        if self._trial is None:
+            return
+        x, state, pressure, slip, self._dt_last = self._trial
+        self._trial = None
+        on = self._on
+        self.state[on], self.pressure_MPa[on], self.slip_mm[on] = state, pressure, slip
+        if self.follows:
+            self.follow(x)
+        self._partner(x, self._x_committed)
+        # The slip carries over the new partner point, normal and correction.
+        self.d0 = self._gap_vector(x) - np.where(self.active[:, None], self.slip_mm, 0.0)
+        self._x_committed = x
+        self._map_to_first(x)
+
+    def first_ply_nodes(self) -> np.ndarray:
+        """The global node indices of ply 1, in its grid's order."""
+        return self._first
+
+    def first_ply_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every node of ply 2, 3, ...: its global index, and the point of ply 1 under it.
+
+        Returns the nodes (m,), the corners of ply 1's cell under each (m, 4, global node
+        indices) and their bilinear weights (m, 4), at the last converged step: the stack
+        moving as one, for the solver (:mod:`~fenicsx_drape.fe.stack_solver`).
+        """
+        return self._upper, self._to_first_J, self._to_first_w
+
+    def _map_to_first(self, x: np.ndarray) -> None:
+        """Project the nodes of plies 2, 3, ... on ply 1's surface at positions ``x``."""
+        grid, lattice = self.plies[0].grid, self._lattice[0]
+        if not len(self._upper):
+            return
+        cell, q = _Surface(grid, lattice, x).project(x[self._upper], self._to_first_cell,
+                                                     self._to_first_q)
+        changed = not np.array_equal(cell, self._to_first_cell)
+        self._to_first_cell, self._to_first_q = cell, q
+        i, j = cell.T
+        J = np.column_stack([lattice[i, j], lattice[i + 1, j], lattice[i + 1, j + 1],
+                             lattice[i, j + 1]])
+        self._to_first_J, self._to_first_w = J, _bilinear(*np.clip(q, 0.0, 1.0).T)
+        if changed or not hasattr(self, "map_version"):
+            self.map_version = getattr(self, "map_version", -1) + 1
 
     def owned_pairs(self) -> tuple[np.ndarray, np.ndarray]:
-        """The pairs whose node a this rank owns: a's local node index, and the pairs' mask.
+        """The active pairs whose node a this rank owns: a's local index, and the pairs' mask.
 
         (Owned nodes come first in the local order, in the global order from the rank's
-        first node; on one rank every pair, a itself.)
+        first node; on one rank every active pair, a itself.)
         """
         first, end = self.owned_range
-        mine = (self.a >= first) & (self.a < end)
+        mine = (self.a >= first) & (self.a < end) & self.active
         return self.a[mine] - first, mine
-
-    def _gather_pairs(self) -> tuple:
-        """Interface, pressure, sliding and place (x, y) of every pair (collective).
-
-        Each pair comes from the rank that owns its node a, in the stack's order.
-        """
-        _, mine = self.owned_pairs()
-        parts = self.comm.allgather((self.pair_id[mine], self.interface[mine],
-                                     self.pressure_MPa[mine], self.sliding_mm[mine],
-                                     self._x_committed[self.a[mine], :2]))
-        pid, *data = (np.concatenate(c) for c in zip(*parts))
-        order = np.argsort(pid)
-        return tuple(d[order] for d in data)
 
     def revert(self) -> None:
         """Forget the trial slip of a step that is cut back."""
         self._trial = None
 
-    def summary(self, x: np.ndarray) -> list[dict]:
+    def summary(self, x: np.ndarray | None = None) -> list[dict]:
         """Per interface: pairs, pressed pairs, largest and mean pressure and sliding.
 
-        ``x`` are the converged positions (for the pairs' places, ``xy``).
+        The pairs over the ply below at the last converged step, with their places (``xy``).
+        ``x`` is not needed (every rank holds every pair); it is accepted for callers that
+        give the converged positions.
         """
         out = []
-        if self.comm is None:
-            face, pressure, sliding, xy = (self.interface, self.pressure_MPa, self.sliding_mm,
-                                           x[self.a, :2])
-        else:  # every pair once, at the last commit (x, local, lacks other ranks' nodes)
-            face, pressure, sliding, xy = self._gathered
-        sliding = np.linalg.norm(sliding, axis=1)
+        xy = self._x_committed[self.a, :2]
+        sliding = np.linalg.norm(self.sliding_mm, axis=1)
         for k in range(len(self.plies) - 1):
-            on = face == k
-            p, s = pressure[on], sliding[on]
+            on = (self.interface == k) & self.active
+            p, s = self.pressure_MPa[on], sliding[on]
             pressed = p > 0
             out.append({"interface": f"ply{k + 1}/ply{k + 2}", "pairs": int(on.sum()),
                         "pressed_pairs": int(pressed.sum()),
@@ -493,4 +715,3 @@ class PlyContact:
     def sliding_mm(self) -> np.ndarray:
         """Plastic (sliding) slip of every pair (p, 3) in mm, at the last converged step."""
         return self.state[:, :3]
-

@@ -89,6 +89,8 @@ about 10⁻¹."""
 
 
 BENDING_JACOBIANS = ("auto", "full", "diagonal", "preconditioner")
+STACK_SOLVERS = ("plies", "direct")
+"""``SolverOptions.stack_solver``: how a stack's linear solves go (fe/stack_solver.py)."""
 """``SolverOptions.bending_jacobian``: how the tow bending's stencils enter Newton's solve."""
 
 SPLIT_FROM_NODES = 500
@@ -143,6 +145,10 @@ class SolverOptions:
     # nodes apart lumped on the diagonal: BENDING_PRECONDITIONER); "auto" chooses between the
     # last and "full" by the sheet's size (SPLIT_FROM_NODES).
     bending_jacobian: str = "auto"
+    # A stack of plies: "direct" factors the whole stack (its Jacobian); "plies" solves with
+    # GMRES preconditioned by each ply's own factor and the stack moving as one
+    # (fe/stack_solver.py: fewer flops, more time, docs/laminates-internals.md).
+    stack_solver: str = "direct"
     # Extra SNES/KSP/PC options (those of the command line, fe.newton.set_petsc_options, win).
     petsc_options: dict = dataclasses.field(default_factory=dict)
 
@@ -153,6 +159,9 @@ class SolverOptions:
         if self.bending_jacobian not in BENDING_JACOBIANS:
             raise DrapeInputError(f"solver option bending_jacobian = {self.bending_jacobian!r}: "
                                   f"choose from {', '.join(BENDING_JACOBIANS)}")
+        if self.stack_solver not in STACK_SOLVERS:
+            raise DrapeInputError(f"solver option stack_solver = {self.stack_solver!r}: choose "
+                                  f"from {', '.join(STACK_SOLVERS)}")
         if self.line_search not in LINE_SEARCHES:
             raise DrapeInputError(f"solver option line_search = {self.line_search!r}: choose "
                                   f"from {', '.join(LINE_SEARCHES)}")
@@ -375,15 +384,26 @@ class TrussProblem:
     def _setup_newton(self) -> None:
         opts = self.options
         split = self._bending is not None and self.bending_jacobian == "preconditioner"
+        contact = next((t for t in self._couplings if hasattr(t, "first_ply_map")), None)
+        plies = opts.stack_solver == "plies" and contact is not None
+        krylov = split or plies
         options = {"pc_factor_mat_solver_type": opts.linear_solver,
-                   **(BENDING_PRECONDITIONER if split else {}), **opts.petsc_options}
+                   **(BENDING_PRECONDITIONER if krylov else {}), **opts.petsc_options}
         operator = self._operator() if split else self._A
         self.newton = Newton(self._residual, self._jacobian, operator, self._b,
-                             P=self._A if split else None,
+                             P=self._A if krylov else None,
                              prefix=f"drape_truss_{next(_ids)}_", atol=opts.snes_atol,
                              rtol=opts.snes_rtol, max_it=opts.snes_max_it,
                              node_atol=opts.node_atol_N, line_search=opts.line_search,
                              options=options, monitor=self._monitor)
+        self.stack_preconditioner = None
+        if plies and "pc_type" not in opts.petsc_options:  # fe/stack_solver.py
+            from fenicsx_drape.fe.stack_solver import PlyPreconditioner
+
+            self.stack_preconditioner = PlyPreconditioner(self, contact, opts.linear_solver)
+            pc = self.newton.snes.getKSP().getPC()
+            pc.setType(PETSc.PC.Type.PYTHON)
+            pc.setPythonContext(self.stack_preconditioner)
 
     def _monitor(self, iterate: Iterate) -> None:
         if self.monitor is not None:

@@ -26,7 +26,7 @@ Everything but the runs is plain NumPy; :func:`run_case` and :func:`form_case` i
 when called, and Gmsh is imported when a meshed tool is read.
 """
 
-from fenicsx_drape.forming.case.format import (
+from fenicsx_drape.forming.case import (
     FormingCase,
     case_file,
     case_for_test,

@@ -29,9 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.errors import DrapeInputError, InputFileError, likely_typo
+from fenicsx_drape.limits import check_file_size
 from fenicsx_drape.measurements import lab
-from fenicsx_drape.provenance import atomic_write_text
+from fenicsx_drape.measurements.tables import ragged_hint, read_rows
+from fenicsx_drape.provenance import atomic_write_text, toml_text
 
 KINDS = ("tensile", "bias_extension", "picture_frame", "forming", "interply_friction")
 
@@ -122,16 +124,9 @@ _SPEED_TOLERANCE = 3.0
 _TOWS_TOLERANCE = 1.5
 
 
-class BundleError(DrapeInputError):
-    """A bundle that cannot be loaded; ``problems`` lists every ``file:line: problem``."""
-
-    def __init__(self, problems: list[str]):
-        self.problems = list(problems)
-        if len(problems) == 1:
-            message = problems[0]
-        else:
-            message = f"{len(problems)} problems:\n  " + "\n  ".join(problems)
-        super().__init__(message)
+# A bundle that cannot be loaded: the package's one error for bad input files, whose
+# ``problems`` list every ``file:line: problem`` (``BundleError`` is its earlier name).
+BundleError = InputFileError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -268,8 +263,8 @@ class _Problems:
     def __init__(self) -> None:
         self.items: list[str] = []
 
-    def add(self, file: str, line: int, problem: str) -> None:
-        self.items.append(f"{file}:{line}: {problem}")
+    def add(self, file: str, line: int | None, problem: str) -> None:
+        self.items.append(f"{file}:{line}: {problem}" if line else f"{file}: {problem}")
 
 
 def _key_lines(text: str) -> dict[tuple[str, int, str], int]:
@@ -297,6 +292,17 @@ def _key_lines(text: str) -> dict[tuple[str, int, str], int]:
         elif m := keyline.match(raw):
             lines.setdefault((table, index, m.group(1).strip("\"'")), number)
     return lines
+
+
+# The keys of [bundle].
+BUNDLE_KEYS = ("name", "material", "tows_per_mm", *NOISE_KEYS)
+
+
+def _typo_note(key: str, known) -> str:
+    """A note naming the known key that ``key`` is likely a typo of (else empty)."""
+    guess = likely_typo(key, known)
+    return (f" -- did you mean `{guess}`? (a likely typo: the key is not read as "
+            f"{guess})" if guess else "")
 
 
 def _is_number(value: Any) -> bool:
@@ -355,15 +361,19 @@ def load_bundle(path: str | Path, read_case: CaseReader | None = None) -> Bundle
     toml_path = path if path.is_file() else folder / "bundle.toml"
     fname = str(toml_path)
     if not toml_path.is_file():
-        raise BundleError([f"{fname}:0: no bundle.toml here (a bundle is a folder holding "
+        raise BundleError([f"{fname}: no bundle.toml here (a bundle is a folder holding "
                            "bundle.toml and one CSV table per test)"])
+    try:
+        check_file_size(toml_path, "bundle.toml")
+    except DrapeInputError as err:
+        raise BundleError([str(err)]) from None
     text = toml_path.read_text(encoding="utf-8-sig", errors="replace")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         line = re.search(r"line (\d+)", str(err))
-        at = line.group(1) if line else 0
-        raise BundleError([f"{fname}:{at}: not valid TOML: {err}"]) from None
+        at = f":{line.group(1)}" if line else ""
+        raise BundleError([f"{fname}{at}: not valid TOML: {err}"]) from None
     lines = _key_lines(text)
     problems = _Problems()
     unknown: list[str] = []
@@ -403,14 +413,14 @@ def load_bundle(path: str | Path, read_case: CaseReader | None = None) -> Bundle
                 problems.add(fname, where("bundle", -1, key),
                              f"[bundle] {key} = {value!r} must be a positive number")
     for key, value in head.items():
-        if key in ("name", "material", "tows_per_mm", *NOISE_KEYS):
+        if key in BUNDLE_KEYS:
             continue
         if msg := _unit_problem(key):
             problems.add(fname, where("bundle", -1, key), msg)
             continue
         extra[key] = value
         unknown.append(f"{fname}:{where('bundle', -1, key)}: unknown [bundle] key {key!r} "
-                       "kept in Bundle.extra")
+                       f"kept in Bundle.extra{_typo_note(key, BUNDLE_KEYS)}")
 
     raw_tests = data.get("test", [])
     if not isinstance(raw_tests, list) or not raw_tests:
@@ -522,6 +532,9 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
                 raw = {k: v for k, v in raw.items() if k != key}
         case_file, case_path, used, forming_case = _read_case(
             folder, fname, raw, index, where, label, known, problems, read_case)
+    # The keys a misspelt one likely means (named in the note that keeps it as a condition).
+    spelled = {*known, *SETUP_KEYS[kind], *NOISE_KEYS, "ply_angles_deg",
+               *(SETUP_OVERRIDE_KEYS if kind == "forming" else ())}
     for key, value in raw.items():
         if key in known:
             continue
@@ -553,10 +566,12 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
             if not math.isfinite(value):
                 problems.add(fname, at, f"{label}: condition {key} = {value} is not finite")
             conditions[key] = float(value)
-            unknown.append(f"{fname}:{at}: {label}: key {key!r} kept as a test condition")
+            unknown.append(f"{fname}:{at}: {label}: key {key!r} kept as a test condition"
+                           f"{_typo_note(key, spelled)}")
         else:
             text_notes[key] = str(value)
-            unknown.append(f"{fname}:{at}: {label}: non-numeric key {key!r} kept as a note")
+            unknown.append(f"{fname}:{at}: {label}: non-numeric key {key!r} kept as a note"
+                           f"{_typo_note(key, spelled)}")
     raw_conditions = raw.get("conditions", {})
     if not isinstance(raw_conditions, dict):
         problems.add(fname, where("test", index, "conditions"),
@@ -604,6 +619,11 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
             from fenicsx_drape.measurements.plausible import grid_table_check
 
             check = grid_table_check(setup, forming_case, fname, where("test", index, "grid_mm"))
+        if not csv_path.is_file():
+            problems.add(fname, where("test", index, "file"),
+                         f"{label}: file = {file!r}: no such file {str(csv_path)!r} (the path "
+                         "is relative to the bundle folder)")
+            return None
         table = _read_table(csv_path, kind, label, problems, check)
     if table is None:
         return None
@@ -735,39 +755,22 @@ def _read_table(path: Path, kind: str, label: str, problems: _Problems, check=No
     ``check(path, columns, lines)``, if given, returns more ``(file, line, problem)``.
     """
     fname = str(path)
-    if not path.is_file():
-        problems.add(fname, 0, f"{label}: the table file does not exist")
-        return None
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as err:
-        problems.add(fname, 0, f"{label}: cannot read the table: {err}")
-        return None
     before = len(problems.items)
-    rows: list[tuple[int, list[str]]] = []
-    header: list[str] | None = None
-    header_line = 0
-    for number, raw in enumerate(text.splitlines(), start=1):
-        stripped = raw.strip()
-        if not stripped:
-            continue
-        if header is None:
-            if stripped.startswith("#"):
-                continue
-            header, header_line = [c.strip() for c in stripped.split(",")], number
-            continue
-        rows.append((number, [c.strip() for c in stripped.split(",")]))
-    if header is None:
-        problems.add(fname, 0, f"{label}: the table has no header row")
+    read = read_rows(path, label, problems.add)
+    if read is None:
         return None
+    header, header_line, rows = read
     required, optional = COLUMNS[kind]
     for name in header:
         if msg := _unit_problem(name):
             problems.add(fname, header_line, f"{label}: column {msg}")
     missing = _missing(required, header)
     if missing:
+        guesses = [f"; {c!r}: did you mean `{g}`?" for c in header
+                   if c not in required + optional and (g := likely_typo(c, missing))]
         problems.add(fname, header_line, f"{label}: missing column(s) {', '.join(missing)} "
-                                         f"(a {kind} table needs {', '.join(required)})")
+                                         f"(a {kind} table needs {', '.join(required)}; its "
+                                         f"header: {', '.join(header)}){''.join(guesses)}")
     duplicated = sorted({c for c in header if header.count(c) > 1})
     if duplicated:
         problems.add(fname, header_line, f"{label}: duplicate column(s) {', '.join(duplicated)}")
@@ -782,7 +785,7 @@ def _read_table(path: Path, kind: str, label: str, problems: _Problems, check=No
     for r, (number, cells) in enumerate(rows):
         if len(cells) != len(header):
             problems.add(fname, number, f"{label}: {len(cells)} cells, but the header has "
-                                        f"{len(header)} columns")
+                                        f"{len(header)} columns{ragged_hint(cells)}")
             continue
         for c, cell in enumerate(cells):
             try:
@@ -853,17 +856,6 @@ def _speed_problem(columns: Mapping[str, np.ndarray], speed_mm_per_min: float) -
 # Writing
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, float)):
-        return repr(float(value)) if isinstance(value, float) else str(value)
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    escaped = str(value).replace("\\", "\\\\").replace('"', '\\"')
-    return f'"{escaped}"'
-
-
 def _format_table(columns: Mapping[str, np.ndarray], comment: str = "") -> str:
     names = list(columns)
     data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
@@ -882,39 +874,35 @@ def write_bundle(bundle: Bundle, path: str | Path, *, comment: str = "") -> Path
     folder = Path(path)
     for test in bundle.tests:
         atomic_write_text(folder / test.file, _format_table(test.columns, comment))
-    out = [f"# {line}" for line in comment.splitlines()]
-    out += ["[bundle]", f"name = {_toml_value(bundle.name)}"]
+    head: dict[str, Any] = {"name": bundle.name}
     if bundle.material:
-        out.append(f"material = {_toml_value(bundle.material)}")
+        head["material"] = bundle.material
     if bundle.tows_per_mm is not None:
-        out.append(f"tows_per_mm = {_toml_value(bundle.tows_per_mm)}")
-    for key, value in bundle.extra.items():
-        if not isinstance(value, dict):
-            out.append(f"{key} = {_toml_value(value)}")
+        head["tows_per_mm"] = bundle.tows_per_mm
+    head.update({k: v for k, v in bundle.extra.items() if not isinstance(v, dict)})
+    tables = []
     for test in bundle.tests:
-        out += ["", "[[test]]", f"id = {_toml_value(test.id)}",
-                f"kind = {_toml_value(test.kind)}", f"file = {_toml_value(test.file)}"]
+        d: dict[str, Any] = {"id": test.id, "kind": test.kind, "file": test.file}
         if test.geometry is not None:
-            out.append(f"geometry = {_toml_value(test.geometry)}")
+            d["geometry"] = test.geometry
         if test.case is not None:
-            out.append(f"case = {_toml_value(test.case)}")
+            d["case"] = test.case
         if test.ply is not None:
-            out.append(f"file_ply = {test.ply}")
+            d["file_ply"] = test.ply
         keys = ("gauge_length_mm", "length_mm", "width_mm", "frame_side_mm", "fabric_side_mm",
                 "speed_mm_per_min")
-        for key in keys:
-            if (value := getattr(test, key)) is not None:
-                out.append(f"{key} = {_toml_value(value)}")
+        d.update({k: getattr(test, k) for k in keys if getattr(test, k) is not None})
         if test.tows is not None and not test.tows_derived:
-            out.append(f"tows = {_toml_value(test.tows)}")
+            d["tows"] = test.tows
         if test.noise_sd_N is not None:
-            out.append(f"force_sd_N = {_toml_value(test.noise_sd_N)}")
+            d["force_sd_N"] = test.noise_sd_N
         if test.noise_rel is not None:
-            out.append(f"force_sd_rel = {_toml_value(test.noise_rel)}")
-        out += [f"{k} = {_toml_value(v)}" for k, v in test.forming.items()]
-        out += [f"{k} = {_toml_value(v)}" for k, v in test.notes.items()]
+            d["force_sd_rel"] = test.noise_rel
+        d.update(test.forming)
+        d.update(test.notes)
         if test.conditions:
-            out.append("[test.conditions]")
-            out += [f"{k} = {_toml_value(v)}" for k, v in test.conditions.items()]
-    atomic_write_text(folder / "bundle.toml", "\n".join(out) + "\n")
+            d["conditions"] = dict(test.conditions)
+        tables.append(d)
+    text = toml_text({"bundle": head, "test": tables}, comment=comment)
+    atomic_write_text(folder / "bundle.toml", text)
     return folder

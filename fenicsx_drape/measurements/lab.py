@@ -28,7 +28,6 @@ checks are :mod:`~fenicsx_drape.measurements.plausible`'s, shared with the grid)
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
@@ -37,7 +36,9 @@ from typing import Any
 
 import numpy as np
 
+from fenicsx_drape.errors import likely_typo
 from fenicsx_drape.measurements import plausible
+from fenicsx_drape.measurements.tables import ragged_hint, read_rows
 
 MEASUREMENTS = ("shear_points", "surface", "outline", "punch_force")
 # Keys of a forming [[test]] table that describe its lab measurements (not case overrides).
@@ -135,24 +136,10 @@ def _read_csv(path: Path, label: str, add) -> tuple[dict[str, np.ndarray],
     ``add(file, line, problem)`` collects problems; None when the table cannot be read.
     """
     fname = str(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as err:
-        add(fname, 0, f"{label}: cannot read the table (not a CSV text file?): {err}")
+    read = read_rows(path, label, add)
+    if read is None:
         return None
-    header, header_line, rows = None, 0, []
-    for number, raw in enumerate(text.splitlines(), start=1):
-        if not raw.strip():
-            continue
-        if header is None:
-            if raw.strip().startswith("#"):
-                continue
-            header, header_line = [c.strip() for c in next(csv.reader([raw]))], number
-            continue
-        rows.append((number, [c.strip() for c in next(csv.reader([raw]))]))
-    if header is None:
-        add(fname, 0, f"{label}: the table has no header row")
-        return None
+    header, header_line, rows = read
     if len(set(header)) != len(header) or "" in header:
         add(fname, header_line, f"{label}: empty or duplicate column names in the header")
         return None
@@ -166,7 +153,7 @@ def _read_csv(path: Path, label: str, add) -> tuple[dict[str, np.ndarray],
     for r, (number, cells) in enumerate(rows):
         if len(cells) != len(header):
             add(fname, number, f"{label}: {len(cells)} cells, but the header has "
-                               f"{len(header)} columns")
+                               f"{len(header)} columns{ragged_hint(cells)}")
             bad += 1
             continue
         cell = dict(zip(header, cells))
@@ -189,6 +176,14 @@ def _read_mesh(path: Path, label: str, add) -> tuple[np.ndarray, np.ndarray | No
     """A scanned surface: points (n, 3) and triangles (m, 3) (None for a bare point cloud)."""
     import meshio
 
+    from fenicsx_drape.limits import BYTES_PER_ROW, max_table_rows
+
+    size, limit = path.stat().st_size, BYTES_PER_ROW * max_table_rows()
+    if size > limit:  # a scan's points are rows: the tables' limit, before meshio reads it
+        add(str(path), 0, f"{label}: the surface is {size / 1e6:.3g} MB, more than "
+                          f"{limit / 1e6:.3g} MB (DRAPE_MAX_TABLE_ROWS × {BYTES_PER_ROW} "
+                          "bytes): not read")
+        return None
     try:
         mesh = meshio.read(path)
     except Exception as err:  # meshio raises many kinds: all mean "not a mesh of this type"
@@ -208,10 +203,34 @@ def _kind_hint(header: Sequence[str]) -> str:
     """Which measurement a table's columns look like (for a file of the wrong kind)."""
     for name, (alternatives, _) in COLUMNS.items():
         if any(set(cols) <= set(header) for cols in alternatives) and name != "surface":
-            return f" (its columns are those of a {name} table)"
+            return f"; its columns are those of {_a(name)} table: the wrong file?"
     if {"i", "j", "x0_mm", "y0_mm"} <= set(header):
-        return " (its columns are those of a grid table: give it as file = ...)"
+        return "; its columns are those of a grid table: give it as file = ..."
     return ""
+
+
+def _a(name: str) -> str:
+    """``a shear_points``, ``an outline``."""
+    return f"{'an' if name[0] in 'aeiou' else 'a'} {name}"
+
+
+def missing_columns(name: str, header: Sequence[str]) -> str:
+    """What a table of measurement ``name`` lacks: the missing columns of its nearest set.
+
+    ``needs the columns x_mm, y_mm, z_mm, shear_deg (or x0_mm, y0_mm, shear_deg): missing
+    shear_deg; 'shear_angle' is not a column of it: did you mean `shear_deg`?``
+    """
+    alternatives, optional = COLUMNS[name]
+    nearest = min(alternatives, key=lambda cols: len(set(cols) - set(header)))
+    missing = [c for c in nearest if c not in header]
+    text = (f"{_a(name)} table needs the columns "
+            + " or ".join(", ".join(cols) for cols in alternatives)
+            + f": missing {', '.join(missing)} (its header: {', '.join(header)})")
+    known = {c for cols in alternatives for c in cols} | set(optional) | set(TEXT_COLUMNS)
+    for column in header:
+        if column not in known and (guess := likely_typo(column, missing)):
+            text += f"; {column!r}: did you mean `{guess}`?"
+    return text + _kind_hint(header)
 
 
 def _frame(raw: Any, fname: str, at: int, label: str, add) -> Frame:
@@ -244,6 +263,18 @@ def _frame(raw: Any, fname: str, at: int, label: str, add) -> Frame:
 NO_FRAME = Frame()
 
 
+def file_problem(name: str, path: Path) -> str | None:
+    """What is wrong with the file a measurement names (none, a wrong kind), or None."""
+    if not path.is_file():
+        return (f"{name} = {path.name!r}: no such file {str(path)!r} (the path is relative to "
+                "the bundle folder)")
+    suffix = path.suffix.lower()
+    if suffix == ".csv" or (name == "surface" and suffix in (*MESH_SUFFIXES, ".txt", ".xyz")):
+        return None
+    allowed = ".csv, " + ", ".join(MESH_SUFFIXES) if name == "surface" else ".csv"
+    return f"{name} = {path.name!r} must be a {allowed} file, not {suffix or 'no suffix'!r}"
+
+
 def read_measurement(name: str, path: Path, label: str, add, *, frame: Frame = NO_FRAME,
                      reach: tuple[np.ndarray, float] | None = None
                      ) -> tuple[dict[str, np.ndarray], dict[str, Any]] | None:
@@ -253,9 +284,8 @@ def read_measurement(name: str, path: Path, label: str, add, *, frame: Frame = N
     ``triangles``, ``flat``; None when it has problems (each given to ``add``).
     """
     fname = str(path)
-    if not path.is_file():
-        add(fname, 0, f"{label}: {name} = {path.name!r}: no such file (relative to the bundle "
-                      "folder)")
+    if problem := file_problem(name, path):
+        add(fname, 0, f"{label}: {problem}")
         return None
     suffix = path.suffix.lower()
     extras: dict[str, Any] = {"labels": (), "line_names": (), "triangles": None, "flat": False}
@@ -266,10 +296,6 @@ def read_measurement(name: str, path: Path, label: str, add, *, frame: Frame = N
         points, extras["triangles"] = mesh
         columns = {"x_mm": points[:, 0], "y_mm": points[:, 1], "z_mm": points[:, 2]}
         extras["lines"] = np.zeros(len(points), int)
-    elif suffix != ".csv" and (name != "surface" or suffix not in (".txt", ".xyz")):
-        allowed = ".csv, " + ", ".join(MESH_SUFFIXES) if name == "surface" else ".csv"
-        add(fname, 0, f"{label}: {name} must be a {allowed} file, not {suffix or 'no suffix'!r}")
-        return None
     else:
         table = _read_csv(path, label, add)
         if table is None:
@@ -278,9 +304,7 @@ def read_measurement(name: str, path: Path, label: str, add, *, frame: Frame = N
         alternatives, _ = COLUMNS[name]
         present = [cols for cols in alternatives if set(cols) <= set(columns)]
         if not present:
-            need = " or ".join(", ".join(cols) for cols in alternatives)
-            add(fname, header_line, f"{label}: a {name} table needs the columns {need}"
-                                    f"{_kind_hint([*columns, *texts])}")
+            add(fname, header_line, f"{label}: {missing_columns(name, [*columns, *texts])}")
             return None
         extras["flat"] = name == "shear_points" and "x_mm" not in columns
         extras["lines"] = lines
@@ -449,6 +473,9 @@ def _measurements(test, raw: Mapping[str, Any], folder: Path, fname: str, where,
         at = where("test", index, name)
         if not isinstance(file, str) or not file:
             add(fname, at, f"{label}: {name} must name a file (relative to the bundle folder)")
+            continue
+        if problem := file_problem(name, folder / file):  # at its key in bundle.toml
+            add(fname, at, f"{label}: {problem}")
             continue
         read = read_measurement(name, folder / file, label, add, frame=frame, reach=reach)
         if read is None:

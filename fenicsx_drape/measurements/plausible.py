@@ -105,7 +105,7 @@ def reach_of_hemisphere(keys: Mapping[str, Any]) -> Reach | None:
 def reach_of_case(case: Any) -> Reach:
     """The reach of a forming case: its flat blank's box, widened by every tool's motion.
 
-    ``case`` is a :class:`~fenicsx_drape.forming.case.format.FormingCase` (read through its
+    ``case`` is a :class:`~fenicsx_drape.forming.case.spec.FormingCase` (read through its
     attributes: ``blank.polygon()``, ``tools``, ``total_travel_mm``). A builtin (hemisphere)
     punch travels ``total_travel_mm`` along +z; a tool with a motion table moves the box by
     its translations.

@@ -5,12 +5,20 @@ and ``make demo`` print the paper beside this model. Wrinkling strains are Green
 as everywhere in this package, negative (the paper quotes magnitudes).
 
 :func:`paper_comparison` formats a run's summary (``summary.json`` of
-:func:`~fenicsx_drape.forming.running.outputs.form_case` of the hemisphere) against them.
+:func:`~fenicsx_drape.forming.running.outputs.form_case` of the hemisphere) against them, and
+only for a run under the paper's conditions (:func:`paper_differences`: the paper's tools,
+blank and model, 10 mm cells, 133 N, 40 s, one ply at 0°); another run is said not to be
+compared, with what differs.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+
+from fenicsx_drape.forming.running.conditions import (
+    PAPER_CONDITIONS,
+    paper_differences,
+)
 
 # Section 4.3 (Fig. 10) and 4.2 (Fig. 9): the default case, 10 mm cells, 133 N, 40 s.
 MAX_SHEAR_MODEL_DEG = 51.4
@@ -95,37 +103,41 @@ def _number(value, unit: str) -> str:
     return f"{value:.2f}"
 
 
-def paper_comparison(summary: Mapping) -> str:
-    """A small table of a hemisphere run's numbers beside the paper's model and experiment.
+def paper_comparison(summary: Mapping, model=None) -> str:
+    """A run's numbers beside the paper's model and experiment, under the paper's conditions.
 
     Args:
         summary: A run's summary (``summary.json``): ``max_shear_deg``,
             ``total_wrinkling_strain``, ``min_wrinkling_strain`` and, when present,
             ``total_wrinkling_engineering`` (the literal measure, see
             :meth:`~fenicsx_drape.forming.running.post.FormedGrid.total_wrinkling_strain`),
-            ``kinematic_max_shear_deg`` and ``case`` (its conditions, printed in the title).
+            ``kinematic_max_shear_deg``, and the conditions: ``case``, ``cell_mm`` and
+            ``paper_differences`` (:func:`paper_differences`, computed when absent).
+        model: The run's model, for :func:`paper_differences` when the summary has no
+            ``paper_differences``.
 
     Returns:
-        Lines of text (no trailing newline). The paper's numbers are for the default case
-        (10 mm cells, 133 N, 40 s); the title says when the run's conditions differ.
+        Lines of text (no trailing newline): the table, titled with the paper's conditions;
+        for a run under other conditions one line saying that it is not compared and what
+        differs (the paper's numbers hold for its conditions only).
     """
+    differs = summary.get("paper_differences")
+    if differs is None:
+        differs = paper_differences(summary, model)
+    if differs:
+        return (f"not compared with the paper: its section 4 numbers are for {PAPER_CONDITIONS}; "
+                f"this run: {', '.join(differs)}")
     rows = [("maximum shear angle", "max_shear_deg", "°"),
             ("total wrinkling strain", "total_wrinkling_strain", "%"),
             ("  as length change / tow length", "total_wrinkling_engineering", "%"),
             ("minimum wrinkling strain (G-L)", "min_wrinkling_strain", ""),
             ("kinematic drape, maximum shear", "kinematic_max_shear_deg", "°")]
-    case = summary.get("case") or {}
-    title = "compared with the paper (section 4: 10 mm cells, 133 N, 40 s)"
-    differs = [f"{k} {case[k]:g}" for k, v in (("cell_mm", 10.0), ("holder_force_N", 133.0),
-                                                ("duration_s", 40.0))
-               if k in case and abs(float(case[k]) - v) > 1e-9]
-    if differs:
-        title += f"; this run: {', '.join(differs)}"
-    lines = [title, f"{'':34s}{'this run':>12s}{'paper model':>14s}{'experiment':>12s}"]
+    lines = ["compared with the paper (section 4: 10 mm cells, 133 N, 40 s)",
+             f"{'':34s}{'this run':>12s}{'paper model':>14s}{'experiment':>12s}"]
     for name, key, unit in rows:
         if key not in summary:
             continue
-        model, experiment = SUMMARY.get(key, SUMMARY["total_wrinkling_strain"])
+        model_value, experiment = SUMMARY.get(key, SUMMARY["total_wrinkling_strain"])
         lines.append(f"{name:34s}{_number(summary[key], unit):>12s}"
-                     f"{_number(model, unit):>14s}{_number(experiment, unit):>12s}")
+                     f"{_number(model_value, unit):>14s}{_number(experiment, unit):>12s}")
     return "\n".join(lines)

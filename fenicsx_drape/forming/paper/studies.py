@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fenicsx_drape.forming.case.format import FormingCase, builtin_tools, case_dict, load_case
+from fenicsx_drape.forming.case import FormingCase, case_dict, load_case
+from fenicsx_drape.forming.case.spec import builtin_tools
 from fenicsx_drape.forming.running.post import FormedGrid, mean_distance
 from fenicsx_drape.forming.running.run import draw_in, run_case
 from fenicsx_drape.provenance import atomic_write_bytes, atomic_write_text, write_json
@@ -72,7 +73,7 @@ class Variant:
 def paper_case(reading: str, **overrides) -> FormingCase:
     """The paper's hemisphere under one reading of eq. 1's force share (see :data:`READINGS`).
 
-    ``meshes/hemisphere/case.toml`` with ``overrides`` (:func:`~fenicsx_drape.forming.case.format.
+    ``meshes/hemisphere/case.toml`` with ``overrides`` (:func:`~fenicsx_drape.forming.case.reading.
     load_case`'s: ``cell_mm``, ``duration_s``, ``holder_force_N``, a tool parameter, ...).
     """
     if reading not in READINGS:

@@ -11,3 +11,47 @@
 - :mod:`~fenicsx_drape.forming.running.plots`: the pictures;
 - :mod:`~fenicsx_drape.forming.running.kinematic`: the kinematic (pin-jointed net) drape.
 """
+
+import importlib
+
+# The public names, from the package, each imported on first use.
+_PUBLIC = {
+    "FormedGrid": "post",
+    "FormingRun": "run",
+    "KinematicNet": "kinematic",
+    "SheetMesh": "measure",
+    "case_bundle": "outputs",
+    "closest_on_edge": "measure",
+    "closest_points": "measure",
+    "coverage": "measure",
+    "drape_case": "kinematic",
+    "form_case": "outputs",
+    "interply_maps": "outputs",
+    "kinematic_drape": "kinematic",
+    "mean_distance": "post",
+    "plot_interply": "plots",
+    "plot_paths": "plots",
+    "plot_shear": "plots",
+    "plot_tool_forces": "plots",
+    "plot_wrinkling": "plots",
+    "probe": "measure",
+    "read_formed": "measure",
+    "run_case": "run",
+    "shear_at_flat": "measure",
+    "shear_at_formed": "measure",
+    "write_drape": "kinematic",
+    "write_run_bundle": "outputs",
+    "write_values": "measure",
+}
+
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str):
+    if name in _PUBLIC:
+        return getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

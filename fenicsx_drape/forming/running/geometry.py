@@ -12,7 +12,12 @@ blank and the built tools before any step and names the tool and the distance:
 - *a holder that does not reach the blank*: at the start its clamping surface covers none of
   the blank's nodes;
 - *a punch that never reaches the die* (a warning: a test stopped short is one): at the end
-  of the motion, the die's surface is still more than a sheet cell from the punch.
+  of the motion, the die's surface is still more than a sheet cell from the punch;
+- *a stack that cannot fit between punch and die*: the plies' mid-planes span more than the
+  gap the tools leave at the end of the motion (refused, naming the plies and the gap); a
+  stack thicker than the gap is warned (the die squeezes it)
+  (:func:`~fenicsx_drape.forming.case.size.stack_fit`). Every ply's nodes, at its height,
+  are checked for the wrong side of a tool.
 
 The distances are exact for meshed tools (closest points on the triangles) and closed form
 for the builtin ones.
@@ -40,17 +45,38 @@ def geometry_problems(case, tools: dict, nodes: np.ndarray) -> tuple[list[str], 
     """Errors and warnings about where the blank and the tools are (module docstring).
 
     Args:
-        case: The :class:`~fenicsx_drape.forming.case.format.FormingCase`.
+        case: The :class:`~fenicsx_drape.forming.case.spec.FormingCase`.
         tools: Its built tools by name.
         nodes: The flat blank's nodes (n, 3) in mm.
 
     Returns:
         ``(errors, warnings)``, each message naming the tool and the distance.
     """
+    from fenicsx_drape.forming.case.size import builtin_stack_fit
+
     errors: list[str] = []
     warns: list[str] = []
     x = np.asarray(nodes, dtype=float).reshape(-1, 3)
     contact = [t for t in case.tools if t.role in ("punch", "die", "surface")]
+    if len(case.plies) > 1:
+        errors, warns = builtin_stack_fit(case)
+        heights = _ply_heights(case)
+        for spec in contact:  # the other plies lie over the first: the top one first
+            def depth(k, spec=spec):
+                return -float(_distance(tools[spec.name], x + np.array([0.0, 0.0, heights[k][0]]),
+                                        0.0).min())
+
+            if depth(-1) <= WRONG_SIDE_MM:
+                continue
+            first = next(k for k in range(1, len(heights)) if depth(k) > WRONG_SIDE_MM)
+            z, thickness = heights[first]
+            which = (f"ply {first + 1} of the stack starts" if first + 1 == len(heights) else
+                     f"plies {first + 1} to {len(heights)} of the stack start")
+            errors.append(f"{which} inside the "
+                          f"{spec.role} {spec.name!r} (ply {first + 1}, {thickness:g} mm "
+                          f"thick, lies with its mid-plane {z:g} mm above ply 1's; the top "
+                          f"ply up to {depth(-1):.3g} mm deep): the stack does not fit where "
+                          "the tools start (check the plies' thickness_mm)")
     nearest = {}
     for spec in contact:
         tool = tools[spec.name]
@@ -98,4 +124,18 @@ def geometry_problems(case, tools: dict, nodes: np.ndarray) -> tuple[list[str], 
                 warns.append(f"the punch {punch.name!r} never reaches the die {die.name!r}: "
                              f"at the end of the motion they are still {gap:.3g} mm apart "
                              f"(more than the sheet's cell {case.blank.cell_mm:g} mm)")
+            elif len(case.plies) > 1:
+                from fenicsx_drape.forming.case.size import stack_fit
+
+                e, w = stack_fit([p.thickness_mm for p in case.plies], gap,
+                                 f"the punch {punch.name!r} and the die {die.name!r}")
+                errors += e
+                warns += w
     return errors, warns
+
+
+def _ply_heights(case) -> list[tuple[float, float]]:
+    """Each ply's mid-plane height over ply 1's (mm) and its thickness, from the punch side."""
+    t = [p.thickness_mm for p in case.plies]
+    z = np.concatenate([[0.0], np.cumsum(0.5 * (np.array(t[:-1]) + np.array(t[1:])))])
+    return [(float(zk), float(tk)) for zk, tk in zip(z, t)]

@@ -610,19 +610,19 @@ def case_surface(case, tools: dict | None = None, *, time_s: float | None = None
     plane, i.e. :meth:`HemisphereTools.formed_part`.
 
     Args:
-        case: The forming case (:func:`~fenicsx_drape.forming.case.format.load_case`).
-        tools: Built tools by name (default :func:`~fenicsx_drape.forming.case.format.build_tools`).
+        case: The forming case (:func:`~fenicsx_drape.forming.case.reading.load_case`).
+        tools: Built tools by name (default :func:`~fenicsx_drape.forming.tools.build.build_tools`).
         time_s: When (default: the end of the motion, ``case.duration_s``).
         blend_mm: See :class:`UnionSurface`.
     """
-    from fenicsx_drape.forming.case.format import build_tools
+    from fenicsx_drape.forming.tools.build import build_tools
 
     for side in ("+z", "-z"):
         names = [t.name for t in case.tools if t.side == side]
         if names:
             break
     else:
-        raise ParameterError(f"kinematic drape: case {case.name!r} has no tool with its sheet "
+        raise ParameterError(f"{case.path or case.name}: kinematic drape: no tool with its sheet "
                              "side +z or -z to drape on")
     if tools is None:
         tools = build_tools(case, skip=tuple(t.name for t in case.tools if t.name not in names))
@@ -671,7 +671,7 @@ def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float
             when None (nor ``forming_case``).
         pictures: Write ``shear.png``.
         case: What was draped, for ``summary.json`` and ``provenance.json``.
-        forming_case: A forming case (:class:`~fenicsx_drape.forming.case.format.FormingCase`):
+        forming_case: A forming case (:class:`~fenicsx_drape.forming.case.spec.FormingCase`):
             the bundle's test names a copy of it (``case = "case/case.toml"``), as
             :func:`~fenicsx_drape.forming.running.outputs.form_case` writes it.
 
@@ -689,7 +689,7 @@ def write_drape(out_dir: str | os.PathLike, net: KinematicNet, *, grid_mm: float
     write_json(out / "summary.json", summary)
     notes = {"simulation": "kinematic drape (pin-jointed net)", "generator": net.generator}
     if forming_case is not None:
-        from fenicsx_drape.forming.case.format import write_case
+        from fenicsx_drape.forming.case import write_case
 
         write_case(forming_case, out / "bundle" / "case")
         notes["case"] = "case/case.toml"

@@ -112,8 +112,12 @@ def plot_wrinkling(grid: FormedGrid, path: str | os.PathLike, title: str = "") -
     return save_figure(fig, path)
 
 
-def plot_paths(grids: Mapping[str, FormedGrid], path: str | os.PathLike) -> Path:
-    """Shear along the diagonal path and wrinkling along the normal path (Fig. 11)."""
+def plot_paths(grids: Mapping[str, FormedGrid], path: str | os.PathLike,
+               title: str = "") -> Path:
+    """Shear along the diagonal path and wrinkling along the normal path (Fig. 11).
+
+    ``title`` says which run it is (the paper's conditions only when the run had them).
+    """
     import matplotlib.pyplot as plt
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
@@ -129,6 +133,8 @@ def plot_paths(grids: Mapping[str, FormedGrid], path: str | os.PathLike) -> Path
     for ax in (a, b):
         ax.grid(alpha=0.3)
         ax.legend()
+    if title:
+        fig.suptitle(title, fontsize=10)
     return save_figure(fig, path)
 
 

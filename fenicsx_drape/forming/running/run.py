@@ -1,10 +1,10 @@
 """Run any forming case: the blank's truss, the tools, the holder, the load steps.
 
-:func:`run_case` sets a :class:`~fenicsx_drape.forming.case.format.FormingCase` up on the FE
+:func:`run_case` sets a :class:`~fenicsx_drape.forming.case.spec.FormingCase` up on the FE
 core and steps it to the end of its motion (the paper's hemisphere is the case
 ``meshes/hemisphere/case.toml``). The terms of the model, for any case:
 
-- the blank's structured net (:meth:`~fenicsx_drape.forming.case.format.BlankSpec.grid`), with the
+- the blank's structured net (:meth:`~fenicsx_drape.forming.case.spec.BlankSpec.grid`), with the
   symmetry conditions u_x = 0 on x = 0 and/or u_y = 0 on y = 0 of a half or quarter model,
   and u_x = u_y = 0 at the net's node at ``origin_mm`` when the blank holds it
   (``hold_origin``: a part symmetric in both planes modelled without them);
@@ -13,16 +13,18 @@ core and steps it to the end of its motion (the paper's hemisphere is the case
   with ``tool_friction`` when the model has it;
 - the blank holder (:mod:`~fenicsx_drape.forming.terms.holder`) on the clamping tool's surface:
   clamping with the same k and eq. 1 friction bars, the force shared as ``force_share`` says;
-- on a single ply that neither symmetry planes in both x and y nor ``hold_origin`` hold, the
-  stick of the punch's first point of contact (:mod:`~fenicsx_drape.forming.terms.stick`):
-  without it a frictionless punch leaves the whole sheet free to slide over it;
+- on a sheet that neither symmetry planes in both x and y nor ``hold_origin`` hold, the
+  stick of the punch's first point of contact (:mod:`~fenicsx_drape.forming.terms.stick`;
+  on a stack, each ply's point there): without it a frictionless punch leaves the whole
+  sheet free to slide over it;
 - the out-of-plane stabilisation of the slack net
   (:mod:`~fenicsx_drape.forming.terms.stabilisation`) along the nearest tool's normal.
 
 Before anything is built the run's length is checked (load steps, nodes, time:
-:func:`~fenicsx_drape.forming.case.format.check_run_size`), and before the first step where
-the blank and the tools are (:mod:`~fenicsx_drape.forming.running.geometry`); the progress
-lines give the estimate, then the time left at the rate so far.
+:func:`~fenicsx_drape.forming.case.size.check_run_size`; the estimate is the first progress
+line), and before the first step where the blank and the tools are
+(:mod:`~fenicsx_drape.forming.running.geometry`); the progress lines then give the time left
+at the rate so far.
 
 Load steps move the fastest tool ``step_mm``; a step whose Newton solve fails is halved, and
 steps grow back (×1.5, up to ``step_mm``) after solves of at most 15 iterations. A step has
@@ -41,20 +43,18 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from fenicsx_drape.errors import InputFileError as CaseError
 from fenicsx_drape.errors import SolverError
-from fenicsx_drape.forming.case.format import (
-    CaseError,
-    FormingCase,
-    build_tools,
-    case_key,
-    check_run_size,
-)
+from fenicsx_drape.forming.case import FormingCase, case_key, check_run_size
+from fenicsx_drape.forming.case.size import size_text
+from fenicsx_drape.forming.case.spec import where
 from fenicsx_drape.forming.running.geometry import geometry_problems
 from fenicsx_drape.forming.running.post import FormedGrid
 from fenicsx_drape.forming.terms.contact import PenaltyContact
 from fenicsx_drape.forming.terms.holder import BlankHolder, StackHolder
 from fenicsx_drape.forming.terms.stabilisation import ExtrapolationSpring
-from fenicsx_drape.forming.terms.stick import ApexStick
+from fenicsx_drape.forming.terms.stick import ApexStick, PlyStick
+from fenicsx_drape.forming.tools.build import build_tools
 
 CONTACT_ROLES = ("punch", "die", "surface")
 # The geometry checks of the cases formed in this process, by content (the latest few): a
@@ -123,7 +123,7 @@ def case_model(case: FormingCase):
     if path is None:
         model = default_model()
         return model.with_effects("interply_friction") if case.stack else model
-    return load_model(path, origin=case.origin)
+    return load_model(path, origin=_model_origin(case))
 
 
 def _stack_model_path(case: FormingCase):
@@ -146,9 +146,14 @@ def ply_models(case: FormingCase) -> list | None:
     if not case.stack:
         return None
     common = _stack_model_path(case)
-    models = [load_model(p.model, origin=case.origin) if p.model not in (None, common) else None
-              for p in case.plies]
+    models = [load_model(p.model, origin=_model_origin(case))
+              if p.model not in (None, common) else None for p in case.plies]
     return models if any(models) else None
+
+
+def _model_origin(case: FormingCase) -> str:
+    """Where a model a case names comes from: data, whose plugins run only when trusted."""
+    return case.origin or f"the case {case.path or case.name}"
 
 
 def tool_friction(model) -> float:
@@ -200,7 +205,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
     """Form a case: build the blank's truss, tools and terms, then step to the end.
 
     Args:
-        case: The forming case (:func:`~fenicsx_drape.forming.case.format.load_case`).
+        case: The forming case (:func:`~fenicsx_drape.forming.case.reading.load_case`).
         model: The material :class:`~fenicsx_drape.model.Model` (default: the case's
             ``model``, else the paper's); the holder's ``mu``, if given, replaces its μ.
         options: :class:`~fenicsx_drape.fe.solver.SolverOptions` of the truss (default: the
@@ -225,21 +230,24 @@ def run_case(case: FormingCase, model=None, options=None, *,
     from fenicsx_drape.fe.stepping import RunReport
     from fenicsx_drape.limits import duration_text
 
-    size = check_run_size(case)  # a run past the step limit stops before anything is built
+    size = check_run_size(case)  # a run past the limits stops before anything is built
+    if progress is not None and (comm or MPI.COMM_WORLD).rank == 0:  # before any work
+        progress(size_text(case, size))
     model = model or case_model(case)
     if case.holder is not None and case.holder.mu is not None:
         model = model.with_parameters(mu=case.holder.mu)
     given = dict(tools or {})
     for name in given:
         if name not in {t.name for t in case.tools}:
-            raise CaseError([f"run_case: tool {name!r} is not a tool of case {case.name!r}"])
+            raise CaseError([f"{where(case)}: run_case: tool {name!r} is not a tool of the case "
+                             f"({', '.join(t.name for t in case.tools)})"])
     built = {**build_tools(case, skip=tuple(given)), **given}
     built = {t.name: built[t.name] for t in case.tools}  # in the case's order
     errors, warns = _checked_geometry(case, built, known=not given)
     if errors:  # before the first step, in the user's terms
-        raise CaseError([f"case {case.path or case.name}: {e}" for e in errors])
+        raise CaseError([f"{where(case)}: {e}" for e in errors])
     for text in warns:
-        warnings.warn(f"case {case.path or case.name}: {text}", stacklevel=2)
+        warnings.warn(f"{where(case)}: {text}", stacklevel=2)
     holder_surface = built[case.holder.tool] if case.holder is not None else None
     μ_t = tool_friction(model)
     if options is None:
@@ -285,9 +293,11 @@ def run_case(case: FormingCase, model=None, options=None, *,
     terms = [*contact, *([holder] if holder is not None else [])]
     punches = [c.tool for c, t in zip(contact, (t for t in case.tools if t.role in CONTACT_ROLES))
                if t.role == "punch"]
-    if planes != ("x", "y") and not case.blank.hold_origin and len(punches) == 1 \
-            and plies is None:
-        terms.append(ApexStick(punches[0], k))  # the sheet's sliding mode held (stick.py)
+    if planes != ("x", "y") and not case.blank.hold_origin and len(punches) == 1:
+        # The sheet's sliding mode held (stick.py): one ply's node, or each ply's point, at
+        # the punch's first contact.
+        terms.append(ApexStick(punches[0], k) if plies is None
+                     else PlyStick(punches[0], k, plies))
     if interply is not None:
         terms.append(interply)
     if case.stabilisation_N_per_mm:
@@ -300,14 +310,9 @@ def run_case(case: FormingCase, model=None, options=None, *,
     if case.blank.hold_origin:
         origin = np.hypot(*(problem.X[:, :2] - case.blank.origin_mm).T) <= 1e-6 * grid.cell_mm
         if comm.allreduce(int(origin[: problem.num_owned].sum())) != len(plies or [0]):
-            raise CaseError([f"case {case.name!r}: hold_origin: no node of the net at "
+            raise CaseError([f"{where(case)}: hold_origin: no node of the net at "
                              f"origin_mm = {list(case.blank.origin_mm)} (inside the blank)"])
         problem.fix(origin, (0, 1))
-
-    if progress is not None and comm.rank == 0:
-        progress(f"{case.name}: about {size['steps']:.0f} load steps ({size['travel_mm']:g} mm "
-                 f"at {case.step_mm:g} mm) on {size['nodes']:.0f} nodes, about "
-                 f"{duration_text(size['seconds'])} (estimate)")
 
     def report(step) -> None:
         if progress is not None and comm.rank == 0:
@@ -344,7 +349,7 @@ def run_case(case: FormingCase, model=None, options=None, *,
         stopped = str(error)
     if contact and stopped is None and not comm.allreduce(touched, op=MPI.LOR):
         names = ", ".join(repr(t.name) for t in case.tools if t.role in CONTACT_ROLES)
-        warnings.warn(f"case {case.name!r}: no node of the blank touched {names} in "
+        warnings.warn(f"{where(case)}: no node of the blank touched {names} in "
                       f"{case.travel_mm(problem.t):g} mm of travel; check the tools' start "
                       "positions and motions", stacklevel=2)
     both = planes == ("x", "y")

@@ -53,7 +53,7 @@ import dataclasses
 import numpy as np
 
 from fenicsx_drape.errors import ParameterError
-from fenicsx_drape.forming.tools.shapes import Gap
+from fenicsx_drape.forming.tools.shapes import FlatHolder
 from fenicsx_drape.materials.base import MaterialLaw
 
 __all__ = ["FORCE_SHARES", "BlankHolder", "FlatHolder", "StackHolder", "part_force_N"]
@@ -76,41 +76,6 @@ def check_force_share(force_share: str, where: str = "holder force_share") -> No
         raise ParameterError(f"{where} = {force_share!r}: choose \"symmetric_part\" (a symmetric "
                              "part carries its share of F; symmetry-plane nodes count ½) or "
                              "\"model\" (the whole F over the model's own nodes)")
-
-
-@dataclasses.dataclass(frozen=True)
-class FlatHolder:
-    """The paper's blank holder: the plane z = ``z_mm`` outside a circular opening (fixed).
-
-    A clamping surface for :class:`BlankHolder`: φ = z − z_mm (normal +z), and it covers the
-    nodes farther than ``opening_radius_mm`` from the z axis.
-    """
-
-    opening_radius_mm: float
-    z_mm: float = 0.0
-    name: str = "holder"
-    flat = True  # a plane: the clamping and friction stiffness are symmetric
-
-    def __post_init__(self) -> None:
-        if not (np.isfinite(self.opening_radius_mm) and self.opening_radius_mm >= 0.0):
-            raise ParameterError(f"FlatHolder: opening_radius_mm = {self.opening_radius_mm} "
-                                 "must be finite and >= 0")
-
-    def gap(self, x: np.ndarray, t: float) -> Gap:
-        """Signed distance to the plane, its normal +z and zero curvature."""
-        x = np.asarray(x, dtype=float).reshape(-1, 3)
-        normal = np.zeros_like(x)
-        normal[:, 2] = 1.0
-        return Gap(x[:, 2] - self.z_mm, normal, np.zeros((len(x), 3, 3)))
-
-    def covers(self, x: np.ndarray, t: float) -> np.ndarray:
-        """The nodes outside the opening (r > R_o)."""
-        x = np.asarray(x, dtype=float).reshape(-1, 3)
-        return np.hypot(x[:, 0], x[:, 1]) > self.opening_radius_mm
-
-    def displacement(self, x: np.ndarray, t0: float, t1: float) -> np.ndarray:
-        """The holder does not move."""
-        return np.zeros((len(x), 3))
 
 
 def _tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

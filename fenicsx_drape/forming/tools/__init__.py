@@ -5,5 +5,36 @@
 - :mod:`~fenicsx_drape.forming.tools.surfaces`: triangle surfaces from Gmsh, CAD and STL;
 - :mod:`~fenicsx_drape.forming.tools.distance`: the smooth signed distance to a surface;
 - :mod:`~fenicsx_drape.forming.tools.motion`: a tool's prescribed rigid motion;
-- :mod:`~fenicsx_drape.forming.tools.drawing`: the builtin tools drawn as meshes (pictures).
+- :mod:`~fenicsx_drape.forming.tools.drawing`: the builtin tools drawn as meshes (pictures);
+- :mod:`~fenicsx_drape.forming.tools.build`: a case's tools built from its tables.
 """
+
+import importlib
+
+# The public names, from the package, each imported on first use.
+_PUBLIC = {
+    "Arc": "shapes",
+    "DistanceField": "distance",
+    "HemisphereTools": "shapes",
+    "MeshedTool": "shapes",
+    "RevolvedTool": "shapes",
+    "RigidMotion": "motion",
+    "Segment": "shapes",
+    "TriangleSurface": "surfaces",
+    "build_tools": "build",
+    "distance_field": "distance",
+    "load_surface": "surfaces",
+    "write_tool_meshes": "drawing",
+}
+
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str):
+    if name in _PUBLIC:
+        return getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -16,11 +16,15 @@ A *hole* (:func:`holes`) is a boundary loop with no surface inside it: along the
 the loop's mean plane, no line through its middle or halfway to its points crosses a triangle
 within the loop's diameter.
 The rim of an open surface (a dome's foot) encloses the surface; a holder's opening is a hole
-by this test and allowed for holders (``forming.case.format`` decides by role).
+by this test and allowed for holders (:mod:`~fenicsx_drape.forming.tools.build` decides by
+role).
 
 A punch or a die is one piece (:func:`pieces`: triangles joined through shared points): two
 separate shells in one file (a surface given twice, shifted; a stray part) are refused, with
 the size and place of each; holders may be made of separate blocks.
+
+A tool whose flat triangles miss its curved geometry by much for the sheet's cell is warned
+(:func:`coarse_mesh_problem`).
 """
 
 from __future__ import annotations
@@ -38,6 +42,11 @@ SPIKE_FACTOR = 6.0
 FOLD_DEG = 170.0
 #: A triangle whose area is below this share of its longest edge squared has no area.
 FLAT_TRIANGLE = 1e-9
+#: A tool mesh whose triangles miss the curved geometry by more than this share of the
+#: sheet's cell changes the formed part (the sag h·θ/6 of triangles whose edge bends by θ).
+COARSE_CHORD_OF_CELL = 0.1
+#: Edges bending more than this are taken as the geometry's own creases, not its curvature.
+CREASE_DEG = 60.0
 
 
 def _at(p: np.ndarray) -> str:
@@ -272,3 +281,38 @@ def pieces(surface) -> list[tuple[int, np.ndarray]]:
         mine = t[of_triangle == k]
         out.append((len(mine), surface.points[np.unique(mine)].mean(axis=0)))
     return sorted(out, key=lambda e: -e[0])
+
+
+def coarse_mesh_problem(surface, cell_mm: float) -> str | None:
+    """A message when a tool's triangles miss its curved geometry by much (None if not).
+
+    Over the edges between two triangles that bend by θ below :data:`CREASE_DEG` (curvature,
+    not a crease), h·θ/6 for an edge of length h is how far the middle of a flat triangle
+    sits from the sphere through its corners (radius ρ = h/θ: the sag r²/(2ρ) at the centre
+    of an equilateral triangle, r = h/√3 its corners' distance); beyond
+    :data:`COARSE_CHORD_OF_CELL` of the sheet's cell the formed part changes.
+    """
+    n = surface.face_normals
+    nbr = surface.neighbours
+    tri = np.repeat(np.arange(len(n)), 3)
+    other = nbr.ravel()
+    ok = other > tri  # each inner edge once
+    tri, other = tri[ok], other[ok]
+    θ = np.arccos(np.clip(np.einsum("ij,ij->i", n[tri], n[other]), -1.0, 1.0))
+    p, t = surface.points, surface.triangles
+    side = np.flatnonzero(ok) % 3
+    a = p[t[tri, side]]
+    b = p[t[tri, (side + 1) % 3]]
+    h = np.linalg.norm(b - a, axis=1)
+    curved = θ < np.radians(CREASE_DEG)
+    if not curved.any():
+        return None
+    chord = h[curved] * θ[curved] / 6.0
+    worst = int(np.argmax(chord))
+    if chord[worst] <= COARSE_CHORD_OF_CELL * cell_mm:
+        return None
+    return (f"the tool mesh is coarse for its curved geometry: its flat triangles miss the "
+            f"surface by up to about {chord[worst]:.3g} mm (an edge of {h[curved][worst]:.3g} "
+            f"mm bending by {np.degrees(θ[curved][worst]):.3g}°), more than "
+            f"{COARSE_CHORD_OF_CELL:g} of the sheet's cell {cell_mm:g} mm; give a smaller "
+            "mesh_mm (or order = 2)")

@@ -585,10 +585,18 @@ class TriangleSurface:
 
 
 def _weld(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Merge coincident points, drop triangles that lost a corner and unused points."""
+    """Merge coincident points, drop degenerate triangles and unused points.
+
+    A triangle is degenerate when it lost a corner in the merge or has no area (its corners
+    on a line: :data:`~fenicsx_drape.forming.tools.checks.FLAT_TRIANGLE`), as the mesh check
+    says (:func:`~fenicsx_drape.forming.tools.checks.mesh_defects`: "ignored"): it covers
+    nothing, and left in it would make an edge look shared by three triangles.
+    """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
+
+    from fenicsx_drape.forming.tools.checks import FLAT_TRIANGLE
 
     lo, hi = points.min(axis=0), points.max(axis=0)
     tol = _WELD_TOLERANCE * max(float(np.linalg.norm(hi - lo)), 1e-300)
@@ -602,6 +610,10 @@ def _weld(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.nda
         triangles = first[label][triangles]
     keep = ((triangles[:, 0] != triangles[:, 1]) & (triangles[:, 1] != triangles[:, 2])
             & (triangles[:, 2] != triangles[:, 0]))
+    a, b, c = (points[triangles[:, k]] for k in range(3))
+    longest = np.max([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
+                      np.linalg.norm(a - c, axis=1)], axis=0)
+    keep &= np.linalg.norm(np.cross(b - a, c - a), axis=1) > FLAT_TRIANGLE * longest**2
     triangles = triangles[keep]
     used, inverse = np.unique(triangles, return_inverse=True)
     return points[used], inverse.reshape(-1, 3)
@@ -937,7 +949,7 @@ def write_msh(surface: TriangleSurface, path: str | os.PathLike) -> Path:
 def sample_curve_loop(path: Path, spacing_mm: float) -> tuple[tuple[float, float], ...]:
     """The closed curve loop of a Gmsh file as a polygon, in this process.
 
-    See :func:`~fenicsx_drape.forming.case.format.sample_outline` (which checks a script first and
+    See :func:`~fenicsx_drape.forming.case.reading.sample_outline` (which checks a script first and
     runs this in a child process).
     """
     import gmsh

@@ -1,17 +1,17 @@
-"""Forming tests in ``compare`` and ``diagnose``: a simulated sheet against a measured grid.
+"""The measured grid: a simulated sheet against the formed positions of nodes drawn on it.
 
 A forming test (``kind = "forming"``, ``docs/measurements.md``) gives the formed
-positions of the nodes of a grid drawn on the flat sheet. These are the grid's hooks of the
-forming kind (:data:`~fenicsx_drape.diagnosis.forming_fit.FORMING`, which hands a lab
-measurement to :mod:`~fenicsx_drape.diagnosis.lab_kind`):
+positions of the nodes of a grid drawn on the flat sheet (its ``file``). The kind
+:data:`GRID`:
 
 - **simulation**: the part the test was formed on, under its conditions. A test with
   ``geometry = "hemisphere"`` forms the paper's hemisphere (``meshes/hemisphere/case.toml``,
   a symmetric quarter, with the tool sizes, travel, duration and holding force of the test:
-  :func:`forming_case_of`) as any case; a test that names its case file
+  :func:`~fenicsx_drape.diagnosis.kinds.forming.forming_case_of`) as any case; a test that
+  names its case file
   (``case = "part.toml"``) forms that case
   (:func:`~fenicsx_drape.forming.running.run.run_case`) with the test's keys as overrides
-  (the bundle loader applied them, :func:`~fenicsx_drape.forming.case.format.case_for_test`),
+  (the bundle loader applied them, :func:`~fenicsx_drape.forming.case.case_for_test`),
   in the case's frame. The modelled part (quarter, half or whole blank, by the case's
   symmetry planes) is compared as it is when the measured grid lies in it, else mirrored
   through the planes to the whole sheet (:func:`sheet_for`); it is interpolated bilinearly
@@ -31,47 +31,17 @@ measurement to :mod:`~fenicsx_drape.diagnosis.lab_kind`):
   the direction from the tool axis in the tow frame (along the tow axes, bias diagonals);
 - the paper's measures beside them (:func:`metrics`): mean distance (mm and % of the mean
   node displacement, the paper's 1.57 mm and 4 %), and the shear-angle and wrinkling-strain
-  errors when the grid has those columns.
-
-**Fitting.** In a forming test only the forming parameters are fitted
-(:func:`~fenicsx_drape.diagnosis.forming_fit.fit_forming`):
-the friction coefficients of the model's forming effects (``mu`` of ``holder_friction``,
-``mu_tool`` of ``tool_friction``), the material parameters staying at their coupon-fitted (or
-given) values. The fit is Gauss-Newton on the per-coordinate residuals in noise units, with
-forward differences of :data:`FD_STEP`, from the better of two starts (the model's values and
-the parameters' defaults, judged in the first batch of runs: a warm start from a model
-lacking the right physics can sit far off, e.g. a holder μ driven up by a model whose tows
-carry compression), steps of at most :data:`MAX_STEP` within :data:`MU_BOUNDS` and halved
-once when they do not lower the cost; every forming run is cached by its case and
-parameters. The runs of one iteration (the point and its perturbations) go to the workers
-at once (:mod:`~fenicsx_drape.diagnosis.forming_runs`) when the point fits in the
-perturbations' last batch for no extra time (one parameter on two workers); else a point's
-perturbations are formed only once the fit takes the point (a rejected step's are not
-needed: on one worker, a fifth of the lab README diagnosis's runs). The fit is the same
-either way.
-
-The holder's μ is fitted only where a test's holder does not fix it (a case's
-``[holder] mu``).
-
-**Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
-a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
-in at most :data:`MAX_ITERATIONS` iterations), every run is cached, the runs of an iteration
-go to persistent worker processes, and the held-out folds (every third node of the grid
-left out, three folds) start from the full fit, so a fold costs a run only when its step
-moves the parameters by more than :data:`XTOL`. The hemisphere runs use cells of
-:data:`~fenicsx_drape.diagnosis.forming_runs.FULL_CELL_MM` (the paper's Δ) and a case its
-blank's ``cell_mm``; :func:`~fenicsx_drape.diagnosis.forming_runs.resolution` sets another
-for both. A coarser screening mesh
-(:data:`~fenicsx_drape.diagnosis.forming_runs.SCREEN_CELL_MM`, 4× cheaper) is only sound
-when its discretisation error is below the noise: against a grid formed on 10 mm cells, the
-20 mm mesh misses by 2.9 × the 0.3 mm noise (at the tow axes over the fillet), which hides a
-tool friction that the 10 mm mesh finds; :func:`~fenicsx_drape.diagnosis.diagnose.confirm`
-refits the baseline and the winner on another mesh to check a verdict.
+  errors when the grid has those columns;
+- **fit**: the friction coefficients (:func:`~fenicsx_drape.diagnosis.kinds.forming.
+  fit_forming`, shared by every forming kind);
+- **picture** (:func:`plot_error_map`): the position error over the part, model by model;
+- **data check**: the positions against the case, and a shifted flat frame
+  (:func:`~fenicsx_drape.diagnosis.kinds.checks.check_positions`).
 """
 
 from __future__ import annotations
 
-import functools
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -79,29 +49,26 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.forming_runs import (
-    FULL_CELL_MM,
-    case_key,
-    cell_override,
-    form_many,
-    stopped_at,
+from fenicsx_drape.diagnosis.kinds import checks
+from fenicsx_drape.diagnosis.kinds.base import FitHook, Region
+from fenicsx_drape.diagnosis.kinds.forming import (
+    case_of,
+    fit_friction,
+    forming_case_of,
+    names_case,
+    parameter_sets,
 )
-from fenicsx_drape.diagnosis.kinds import Region
+from fenicsx_drape.diagnosis.kinds.part import CASE_REGION_NAMES, region_of_points, travel_axis
 from fenicsx_drape.errors import DrapeInputError
-from fenicsx_drape.forming.case.format import FormingCase, case_file, case_for_test, with_overrides
+from fenicsx_drape.runs import form_many, stopped_at
 
 if TYPE_CHECKING:
-    from fenicsx_drape.diagnosis.kinds import Comparison
+    from fenicsx_drape.diagnosis.kinds.base import Comparison
+    from fenicsx_drape.forming.case import FormingCase
     from fenicsx_drape.forming.running.post import FormedGrid
     from fenicsx_drape.measurements.bundle import Test
     from fenicsx_drape.model import Model
 
-FORMING_PARAMETERS = ("mu", "mu_tool")  # what a forming test fits (friction coefficients)
-FD_STEP = 0.02  # forward-difference step in a friction coefficient
-XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
-MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
-MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
-MU_BOUNDS = (0.0, 2.0)  # friction coefficients fitted within (prepreg on steel: 0.1-0.5)
 # A measured node outside the cells of the model's net (a ragged edge) takes the nearest kept
 # cell's bilinear map up to this many cells away; farther, the grid does not fit the blank.
 EXTRAPOLATE_CELLS = 1.5
@@ -109,59 +76,6 @@ EXTRAPOLATE_CELLS = 1.5
 
 # --------------------------------------------------------------------------------------------
 # Simulation
-
-
-def names_case(test: Test) -> bool:
-    """Whether a forming test names its case file (else it is the paper's hemisphere)."""
-    return test.case is not None or test.forming_case is not None
-
-
-_read_cases: dict[tuple, FormingCase] = {}
-
-
-def forming_case_of(test: Test) -> FormingCase:
-    """The case a test forms, with the test's keys applied.
-
-    A test that names its case file: that case (as the bundle loader read it, else read here);
-    a test with ``geometry = "hemisphere"``: the paper's, ``meshes/hemisphere/case.toml`` (a
-    symmetric quarter), with the test's tool sizes, travel, duration and holding force. Read
-    once per file and keys.
-    """
-    if test.forming_case is not None:
-        return test.forming_case
-    if test.case_path is not None:
-        path, keys = test.case_path, test.case_keys
-    elif test.geometry == "hemisphere":
-        path, keys = case_file("hemisphere"), test.forming
-    else:
-        raise DrapeInputError(f"test {test.id!r}: forming geometry {test.geometry!r} cannot be "
-                              "simulated (known: hemisphere; or name the forming case with "
-                              "case = \"case.toml\")")
-    key = (str(path), tuple(sorted((k, str(v)) for k, v in keys.items())))
-    if key not in _read_cases:
-        _read_cases[key] = case_for_test(path, keys)[0]
-    return _read_cases[key]
-
-
-@functools.lru_cache(maxsize=64)
-def _with_cell(case: FormingCase, cell_mm: float) -> FormingCase:
-    return case if case.blank.cell_mm == cell_mm else with_overrides(case, cell_mm=cell_mm)
-
-
-def case_of(test: Test, cell_mm: float | None = None) -> FormingCase:
-    """The case a forming test is simulated with (:func:`forming_case_of`), on its cells.
-
-    The cells are ``cell_mm``, else the :func:`~fenicsx_drape.diagnosis.forming_runs.
-    resolution`'s, else the case's own (the hemisphere's: the paper's 10 mm).
-    """
-    case = forming_case_of(test)
-    cell = cell_mm or cell_override()
-    return _with_cell(case, float(cell)) if cell else case
-
-
-def model_planes(test: Test) -> tuple[str, ...]:
-    """The symmetry planes of the part the test's runs model (the hemisphere: a quarter)."""
-    return forming_case_of(test).planes
 
 
 def in_part(test: Test, planes: Sequence[str]) -> bool:
@@ -256,13 +170,10 @@ def simulated_sheets(test: Test, model: Model) -> list[FormedGrid]:
     On a stack, the sheet of the ply the test was measured on (``test.ply``; None: the
     outermost ply away from the punch).
     """
-    sizes = {np.size(v) for v in model.parameters.values() if np.ndim(v) > 0}
+    sets = parameter_sets(model)
     case = case_of(test)
-    if not sizes:
+    if sets is None:
         return [sheet_for(test, form_many([(case, model)])[0].ply(test.ply))]
-    (k,) = sizes
-    sets = [model.with_parameters(**{n: float(v[i]) for n, v in model.parameters.items()
-                                     if np.ndim(v) > 0}) for i in range(k)]
     return [sheet_for(test, g.ply(test.ply)) for g in form_many([(case, m) for m in sets])]
 
 
@@ -281,6 +192,20 @@ def interpolate(sheet: FormedGrid, field: np.ndarray, points_mm: np.ndarray) -> 
     stacked = np.repeat(np.asarray(field, float)[..., None], 3, axis=-1)
     return sample(FormedGrid(sheet.X, stacked, sheet.quarter, sheet.symmetry), points_mm)[:, 0]
 
+
+
+def on_sheet(test: Test, sheet: FormedGrid, plane: str | None = None) -> np.ndarray:
+    """The grid's ``x, y, z`` on one formed sheet (flattened), as :func:`simulate` reads it.
+
+    ``plane``: the sheet is the run of the mirror image in that symmetry plane ("x" or "y"):
+    the grid is read at its image and mirrored back.
+    """
+    sheet = sheet.ply(test.ply)  # a stack: the ply measured
+    M = np.ones(3) if plane is None else np.where(np.arange(3) == "xy".index(plane), -1.0, 1.0)
+    P = reference_points(test) * M[:2]
+    part = sheet if all(bool((P[:, "xy".index(q)] >= -1e-9).all()) for q in sheet.planes) \
+        else sheet.full()
+    return (sample(part, P, test.id) * M).ravel()
 
 # --------------------------------------------------------------------------------------------
 # Noise, regions, the paper's measures
@@ -352,37 +277,6 @@ def region_of_nodes(test: Test) -> np.ndarray:
                     np.where(r0 <= apex, 0, np.where(axes, 2, 1)))
 
 
-# Regions of the part a case forms (:func:`case_regions`): by what a node touches at the end
-# and, on the walls, by its direction from the tool axis in the tow frame.
-CASE_REGION_NAMES = ("punch top", "walls along the tow axes", "walls on the bias diagonals",
-                     "flat base", "flange under the holder", "free sheet (no tool contact)")
-CONTACT_MM = 1.0  # a node within this (plus three times the noise) of a surface touches it
-WALL_DEG = 30.0  # a surface steeper than this to the plane normal to the travel is a wall
-CONTACT_ROLES = ("punch", "die", "surface")
-_built_tools: dict[str, dict[str, Any]] = {}
-
-
-def _tools_of(case: FormingCase) -> dict[str, Any]:
-    """The built tools of a case (cached by the case's content: meshing costs seconds)."""
-    from fenicsx_drape.forming.case.format import build_tools
-
-    key = case_key(case)
-    if key not in _built_tools:
-        _built_tools[key] = build_tools(case)
-    return _built_tools[key]
-
-
-def travel_axis(case: FormingCase) -> np.ndarray:
-    """The unit direction the case's fastest tool travels (the frame's z for the hemisphere)."""
-    speeds = [case.speed_mm_per_s(t) for t in case.tools]
-    spec = case.tools[int(np.argmax(speeds))]
-    if spec.motion is not None:
-        d = spec.motion.translation(spec.motion.time_s[-1]) - spec.motion.translation(0.0)
-        if np.linalg.norm(d) > 0:
-            return d / np.linalg.norm(d)
-    return np.array([0.0, 0.0, 1.0])
-
-
 def case_region_of_nodes(test: Test) -> np.ndarray:
     """Index into :data:`CASE_REGION_NAMES` of every measured node of a case's test.
 
@@ -397,44 +291,6 @@ def case_region_of_nodes(test: Test) -> np.ndarray:
     """
     return region_of_points(test, measured_positions(test), direction_of_nodes(test),
                             noise(test)[0])
-
-
-def region_of_points(test: Test, x: np.ndarray, direction_deg: np.ndarray,
-                     noise_mm: float) -> np.ndarray:
-    """:func:`case_region_of_nodes` of any formed points (n, 3).
-
-    With their directions (deg, 0-45) from the nearest tow axis and the positions' noise (mm).
-    """
-    case = forming_case_of(test)
-    tools = _tools_of(case)
-    t = case.duration_s
-    x = np.array(x, float)
-    for plane in case.planes:
-        axis = {"x": 0, "y": 1}[plane]
-        x[:, axis] = np.abs(x[:, axis])
-    tol = CONTACT_MM + 3.0 * noise_mm
-    n = len(x)
-    best = np.full(n, np.inf)
-    normal = np.zeros((n, 3))
-    for spec in case.tools:
-        if spec.role in CONTACT_ROLES:
-            g = tools[spec.name].gap(x, t)
-            closer = (np.abs(g.phi) < tol) & (np.abs(g.phi) < best)
-            best = np.where(closer, np.abs(g.phi), best)
-            normal[closer] = g.normal[closer]
-    touching = np.isfinite(best)
-    e = travel_axis(case)
-    cos = np.abs(normal @ e) / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)
-    wall = touching & (cos < math.cos(math.radians(WALL_DEG)))
-    height = x @ e
-    top = touching & ~wall & (height >= 0.5 * max(float(height.max()), 0.0))
-    bias = np.asarray(direction_deg) >= 22.5
-    which = np.select([wall & ~bias, wall & bias, top, touching], [1, 2, 0, 3], default=5)
-    if case.holder is not None:
-        holder = tools[case.holder.tool]
-        under = np.asarray(holder.covers(x, t), bool) & (np.abs(holder.gap(x, t).phi) < tol)
-        which = np.where(under, 4, which)
-    return which
 
 
 def direction_of_nodes(test: Test) -> np.ndarray:
@@ -536,102 +392,6 @@ def abscissa(test: Test) -> tuple[str, np.ndarray]:
 
 
 # --------------------------------------------------------------------------------------------
-# Fitting the forming parameters
-
-
-def holder_mu_free(test: Test) -> bool:
-    """Whether the model's holder μ acts in a test (a case may fix it, or have no holder)."""
-    if not names_case(test):
-        return True
-    holder = forming_case_of(test).holder
-    return holder is not None and holder.mu is None
-
-
-def synthetic_forming_test(model: Model, *, test_id: str = "hemisphere",
-                           cell_mm: float = FULL_CELL_MM, grid_mm: float | None = None,
-                           sd_mm: float = 0.3, seed: int = 0, quarter: bool = True,
-                           duration_s: float = 40.0, holder_force_N: float = 133.0) -> Test:
-    """A forming test "measured" by the project's simulator plus Gaussian position noise.
-
-    The hemisphere formed by ``model`` on cells of ``cell_mm``, read at a drawn grid of
-    ``grid_mm`` (default: the cell), with noise of ``sd_mm`` per coordinate written as the
-    ``position_sd_mm`` column; the quarter grid, or the full sheet by symmetry.
-    """
-    from fenicsx_drape.forming.case.format import load_case
-    from fenicsx_drape.forming.tools.shapes import HemisphereTools
-    from fenicsx_drape.measurements.bundle import Test
-
-    case = load_case("hemisphere", cell_mm=cell_mm, duration_s=duration_s,
-                     holder_force_N=holder_force_N)
-    (sheet,) = form_many([(case, model)])
-    table = (sheet if quarter else sheet.full()).drawn_grid(grid_mm or cell_mm)
-    rng = np.random.default_rng(seed)
-    columns = {k: np.asarray(v, float) for k, v in table.items()}
-    for c in ("x_mm", "y_mm", "z_mm"):
-        columns[c] = np.round(columns[c] + rng.normal(0.0, sd_mm, columns[c].size), 4)
-    columns["position_sd_mm"] = np.full(columns["i"].size, sd_mm)
-    t = HemisphereTools(**case.tool("punch").params)
-    setup = {"punch_radius_mm": t.punch_radius_mm, "fillet_radius_mm": t.fillet_radius_mm,
-             "holder_opening_mm": t.holder_opening_mm, "sheet_mm": t.sheet_mm,
-             "travel_mm": t.travel_mm, "duration_s": duration_s,
-             "holder_force_N": holder_force_N, "grid_mm": grid_mm or cell_mm}
-    return Test(id=test_id, kind="forming", file=f"{test_id}.csv", columns=columns,
-                geometry="hemisphere", forming=setup)
-
-
-def synthetic_case_test(model: Model, case: FormingCase, *, test_id: str | None = None,
-                        grid_mm: float | None = None, sd_mm: float = 0.3, seed: int = 0,
-                        full: bool = False, case_file: str = "case/case.toml",
-                        ply: int | None = None) -> Test:
-    """A forming test of any case "measured" by the project's simulator plus Gaussian noise.
-
-    The case formed by ``model`` (on its own cells), read at a drawn grid of ``grid_mm``
-    (default: the cell) on the modelled part, or on the whole blank by symmetry (``full``),
-    with noise of ``sd_mm`` per coordinate written as the ``position_sd_mm`` column (none when
-    0). The test names ``case_file`` and carries the case; its keys repeat the case's
-    duration, travel and holding force. Write it with :func:`write_case_bundle`. On a stack,
-    ``ply`` names the ply measured (its ``file_ply`` key); None: the outermost one.
-    """
-    from fenicsx_drape.measurements.bundle import Test
-
-    (sheet,) = form_many([(case, model)])
-    sheet = sheet.ply(ply)
-    grid_mm = grid_mm or case.blank.cell_mm
-    table = (sheet.full() if full else sheet).drawn_grid(grid_mm)
-    rng = np.random.default_rng(seed)
-    columns = {k: np.asarray(v, float) for k, v in table.items()}
-    if sd_mm:
-        for c in ("x_mm", "y_mm", "z_mm"):
-            columns[c] = np.round(columns[c] + rng.normal(0.0, sd_mm, columns[c].size), 4)
-        columns["position_sd_mm"] = np.full(columns["i"].size, sd_mm)
-    keys = {"duration_s": case.duration_s, "travel_mm": case.total_travel_mm}
-    if case.holder is not None:
-        keys["holder_force_N"] = case.holder.force_N
-    test_id = test_id or case.name
-    return Test(id=test_id, kind="forming", file=f"{test_id}.csv", columns=columns,
-                forming={**keys, "grid_mm": grid_mm}, case=case_file, case_keys=keys,
-                forming_case=case, ply=ply)
-
-
-def write_case_bundle(name: str, tests: Sequence[Test], folder: str | Path, *,
-                      comment: str = "") -> Path:
-    """Write forming tests that carry their case as a bundle folder, with copies of the cases.
-
-    Each test's case is written (with its geometry files) at its ``case`` path inside the
-    folder; the tests that name no case are written as they are.
-    """
-    from fenicsx_drape.forming.case.format import write_case
-    from fenicsx_drape.measurements.bundle import Bundle, write_bundle
-
-    folder = Path(folder)
-    for test in tests:
-        if test.forming_case is not None and test.case is not None:
-            where = folder / test.case
-            write_case(test.forming_case, where.parent, name=where.name, comment=comment)
-    return write_bundle(Bundle(name=name, tests=tuple(tests)), folder, comment=comment)
-
-
-# --------------------------------------------------------------------------------------------
 # Pictures
 
 
@@ -676,3 +436,83 @@ def plot_error_map(comparisons: Mapping[str, Comparison], test: Test, path: Path
     axes[n].set_xlabel(f"share of the {next(iter(comparisons))} error (%)")
     fig.suptitle(f"{test.id}: where the formed part misses", fontsize=10)
     return save_figure(fig, path)
+
+
+# --------------------------------------------------------------------------------------------
+# The kind
+
+
+@dataclasses.dataclass(frozen=True)
+class GridKind:
+    """The measured grid (:class:`~fenicsx_drape.diagnosis.kinds.base.FormedKind`).
+
+    The formed ``x, y, z`` of nodes drawn on the flat sheet (module doc).
+    """
+
+    name: str = "grid"
+    test_kind: str = "forming"  # the bundle's kind of its tests
+    formed: bool = True
+    mirrorable: bool = True  # a grid is read at its image in a symmetry plane
+    fit: FitHook = fit_friction  # the friction coefficients, shared by the forming kinds
+
+    def holds(self, test: Test) -> bool:
+        """Whether ``test`` is a forming test's grid (no lab measurement, or its ``file``)."""
+        lab = getattr(test, "lab", None)
+        return test.kind == "forming" and (lab is None or lab.measurement == "file")
+
+    def unit(self, test: Test) -> str:
+        """Millimetres."""
+        return "mm"
+
+    def measured(self, test: Test) -> np.ndarray:
+        """The measured ``x, y, z`` of every node (flattened)."""
+        return measured_positions(test).ravel()
+
+    def noise(self, test: Test) -> tuple[float, str]:
+        """The position noise (mm) and its source (:func:`noise`)."""
+        return noise(test)
+
+    def value_sd(self, test: Test) -> np.ndarray:
+        """Per compared value, the noise a fit weighs it with (:func:`row_noise`).
+
+        A node's x, y, z share its ``position_sd_mm``.
+        """
+        return np.repeat(row_noise(test), 3)
+
+    def sd_column(self, test: Test) -> str:
+        """``position_sd_mm``."""
+        return "position_sd_mm"
+
+    def simulate(self, test: Test, model: Model) -> np.ndarray:
+        """The model's ``x, y, z`` of every node (:func:`simulate`)."""
+        return simulate(test, model)
+
+    def on_sheet(self, test: Test, sheet: FormedGrid, model: Model,
+                 plane: str | None = None) -> np.ndarray:
+        """The grid read on one formed sheet (:func:`on_sheet`)."""
+        return on_sheet(test, sheet, plane)
+
+    def regions(self, test: Test) -> list[Region]:
+        """The regions of the part (:func:`part_regions`)."""
+        return part_regions(test)
+
+    def abscissa(self, test: Test) -> tuple[str, np.ndarray]:
+        """Each node's flat distance from the axis (:func:`abscissa`)."""
+        return abscissa(test)
+
+    def metrics(self, test: Test, simulated: np.ndarray, model: Model | None = None
+                ) -> dict[str, Any]:
+        """The paper's measures (:func:`metrics`)."""
+        return metrics(test, simulated, model)
+
+    def plot(self, comparisons: Mapping[str, Comparison], test: Test, path: Path,
+             shares: Sequence[Mapping[str, Any]] = ()) -> Path:
+        """The error map over the part (:func:`plot_error_map`)."""
+        return plot_error_map(comparisons, test, path, shares)
+
+    def check(self, test: Test, case: FormingCase) -> tuple[bool, str] | None:
+        """The positions against the case and a shifted frame (module doc)."""
+        return checks.check_registered_or_positions(test, case)
+
+
+GRID = GridKind()

@@ -1,7 +1,7 @@
 """Do all coupon tests of a bundle share one parameter set? Leave-one-group-out refits.
 
 A bundle may hold tests of several kinds (bias extension, picture frame, tension), specimen
-sizes and labs. The joint fit (:func:`fenicsx_drape.calibration.fit.fit`) weighs every test
+sizes and labs. The joint fit (:func:`fenicsx_drape.calibration.fitting.fit`) weighs every test
 by its noise; a test that cannot be reconciled with the others would still pull all
 parameters. :func:`consistency` asks, for every group of tests -- one test, one lab, one
 specimen size, one kind -- how the others alone predict it:
@@ -125,7 +125,7 @@ def consistency(bundle: Bundle, result=None, *, model=None, by: Sequence[str] = 
 
     Args:
         bundle: The measurements (only coupon tests are used).
-        result: The joint :class:`~fenicsx_drape.calibration.fit.FitResult`; fitted here
+        result: The joint :class:`~fenicsx_drape.calibration.fitting.FitResult`; fitted here
             (from ``model``, or the default model) when None.
         model: The model to fit when ``result`` is None.
         by: The groupings to try, among :data:`GROUPINGS`.
@@ -135,7 +135,7 @@ def consistency(bundle: Bundle, result=None, *, model=None, by: Sequence[str] = 
         A JSON-ready report: ``joint`` (normalised error and per test), ``groups`` (one
         record per left-out group), ``verdict`` and ``says``, and the rules used.
     """
-    from fenicsx_drape.calibration.fit import fit
+    from fenicsx_drape.calibration.fitting import fit
 
     say = progress or (lambda line: None)
     unknown = set(by) - set(GROUPINGS)
@@ -177,7 +177,7 @@ def consistency(bundle: Bundle, result=None, *, model=None, by: Sequence[str] = 
             say(f"  held-out {held:.3g} (joint {in_joint:.3g}), rest {refit.normalised:.3g}, "
                 f"measured/predicted {scale:.3g}")
     verdict, says = _verdict(joint, records)
-    from fenicsx_drape.calibration.fit import _strict
+    from fenicsx_drape.calibration.fitting import _strict
 
     return _strict({"scheme": "leave one group out; the rest refitted from the joint optimum "
                       "(warm start, no global stage); the group predicted",

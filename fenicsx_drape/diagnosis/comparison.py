@@ -12,15 +12,15 @@ The definitions are those of the diagnosis contract (``docs/measurements.md``):
   contributions sum to ``normalised²``.
 
 The regions are the ranges of the variables that matter physically: per test, those its
-kind gives (coupons, :mod:`~fenicsx_drape.diagnosis.coupon_kind`: ranges of the kinematic
+kind gives (coupons, :mod:`~fenicsx_drape.diagnosis.kinds.coupon`: ranges of the kinematic
 strain that separate the mechanisms of the paper's section 3.2, and the phases of the loading
-history; forming, :mod:`~fenicsx_drape.diagnosis.forming_kind`: parts of the formed part),
-and across tests of one kind, each value of a condition that varies (``speed_mm_per_min``,
-``temperature_C``, ...).
+history; a formed part's measurements, e.g. :mod:`~fenicsx_drape.diagnosis.kinds.grid`: parts
+of the formed part), and across tests of one kind, each value of a condition that varies
+(``speed_mm_per_min``, ``temperature_C``, ...).
 
-This module knows no test kind by name: each test's kind is looked up in the registry
-(:mod:`fenicsx_drape.diagnosis.kinds`), which says how to measure, simulate, fit and picture
-it. The built-in kinds register when :mod:`fenicsx_drape.diagnosis` is imported.
+This module knows no measurement kind by name: each test's kind is looked up in the table
+:data:`~fenicsx_drape.diagnosis.kinds.KINDS` (:func:`~fenicsx_drape.diagnosis.kinds.kind_of`),
+which says how to measure, simulate, fit and picture it.
 """
 
 from __future__ import annotations
@@ -34,9 +34,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fenicsx_drape.diagnosis.coupon_kind import COUPON
-from fenicsx_drape.diagnosis.forming_fit import FORMING
-from fenicsx_drape.diagnosis.kinds import Comparison, Region, unit_of
+from fenicsx_drape.diagnosis.kinds import (
+    KINDS,
+    TEST_KINDS,
+    Comparison,
+    Region,
+    comparable,
+    find_kind,
+    is_formed,
+    kind_of,
+)
+from fenicsx_drape.diagnosis.kinds.coupon import plot_curves
 from fenicsx_drape.errors import DrapeInputError
 
 if TYPE_CHECKING:
@@ -50,11 +58,6 @@ OUTLIER_SD = 5.0
 # many (the complete list is in ``CompareResult.regions``).
 WHERE_MIN_SHARE = 0.05
 WHERE_MAX_ENTRIES = 12
-
-# The test kinds compare and diagnose know, in the order their fits run: the coupons fix the
-# material before the forming tests fit the friction coefficients with it held.
-KINDS = {"tensile": COUPON, "bias_extension": COUPON, "picture_frame": COUPON,
-         "forming": FORMING}
 
 
 # --------------------------------------------------------------------------------------------
@@ -77,10 +80,10 @@ def prepare(bundle: Bundle) -> tuple[list[Test], list[str]]:
     """
     tests, skipped = [], []
     for test in bundle.tests:
-        if test.kind in KINDS:
+        if comparable(test):
             tests.append(test)
             stack = getattr(test.forming_case, "plies", ())
-            if test.kind == "forming" and test.ply is None and len(stack) > 1:
+            if is_formed(test) and test.ply is None and len(stack) > 1:
                 skipped.append(f"test {test.id!r}: no ply named; compared with the outermost "
                                f"ply away from the punch (ply {len(stack)})")
         else:
@@ -88,7 +91,7 @@ def prepare(bundle: Bundle) -> tuple[list[Test], list[str]]:
                            "(no simulation for this kind); left out")
     if not tests:
         raise DrapeInputError(f"bundle {bundle.name!r}: no test of a comparable kind "
-                              f"({', '.join(KINDS)})")
+                              f"({', '.join(TEST_KINDS)})")
     return tests, skipped
 
 
@@ -99,7 +102,7 @@ def compare_tests(tests: Sequence[Test], simulated: Mapping[str, np.ndarray],
     """Compare given simulated values with the tests (regions and noise computed if absent)."""
     out = []
     for test in tests:
-        kind = KINDS[test.kind]
+        kind = kind_of(test)
         values = np.asarray(simulated[test.id], dtype=float)
         measured = np.asarray(kind.measured(test), dtype=float)
         if values.shape != measured.shape:
@@ -107,8 +110,8 @@ def compare_tests(tests: Sequence[Test], simulated: Mapping[str, np.ndarray],
                              f"{measured.shape} measured")
         level, source = noise[test.id] if noise else kind.noise(test)
         test_regions = regions[test.id] if regions is not None else kind.regions(test)
-        out.append(Comparison(test.id, test.kind, unit_of(kind, test), measured, values, level,
-                                  source, tuple(test_regions), conditions_of(test)))
+        out.append(Comparison(test.id, test.kind, kind.unit(test), measured, values, level,
+                              source, tuple(test_regions), conditions_of(test)))
     return out
 
 
@@ -435,13 +438,18 @@ def kind_metrics(tests: Iterable[Test], comparisons: Sequence[Comparison],
                  model: Model) -> dict[str, dict[str, Any]]:
     """The kinds' own measures (e.g. forming: mean distance), by test id, where defined."""
     by_id = {c.id: c for c in comparisons}
-    return {t.id: KINDS[t.kind].metrics(t, by_id[t.id].simulated, model) for t in tests
-            if KINDS[t.kind].metrics is not None and t.id in by_id}
+    out = {}
+    for t in tests:
+        if t.id in by_id:
+            measures = kind_of(t).metrics(t, by_id[t.id].simulated, model)
+            if measures is not None:
+                out[t.id] = measures
+    return out
 
 
 def simulate(tests: Iterable[Test], model: Model) -> dict[str, np.ndarray]:
     """The model's values for each test (N per row for coupons), by test id."""
-    return {test.id: KINDS[test.kind].simulate(test, model) for test in tests}
+    return {test.id: kind_of(test).simulate(test, model) for test in tests}
 
 
 def evaluate(bundle: Bundle, model: Model) -> CompareResult:
@@ -509,10 +517,10 @@ def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = No
     """Fit a model to a bundle that may mix test kinds: each kind's own ``fit`` in turn.
 
     The fits of the kinds present among the chosen tests run once each, in the order
-    of :data:`KINDS`: the coupons fix the material
-    (:func:`fenicsx_drape.calibration.fit.fit`), then the forming tests fit the friction
-    coefficients with the material held (:func:`~fenicsx_drape.diagnosis.forming_fit.
-    fit_forming`). A kind without a fit leaves the model as it is.
+    of :data:`~fenicsx_drape.diagnosis.kinds.KINDS`: the coupons fix the material
+    (:func:`fenicsx_drape.calibration.fitting.fit`), then the forming tests fit the friction
+    coefficients with the material held (:func:`~fenicsx_drape.diagnosis.kinds.forming.
+    fit_forming`).
 
     Args:
         bundle: The measurements.
@@ -523,24 +531,20 @@ def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = No
         from_features: Start the coupon fit from curve features (section 3.2) rather than
             the model's values.
         progress: Called with a line of text as the fits proceed.
-        details: Filled by the kinds' fits that take it with what they found (the coupons:
-            ``details["coupons"]``, the :class:`~fenicsx_drape.calibration.fit.FitResult`).
+        details: Filled by the kinds' fits with what they found (the coupons:
+            ``details["coupons"]``, the :class:`~fenicsx_drape.calibration.fitting.FitResult`).
 
     Returns:
         The fitted model.
     """
-    import inspect
-
-    present = {t.kind for t in bundle.tests if tests is None or t.id in tests}
+    present = [find_kind(t) for t in bundle.tests if tests is None or t.id in tests]
     done: list[Callable[..., Model]] = []
-    for name, kind in KINDS.items():
-        if name in present and kind.fit is not None and kind.fit not in done:
+    for kind in KINDS:
+        if any(k is kind for k in present) and kind.fit not in done:
             done.append(kind.fit)
-            extra = ({"details": details} if details is not None
-                     and "details" in inspect.signature(kind.fit).parameters else {})
-            model = kind.fit(bundle, model, tests=tests, parameters=parameters,
-                             max_iterations=max_iterations, from_features=from_features,
-                             progress=progress, **extra)
+            model = kind.fit(bundle, model, kind_of=find_kind, tests=tests,
+                             parameters=parameters, max_iterations=max_iterations,
+                             from_features=from_features, progress=progress, details=details)
     return model
 
 
@@ -557,6 +561,9 @@ def plot_residuals(comparisons: Mapping[str, Comparison], test: Test, path: Path
                    shares: Sequence[Mapping[str, Any]] = ()) -> Path:
     """Measured against one or more models (top) and their residuals (bottom).
 
+    Against the test kind's abscissa (:func:`~fenicsx_drape.diagnosis.kinds.coupon.
+    plot_curves`); a kind's own picture is its ``plot``.
+
     Args:
         comparisons: The models' comparisons with ``test``, by label (e.g. "baseline").
         test: The test.
@@ -564,33 +571,7 @@ def plot_residuals(comparisons: Mapping[str, Comparison], test: Test, path: Path
         shares: Regions of the test (entries of :func:`locate`) to shade with their share of
             the first model's error.
     """
-    import matplotlib.pyplot as plt
-
-    from fenicsx_drape.provenance import save_figure
-
-    first = next(iter(comparisons.values()))
-    name, x = KINDS[first.kind].abscissa(test)
-    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7, 6),
-                                      gridspec_kw={"height_ratios": [2, 1]})
-    top.plot(x, first.measured, ".", ms=3, color="0.5", label="measured")
-    bottom.axhspan(-first.noise, first.noise, color="C2", alpha=0.2, label="± noise")
-    for i, (label, c) in enumerate(comparisons.items()):
-        top.plot(x, c.simulated, "-", color=f"C{i}",
-                 label=f"{label}: RMSE {c.rmse:.3g} {c.unit} = {c.normalised:.2f} × noise")
-        bottom.plot(x, c.residual, ".", ms=3, color=f"C{i}", label=label)
-    top.set_ylabel(f"value ({first.unit})")
-    top.legend(loc="upper left", fontsize=7)
-    top.set_title(f"{first.id} ({first.kind.replace('_', ' ')})")
-    for i, entry in enumerate(e for e in shares if e["variable"] == name):
-        lo, hi = entry["range"]
-        bottom.axvspan(lo, hi, color=f"C{i % 10}", alpha=0.08)
-        bottom.annotate(f"{entry['says']}\n{100 * entry['share_of_error']:.0f} %",
-                        xy=(0.5 * (lo + hi), 1.0), xycoords=("data", "axes fraction"),
-                        ha="center", va="top", fontsize=7)
-    bottom.set_xlabel(name.replace("_", " "))
-    bottom.set_ylabel(f"measured − model ({first.unit})")
-    bottom.legend(loc="lower left", fontsize=7)
-    return save_figure(fig, path)
+    return plot_curves(comparisons, test, path, shares, kind_of(test).abscissa(test))
 
 
 def plot_where(entries: Sequence[Mapping[str, Any]], path: Path, title: str = "") -> Path:
@@ -626,8 +607,8 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
         The path of ``compare.json``.
     """
     from fenicsx_drape.diagnosis import ledger
-    from fenicsx_drape.diagnosis.forming_runs import execution_record
     from fenicsx_drape.provenance import atomic_write_text, write_json, write_provenance
+    from fenicsx_drape.runs import execution_record
 
     out = Path(out_dir)
     record = result.to_dict()
@@ -642,9 +623,9 @@ def write_compare(result: CompareResult, bundle: Bundle, out_dir: str | Path, *,
     tests = {t.id: t for t in bundle.tests}
     regions = record["regions"]
     for c in result.tests:
-        plot = KINDS[c.kind].plot or plot_residuals
-        plot({"model": c}, tests[c.id], out / f"residual_{safe_name(c.id)}.png",
-             [e for e in regions if e["tests"] == [c.id]])
+        kind_of(tests[c.id]).plot({"model": c}, tests[c.id],
+                                  out / f"residual_{safe_name(c.id)}.png",
+                                  [e for e in regions if e["tests"] == [c.id]])
     plot_where(record["where"], out / "where.png",
                f"{result.bundle}: normalised error {result.normalised:.2f}")
     ledger.record(out, result, bundle=bundle, model_path=model_path)

@@ -1,0 +1,296 @@
+"""What the forming kinds share: the case a test forms, its runs, and the fit of the friction.
+
+Every forming measurement (the measured grid, :mod:`~fenicsx_drape.diagnosis.kinds.grid`, and
+the lab's, :mod:`~fenicsx_drape.diagnosis.kinds.shear_points`, ``surface``, ``outline``,
+``punch_force``) is compared with the run of the case its test names
+(:func:`forming_case_of`, on the cells of :func:`case_of`), one run per parameter set of a
+vectorised model (:func:`parameter_sets`); a blank placed off-centre moves the flat
+positions it is read at (:func:`moved`). They share one fit hook, :func:`fit_friction`
+(:func:`fit_forming`).
+
+**Fitting.** In a forming test only the forming parameters are fitted
+(:func:`fit_forming`):
+the friction coefficients of the model's forming effects (``mu`` of ``holder_friction``,
+``mu_tool`` of ``tool_friction``), the material parameters staying at their coupon-fitted (or
+given) values. The fit is Gauss-Newton on the per-coordinate residuals in noise units, with
+forward differences of :data:`FD_STEP`, from the better of two starts (the model's values and
+the parameters' defaults, judged in the first batch of runs: a warm start from a model
+lacking the right physics can sit far off, e.g. a holder μ driven up by a model whose tows
+carry compression), steps of at most :data:`MAX_STEP` within :data:`MU_BOUNDS` and halved
+once when they do not lower the cost; every forming run is cached by its case and
+parameters. The runs of one iteration (the point and its perturbations) go to the workers
+at once (:mod:`~fenicsx_drape.runs`) when the point fits in the
+perturbations' last batch for no extra time (one parameter on two workers); else a point's
+perturbations are formed only once the fit takes the point (a rejected step's are not
+needed: on one worker, a fifth of the lab README diagnosis's runs). The fit is the same
+either way.
+
+The holder's μ is fitted only where a test's holder does not fix it (a case's
+``[holder] mu``).
+
+**Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
+a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
+in at most :data:`MAX_ITERATIONS` iterations), every run is cached, the runs of an iteration
+go to persistent worker processes, and the held-out folds (every third node of the grid
+left out, three folds) start from the full fit, so a fold costs a run only when its step
+moves the parameters by more than :data:`XTOL`. The hemisphere runs use cells of
+:data:`~fenicsx_drape.runs.FULL_CELL_MM` (the paper's Δ) and a case its
+blank's ``cell_mm``; :func:`~fenicsx_drape.runs.resolution` sets another
+for both. A coarser screening mesh
+(:data:`~fenicsx_drape.runs.SCREEN_CELL_MM`, 4× cheaper) is only sound
+when its discretisation error is below the noise: against a grid formed on 10 mm cells, the
+20 mm mesh misses by 2.9 × the 0.3 mm noise (at the tow axes over the fillet), which hides a
+tool friction that the 10 mm mesh finds; :func:`~fenicsx_drape.diagnosis.pipeline.confirm`
+refits the baseline and the winner on another mesh to check a verdict.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.forming.case import FormingCase, case_file, case_for_test, with_overrides
+from fenicsx_drape.runs import Deferred, cell_override, spare
+
+if TYPE_CHECKING:
+    from fenicsx_drape.diagnosis.kinds.base import Kind
+    from fenicsx_drape.measurements.bundle import Bundle, Test
+    from fenicsx_drape.model import Model
+
+FORMING_PARAMETERS = ("mu", "mu_tool")  # what a forming test fits (friction coefficients)
+FD_STEP = 0.02  # forward-difference step in a friction coefficient
+XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
+MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
+MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
+MU_BOUNDS = (0.0, 2.0)  # friction coefficients fitted within (prepreg on steel: 0.1-0.5)
+
+
+# --------------------------------------------------------------------------------------------
+# The case a test forms
+
+
+def names_case(test: Test) -> bool:
+    """Whether a forming test names its case file (else it is the paper's hemisphere)."""
+    return test.case is not None or test.forming_case is not None
+
+
+_read_cases: dict[tuple, FormingCase] = {}
+
+
+def forming_case_of(test: Test) -> FormingCase:
+    """The case a test forms, with the test's keys applied.
+
+    A test that names its case file: that case (as the bundle loader read it, else read here);
+    a test with ``geometry = "hemisphere"``: the paper's, ``meshes/hemisphere/case.toml`` (a
+    symmetric quarter), with the test's tool sizes, travel, duration and holding force. Read
+    once per file and keys.
+    """
+    if test.forming_case is not None:
+        return test.forming_case
+    if test.case_path is not None:
+        path, keys = test.case_path, test.case_keys
+    elif test.geometry == "hemisphere":
+        path, keys = case_file("hemisphere"), test.forming
+    else:
+        raise DrapeInputError(f"test {test.id!r}: forming geometry {test.geometry!r} cannot be "
+                              "simulated (known: hemisphere; or name the forming case with "
+                              "case = \"case.toml\")")
+    key = (str(path), tuple(sorted((k, str(v)) for k, v in keys.items())))
+    if key not in _read_cases:
+        _read_cases[key] = case_for_test(path, keys)[0]
+    return _read_cases[key]
+
+
+@functools.lru_cache(maxsize=64)
+def _with_cell(case: FormingCase, cell_mm: float) -> FormingCase:
+    return case if case.blank.cell_mm == cell_mm else with_overrides(case, cell_mm=cell_mm)
+
+
+def case_of(test: Test, cell_mm: float | None = None) -> FormingCase:
+    """The case a forming test is simulated with (:func:`forming_case_of`), on its cells.
+
+    The cells are ``cell_mm``, else the :func:`~fenicsx_drape.runs.
+    resolution`'s, else the case's own (the hemisphere's: the paper's 10 mm).
+    """
+    case = forming_case_of(test)
+    cell = cell_mm or cell_override()
+    return _with_cell(case, float(cell)) if cell else case
+
+
+def model_planes(test: Test) -> tuple[str, ...]:
+    """The symmetry planes of the part the test's runs model (the hemisphere: a quarter)."""
+    return forming_case_of(test).planes
+
+
+def parameter_sets(model: Model) -> list[Model] | None:
+    """The models of each parameter set of a vectorised model (None: not vectorised)."""
+    sizes = {np.size(v) for v in model.parameters.values() if np.ndim(v) > 0}
+    if not sizes:
+        return None
+    (k,) = sizes
+    return [model.with_parameters(**{n: float(v[i]) for n, v in model.parameters.items()
+                                     if np.ndim(v) > 0}) for i in range(k)]
+
+
+def moved(test: Test, shift: np.ndarray) -> Test:
+    """``test`` with its flat-blank positions moved by ``shift`` (mm): a blank offset.
+
+    The flat positions of a grid or of shear points at flat positions are where the stated
+    set-up puts the material; on a blank moved by d the same material lies d further. Formed
+    positions (a scan, an edge, shear points on the formed part) and forces are in the tools'
+    frame and do not move.
+    """
+    if not np.any(shift) or "x0_mm" not in test.columns:
+        return test
+    columns = dict(test.columns)
+    columns["x0_mm"] = np.asarray(columns["x0_mm"], float) + shift[0]
+    columns["y0_mm"] = np.asarray(columns["y0_mm"], float) + shift[1]
+    return dataclasses.replace(test, columns=columns)
+
+
+# --------------------------------------------------------------------------------------------
+# Fitting the forming parameters
+
+
+def holder_mu_free(test: Test) -> bool:
+    """Whether the model's holder μ acts in a test (a case may fix it, or have no holder)."""
+    if not names_case(test):
+        return True
+    holder = forming_case_of(test).holder
+    return holder is not None and holder.mu is None
+
+
+def forming_parameters(model: Model) -> tuple[str, ...]:
+    """The forming parameters the model fits: those of :data:`FORMING_PARAMETERS` it uses."""
+    active = model.active_parameters()
+    return tuple(n for n in FORMING_PARAMETERS if n in active)
+
+
+def _residuals(tests: Sequence[Test], kinds: Sequence[Kind], model: Model,
+               names: Sequence[str], sets: np.ndarray) -> np.ndarray:
+    """Residuals in noise units, cost = Σ_tests (RMSE / noise)², one row per parameter set."""
+    vectorised = model.with_parameters(**{n: sets[:, i] for i, n in enumerate(names)})
+    out = []
+    for test, kind in zip(tests, kinds):
+        values = np.atleast_2d(kind.simulate(test, vectorised))
+        sd = kind.value_sd(test)
+        w = 1.0 / sd / math.sqrt(sd.size)
+        r = (values - kind.measured(test)) * w
+        out.append(np.where(np.isfinite(r), r, 0.0))
+    return np.concatenate(out, axis=1)
+
+
+def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
+                tests: Sequence[str] | None = None, max_iterations: int = MAX_ITERATIONS,
+                progress: Callable[[str], None] | None = None) -> Model:
+    """Fit the model's forming parameters to the forming tests of ``bundle`` (module doc).
+
+    Args:
+        bundle: The measurements (coupon tests are ignored here).
+        model: The model, material parameters as fitted to the coupons (or given).
+        kind_of: Each test's kind (:func:`~fenicsx_drape.diagnosis.kinds.kind_of`; None: no
+            kind compares it).
+        tests: Only these test ids; all forming tests when None.
+        max_iterations: Gauss-Newton iterations at most (capped at :data:`MAX_ITERATIONS`).
+        progress: Called with a line of text per iteration.
+
+    Returns:
+        The model with its forming parameters fitted.
+    """
+    from fenicsx_drape.model import parameter_info
+
+    say = progress or (lambda line: None)
+    chosen = [t for t in bundle.tests if (kind := kind_of(t)) is not None and kind.formed
+              and (tests is None or t.id in tests)]
+    kinds = [kind_of(t) for t in chosen]
+    names = forming_parameters(model)
+    if not any(holder_mu_free(t) for t in chosen):
+        names = tuple(n for n in names if n != "mu")
+    if not chosen or not names:
+        return model
+    p = np.array([float(model.parameters[n]) for n in names])
+    k = len(names)
+    h = FD_STEP * np.eye(k)
+
+    def residuals(*points: np.ndarray) -> np.ndarray:
+        return _residuals(chosen, kinds, model, names, np.vstack(points))
+
+    def slopes(p: np.ndarray, r: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
+        R = residuals(*(p + h)) if R is None else R
+        return (R - r).T / FD_STEP
+
+    def evaluate(*points: np.ndarray) -> tuple[np.ndarray, list[np.ndarray | None]]:
+        """The residuals at ``points`` and each one's Jacobian where its runs were at hand.
+
+        A point's finite differences are spare runs (runs.spare): formed with it where
+        the batch leaves a worker free (one parameter on two workers), else only once the fit
+        takes the point (a rejected step's would be wasted). The same numbers either way.
+        """
+        m = len(points)
+        try:
+            with spare(m):
+                R = residuals(*points, *(q + h for q in points))
+            return R[:m], [slopes(q, R[i], R[m + i * k:m + (i + 1) * k])
+                           for i, q in enumerate(points)]
+        except Deferred:  # the points are formed: their slopes where their runs are
+            R = residuals(*points)
+        Js = []
+        for i, q in enumerate(points):
+            try:
+                with spare(0):
+                    Js.append(slopes(q, R[i]))
+            except Deferred:
+                Js.append(None)
+        return R, Js
+
+    # Two starts, judged in the first batch of runs: the model's values and the parameters'
+    # defaults (a warm start from a model without the right physics can sit far off).
+    default = np.clip([parameter_info(n).default for n in names], *MU_BOUNDS)
+    R, Js = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
+    r, J = R[0], Js[0]
+    if len(R) > 1 and R[1] @ R[1] < r @ r:
+        say(f"  forming fit: starting from the defaults "
+            f"{ {n: round(float(v), 4) for n, v in zip(names, default)} } "
+            f"(cost {R[1] @ R[1]:.4g}, was {r @ r:.4g})")
+        p, r, J = default, R[1], Js[1]
+    for iteration in range(min(max_iterations, MAX_ITERATIONS)):
+        J = slopes(p, r) if J is None else J
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP)
+        for attempt in range(2):  # the Gauss-Newton step, then half of it
+            trial = np.clip(p + step / 2**attempt, *MU_BOUNDS)
+            if np.abs(trial - p).max() < XTOL:
+                break
+            (r_new,), (J_new,) = evaluate(trial)
+            say(f"  forming fit {iteration + 1}: "
+                f"{ {n: round(float(v), 4) for n, v in zip(names, trial)} }, "
+                f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
+            if r_new @ r_new < r @ r:
+                break
+        else:
+            break
+        if np.abs(trial - p).max() < XTOL:
+            break
+        p, r, J = trial, r_new, J_new
+    return model.with_parameters(**{n: float(v) for n, v in zip(names, p)})
+
+
+def fit_friction(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
+                 tests: Sequence[str] | None = None, parameters: Sequence[str] | None = None,
+                 max_iterations: int = MAX_ITERATIONS, from_features: bool = True,
+                 progress: Callable[[str], None] | None = None, details: dict | None = None
+                 ) -> Model:
+    """The forming kinds' fit hook (:class:`~fenicsx_drape.diagnosis.kinds.base.FitHook`).
+
+    The forming parameters only (:func:`fit_forming`), the material held as the coupons (or
+    the model) left it: ``parameters``, ``from_features`` and ``details`` concern the
+    material.
+    """
+    return fit_forming(bundle, model, kind_of=kind_of, tests=tests, progress=progress,
+                       max_iterations=max_iterations)

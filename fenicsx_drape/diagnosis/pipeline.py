@@ -1,0 +1,520 @@
+"""Which physical effect is a model missing? (``drape diagnose``): the stages, in order.
+
+The procedure follows the diagnosis contract of ``docs/measurements.md``. :func:`diagnose`
+calls its stages in order; each takes the results of those before it and returns a frozen
+value (:mod:`~fenicsx_drape.diagnosis.results`):
+
+0. **Data before physics** (:func:`check_data` → ``DataCheck``): each forming measurement
+   against its case (:mod:`~fenicsx_drape.diagnosis.data_check`); a suspect one is named
+   first in the conclusion, and no effect on it.
+1. **Prepare** (:func:`prepare_tests` → ``Prepared``): each test's noise from its kind's one
+   noise function, its regions, the held-out folds (:mod:`~fenicsx_drape.diagnosis.folds`).
+2. **Baseline, outliers** (:func:`baseline_stage` → ``Baseline``): the model is fitted to
+   the bundle (:func:`fenicsx_drape.calibration.fitting.fit` for the coupons, the friction for
+   the forming tests) and compared with every test (:mod:`~fenicsx_drape.diagnosis.
+   compare`); the rows beyond ``OUTLIER_SD`` robust sd are left out and it is refitted.
+3. **Set-up before physics** (:func:`~fenicsx_drape.diagnosis.setup_stage.setup_stage` →
+   ``SetupResult``): the set-up as stated against the set-up fitted; the best, when one is
+   significant, is applied and the baseline refitted at it (:func:`at_setup`).
+4. **Held-out error and resolution** (:func:`heldout_stage` → ``HeldOut``,
+   :func:`resolution_stage` → ``Resolution``): every row predicted by the fold that held it
+   out; each forming measurement the baseline misses compared with the same model on half
+   the cell (:mod:`~fenicsx_drape.diagnosis.resolution`): a measurement whose residual the net
+   explains is no evidence for an effect.
+5. **Effects** (:func:`effect_stage` → ``Candidate``, or an untestable entry): every
+   catalogued effect not in the model (:data:`fenicsx_drape.effects.EFFECTS`), and every user
+   law its plugins register, is a candidate; an effect whose prerequisite is missing is
+   tried with it (``rate_dependence+temperature_dependence``). Added at its default strength,
+   a candidate changing the tests by less than ``UNTESTABLE_BELOW`` × the noise is
+   untestable; else it is refitted, warm-started from the baseline, over its own parameters
+   and those of the law it acts on, from the best of four starts (:func:`~fenicsx_drape.
+   diagnosis.refits.best_start`), with a fitted set-up refitted with it in turns; then judged
+   on held-out rows: ``evidence`` = baseline held-out / candidate held-out on the tests of
+   the kinds it acts on (:func:`~fenicsx_drape.diagnosis.decision.evidence`).
+6. **Groups** (:func:`groups_stage`): when the coupon tests come from several labs, sizes or
+   shear tests, each group is left out of the baseline's coupon fit in turn and predicted by
+   the rest (:mod:`fenicsx_drape.calibration.agreement`).
+7. **The best candidate, looked at again** (:func:`setup_with_effect_stage`,
+   :func:`net_check_stage`): a significant best with no set-up error named: the set-up
+   stage again with it in (a missing effect can hide a set-up error); above the noise: is
+   what it leaves its net's own error?
+8. **Decision** (:func:`~fenicsx_drape.diagnosis.decision.decide` → ``Decision``) and
+   **report** (:func:`~fenicsx_drape.diagnosis.report.format_report`, which only formats).
+
+The confirmation on a finer net is ``drape diagnose --confirm-cell-mm`` (:func:`confirm`).
+Stages that do not need each other's results (the candidates; the folds; the held-out error
+and resolution) run through :func:`~fenicsx_drape.runs.together`: the same
+results as one after the other, their forming runs in common batches that keep every worker
+busy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import time
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fenicsx_drape.diagnosis.comparison import (
+    compare_tests,
+    error_record,
+    find_outliers,
+    kind_metrics,
+    normalised_error,
+    prepare,
+    simulate,
+    where,
+)
+from fenicsx_drape.diagnosis.data_check import data_check, say_suspects, suspect_tests
+from fenicsx_drape.diagnosis.decision import (
+    ADEQUATE,
+    BASELINE_ITERATIONS,
+    EVIDENCE_THRESHOLD,
+    UNTESTABLE_BELOW,
+    decide,
+    evidence,
+    rank,
+    setup_rules,
+)
+from fenicsx_drape.diagnosis.folds import folds_of
+from fenicsx_drape.diagnosis.kinds import is_formed, kind_of
+from fenicsx_drape.diagnosis.refits import (
+    REFIT_ITERATIONS,
+    best_start,
+    candidate_names,
+    fit,
+    heldout,
+    no_worse,
+    refit_parameters,
+    sensitivity,
+)
+from fenicsx_drape.diagnosis.report import Report, format_report
+from fenicsx_drape.diagnosis.resolution import check_resolution, explained
+from fenicsx_drape.diagnosis.results import (
+    Baseline,
+    Candidate,
+    DataCheck,
+    Effects,
+    HeldOut,
+    Prepared,
+    Resolution,
+    SetupRefit,
+    SetupResult,
+)
+from fenicsx_drape.diagnosis.setup_fit import refit_setup
+from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS, corrected, fitted_value
+from fenicsx_drape.diagnosis.setup_stage import setup_stage
+from fenicsx_drape.diagnosis.words import optimiser_record, untestable_reason
+from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.runs import FULL_CELL_MM, together
+
+if TYPE_CHECKING:
+    from fenicsx_drape.measurements.bundle import Bundle
+    from fenicsx_drape.model import Model
+
+# Rounds of set-up and effect fitted in turn when a set-up error was fitted.
+SETUP_ROUNDS = 4
+
+Progress = Callable[[str], None]
+
+
+def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
+             candidates: Sequence[str] | None = None,
+             setup: Sequence[str] | None = None) -> Report:
+    """Find which effect ``model`` misses to explain ``bundle`` (the module doc's stages).
+
+    Args:
+        bundle: The measurements.
+        model: The current model (effects, plugins, starting parameters).
+        progress: Called with a line of text at each stage.
+        candidates: Only try these effects (default: every one not in the model).
+        setup: The set-up parameters tried first on forming tests
+            (:mod:`~fenicsx_drape.diagnosis.setup_parameters`); default: all of them, or none
+            when ``candidates`` restricts the effects.
+
+    Returns:
+        The report: a dict with every field of the diagnosis contract (:data:`~fenicsx_drape.
+        diagnosis.report.CONTRACT`) plus ``add_effects`` (the effects to add),
+        ``heldout_scheme``, ``significance``, ``ranking``, ``trends``, ``conclusion``,
+        ``notes`` and ``seconds``.
+    """
+    from fenicsx_drape.calibration.coupons import declare_noise
+
+    start = time.perf_counter()
+    say = progress or (lambda line: None)
+    checked = check_data(bundle, say)
+    data = prepare_tests(declare_noise(checked.bundle, model.noise))
+    base = baseline_stage(data, model, say)
+    parameters = SETUP_PARAMETERS if setup is None and candidates is None else setup
+    stage = setup_stage(base.data.bundle, model, parameters, setup_rules(), say)
+    base = at_setup(base, stage, model, say)
+    # The held-out error and the net's own error are independent: their runs together.
+    held, resolution = together([functools.partial(heldout_stage, base),
+                                 functools.partial(resolution_stage, base)], say)
+    names = [n for n in candidate_names(model) if candidates is None or n in candidates]
+    effects = effects_stage(names, model, base, held, stage, resolution, say)
+    groups = groups_stage(base, say)
+    stage, best = setup_with_effect_stage(stage, effects.best, base, say)
+    best = net_check_stage(best, say)
+    decision = decide(effects, best, stage, checked)
+    report = format_report(bundle, checked, base, held, resolution, effects, decision, groups,
+                           measures_stage(base, decision.ranked),
+                           seconds=time.perf_counter() - start)
+    say(report["conclusion"])
+    return report
+
+
+# --------------------------------------------------------------------------------------------
+# 0.-2. The data, prepared; the baseline
+
+
+def check_data(bundle: Bundle, say: Progress) -> DataCheck:
+    """Each measurement checked against its case before any fit (spec version 4).
+
+    A suspect one is said at once; the others are diagnosed without it (all of them when
+    every test is suspect: the report then names no effect).
+    """
+    entries = data_check(bundle)
+    say_suspects(entries, say)
+    bad = suspect_tests(bundle, entries)
+    if bad and len(bad) < len(bundle.tests):
+        bundle = dataclasses.replace(bundle, tests=tuple(t for t in bundle.tests
+                                                         if t.id not in bad))
+    return DataCheck(tuple(entries), frozenset(bad), bundle)
+
+
+def prepare_tests(bundle: Bundle) -> Prepared:
+    """The comparable tests in canonical order, each one's noise and regions, the folds."""
+    tests, skipped = prepare(bundle)
+    tests = tuple(sorted(tests, key=lambda t: t.id))
+    canonical = dataclasses.replace(bundle, tests=tests)
+    noise = {t.id: kind_of(t).noise(t) for t in tests}
+    regions = {t.id: kind_of(t).regions(t) for t in tests}
+    folds, scheme = folds_of(canonical)
+    return Prepared(canonical, tests, noise, regions, folds, scheme, tuple(skipped))
+
+
+def _without_outliers(bundle: Bundle, outliers: Sequence[dict[str, Any]]) -> Bundle:
+    """The bundle with the outliers' rows left out of their tests."""
+    from fenicsx_drape.measurements.lab import without_rows
+
+    tests = []
+    for test in bundle.tests:
+        rows = [o["row"] for o in outliers if o["id"] == test.id]
+        tests.append(without_rows(test, rows) if rows else test)
+    return dataclasses.replace(bundle, tests=tuple(tests))
+
+
+def _baseline_fit(data: Prepared, model: Model):
+    """The model fitted to the prepared bundle, its comparisons and the coupon fit (or None)."""
+    details: dict[str, Any] = {}
+    fitted = fit(data.bundle, model, max_iterations=BASELINE_ITERATIONS, from_features=True,
+                 details=details)
+    return fitted, tuple(data.compare(simulate(data.tests, fitted))), details.get("coupons")
+
+
+def baseline_stage(data: Prepared, model: Model, say: Progress) -> Baseline:
+    """The model as given fitted to the bundle, and its outliers left out (refitted).
+
+    Bad and odd rows (spec version 3): one row never decides a diagnosis. The rows beyond
+    ``OUTLIER_SD`` robust sd after the fit are listed and left out; the baseline is refitted.
+    """
+    say(f"baseline ({', '.join(model.effects) or 'no effects'}): fitting (global stage)")
+    fitted, compared, coupons = _baseline_fit(data, model)
+    optimiser = optimiser_record(coupons)
+    say(f"  {optimiser['statement']}")
+    outliers = find_outliers(compared, data.tests, data.bundle.path)
+    error_with = error_record(compared)
+    if outliers:
+        say(f"  {len(outliers)} outlier row(s) ("
+            + ", ".join(f"{o['file']}:{o['line']}" for o in outliers[:5])
+            + "): left out, baseline refitted")
+        data = prepare_tests(_without_outliers(data.bundle, outliers))
+        fitted, compared, coupons = _baseline_fit(data, model)
+    say(f"  normalised error {normalised_error(compared):.3g}")
+    return Baseline(data, fitted, compared, tuple(outliers), error_with, optimiser, coupons)
+
+
+def at_setup(base: Baseline, stage: SetupResult | None, model: Model,
+             say: Progress) -> Baseline:
+    """The baseline refitted on the bundle with the set-up stage's best set-up applied.
+
+    The baseline itself when the stage applied nothing.
+    """
+    from fenicsx_drape.calibration.coupons import declare_noise
+
+    if stage is None or stage.corrected is base.data.bundle:
+        return base
+    data = prepare_tests(declare_noise(stage.corrected, model.noise))
+    say("baseline at the fitted set-up: fitting")
+    fitted, compared, coupons = _baseline_fit(data, model)
+    say(f"  normalised error {normalised_error(compared):.3g}")
+    return dataclasses.replace(base, data=data, model=fitted, compared=compared,
+                               optimiser=optimiser_record(coupons), coupons=coupons)
+
+
+# --------------------------------------------------------------------------------------------
+# 4. Held-out error and resolution
+
+
+def heldout_stage(base: Baseline, say: Progress) -> HeldOut:
+    """The baseline's held-out error: every row predicted by the fold that held it out."""
+    say("baseline: held-out folds")
+    held = HeldOut(tuple(base.data.compare(heldout(base.data, base.model, say))))
+    say(f"  held-out normalised error {held.normalised:.3g}")
+    return held
+
+
+def resolution_stage(base: Baseline, say: Progress) -> Resolution:
+    """Resolution before physics (spec version 4): the net's own error on each measurement."""
+    entries = tuple(check_resolution(base.data.tests, base.model, base.compared, ADEQUATE,
+                                     say))
+    resolved = frozenset(explained(entries))
+    if resolved:
+        say(f"  the net explains the residual of {', '.join(sorted(resolved))}")
+    return Resolution(entries, resolved)
+
+
+# --------------------------------------------------------------------------------------------
+# 5. Effects
+
+
+def effects_stage(names: Sequence[str], model: Model, base: Baseline, held: HeldOut,
+                  stage: SetupResult | None, resolution: Resolution, say: Progress) -> Effects:
+    """Every candidate effect (:func:`effect_stage`), tried together and ranked."""
+    tried = together([functools.partial(effect_stage, name, model, base, held, stage,
+                                        resolution) for name in names], say)
+    return Effects(tuple(rank([c for c in tried if isinstance(c, Candidate)])),
+                   tuple(u for u in tried if not isinstance(u, Candidate)))
+
+
+def effect_stage(name: str, model: Model, base: Baseline, held: HeldOut,
+                 stage: SetupResult | None, resolution: Resolution,
+                 say: Progress) -> Candidate | dict[str, Any]:
+    """One candidate effect: its refit, held-out error and evidence, or its untestable entry."""
+    from fenicsx_drape.effects import describe_effect
+
+    data, baseline = base.data, base.model
+    effect = describe_effect(name)
+    prerequisites = tuple(p for p in effect.prerequisites if p not in model.effects)
+    added = (*prerequisites, name)
+    label = "+".join(added)
+    try:
+        reference = baseline.with_effects(*prerequisites)
+        start_model = baseline.with_effects(*added)
+    except DrapeInputError as err:
+        return {"effect": label, "reason": f"cannot be added: {err}"}
+    try:
+        change, per_test = sensitivity(data, reference, start_model)
+    except DrapeInputError as err:  # e.g. an effect a stack of plies cannot take
+        say(f"candidate {label}: untestable (its runs cannot be formed)")
+        return {"effect": label, "effects": list(added),
+                "reason": f"its runs cannot be formed on these tests' parts: {err}"}
+    if change < UNTESTABLE_BELOW:
+        say(f"candidate {label}: untestable (change {change:.2g} × noise)")
+        return {"effect": label, "effects": list(added),
+                "reason": untestable_reason(effect, data, change, per_test),
+                "sensitivity": change}
+    say(f"candidate {label}: refitting")
+    names = refit_parameters(start_model, name)
+    # Its own parameters: those it brings that the baseline does not use.
+    base_active = set(baseline.active_parameters())
+    own = [p for p in names if p not in base_active
+           and any(p in describe_effect(a).parameters for a in added)]
+    start = best_start(data, start_model, own, names)
+    refit = no_worse(data, fit(data.bundle, start, parameters=names,
+                               max_iterations=REFIT_ITERATIONS), start)
+    after = data.compare(simulate(data.tests, refit))
+    joint, data_c = None, data
+    if stage and stage.best and normalised_error(after) < normalised_error(base.compared):
+        # The set-up fitted again with the effect, then the effect again at that set-up,
+        # in turn (a set-up error and an effect can act alike).
+        alone = (refit, after)
+        for _ in range(SETUP_ROUNDS):
+            again, data_c = _with_setup_refitted(stage, refit, data_c, model.noise, joint, say)
+            if again is None:
+                break
+            joint = again
+            refit = no_worse(data_c, fit(data_c.bundle, refit, parameters=names,
+                                         max_iterations=REFIT_ITERATIONS), refit)
+        after = data_c.compare(simulate(data_c.tests, refit))
+        if normalised_error(after) > normalised_error(alone[1]):
+            # The rounds ended worse than the effect at the set-up fitted alone: keep that.
+            (refit, after), joint, data_c = alone, None, data
+    say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
+    heldout_cmp = data_c.compare(heldout(data_c, refit, say))
+    held_after = normalised_error(heldout_cmp)
+    gain = evidence(held.compared, heldout_cmp, added, resolution.explained)
+    say(f"  held-out normalised error {held_after:.3g}, evidence {gain:.3g}")
+    return Candidate(
+        effect=label, effects=added, acts_on=effect.acts_on, summary=effect.summary,
+        parameters={p: float(refit.parameters[p]) for p in own},
+        error_after=error_record(after), heldout_normalised=held_after, evidence=gain,
+        significant=bool(gain >= EVIDENCE_THRESHOLD), sensitivity=change,
+        where_after=tuple(where(after)[:3]), setup_refitted=joint, model=refit,
+        after=tuple(after), tests=data_c.tests, n_parameters=len(own))
+
+
+def _with_setup_refitted(stage: SetupResult, model: Model, data: Prepared, noise,
+                         last: SetupRefit | None, say: Progress
+                         ) -> tuple[SetupRefit | None, Prepared]:
+    """The set-up stage's best parameter fitted again with ``model`` (a candidate's refit).
+
+    From ``last`` (the previous round's) or the set-up fitted alone. Returns the refit and
+    the data with that set-up applied, or ``(None, data)`` when the set-up does not move. The
+    set-up is fitted on all rows; the held-out folds then refit the effect's parameters only.
+    """
+    from fenicsx_drape.calibration.coupons import declare_noise
+
+    best, original, stated_model = stage.best, stage.bundle, stage.stated_model
+    name = best.parameter
+    before = np.asarray(last.p if last else best.p, dtype=float)
+    p = refit_setup(original, name, before, model, say)
+    if np.allclose(p, before):
+        return None, data
+    # The stage's bundle is the baseline's, its outliers already left out.
+    new = prepare_tests(declare_noise(corrected(original, name, p, stated_model), noise))
+    refit = SetupRefit(name, fitted_value(original, name, p, stated_model),
+                       fitted_value(original, name, best.p, stated_model),
+                       tuple(float(v) for v in p))
+    say(f"  {name} with the effect: {refit.fitted} (alone: {refit.fitted_alone})")
+    return refit, new
+
+
+# --------------------------------------------------------------------------------------------
+# 6.-7. The coupon groups; the best candidate looked at again
+
+
+def groups_stage(base: Baseline, say: Progress) -> dict[str, Any] | None:
+    """Leave one lab, size or shear-test kind out of the coupons' fit, when there are several.
+
+    See :mod:`fenicsx_drape.calibration.agreement`; None when there is nothing to compare.
+    """
+    from fenicsx_drape.calibration.agreement import consistency, informative
+
+    coupons = base.coupons
+    if coupons is None:
+        return None
+    by = informative([t for t in coupons.bundle.tests if t.id in coupons.errors])
+    if not by:
+        return None
+    say(f"consistency: leaving out one {', one '.join(by)} at a time")
+    report = consistency(coupons.bundle, coupons, by=by)
+    say(f"  {report['verdict']}: {report['says']}")
+    return report
+
+
+def setup_with_effect_stage(stage: SetupResult | None, best: Candidate | None, base: Baseline,
+                            say: Progress) -> tuple[SetupResult | None, Candidate | None]:
+    """The set-up stage again with a significant best effect in, when alone it named nothing.
+
+    A missing effect can hide a set-up error: its error swamps what a turned ply or a moved
+    blank changes, so the set-up alone has nothing to gain. The set-up candidates are judged
+    again with the effect added to the model as given (at the catalogue's values: the
+    effect's refit at the stated set-up has taken up some of the set-up's error); a set-up
+    error they name is reported (``found_with_effect``) and the effect is refitted at it.
+    Returns the set-up and the best candidate, each new when it changed.
+    """
+    from fenicsx_drape.calibration.coupons import declare_noise
+
+    if (best is None or not best.significant or not stage or stage.setup_error is not None
+            or not stage.parameters):
+        return stage, best
+    say(f"set-up stage again, with {best.effect} in")
+    with_effect = stage.given_model.with_effects(*best.effects)
+    again = setup_stage(base.data.bundle, with_effect, stage.parameters, setup_rules(), say)
+    if again is None or again.setup_error is None:
+        return stage, best
+    again = dataclasses.replace(
+        again, parameters=stage.parameters, given_model=stage.given_model,
+        found_with_effect=best.effect,
+        entries=({**again.entries[0], "found_with_effect": best.effect}, *again.entries[1:]))
+    data = prepare_tests(declare_noise(corrected(base.data.bundle, again.best.parameter,
+                                                 again.best.p, again.stated_model),
+                                       base.model.noise))
+    names = refit_parameters(best.model, best.effects[-1])
+    refit = no_worse(data, fit(data.bundle, best.model, parameters=names,
+                               max_iterations=REFIT_ITERATIONS), best.model)
+    after = tuple(data.compare(simulate(data.tests, refit)))
+    say(f"  {best.effect} refitted at that set-up: normalised error "
+        f"{normalised_error(after):.3g} (at the stated set-up "
+        f"{best.error_after['normalised']:.3g})")
+    return again, dataclasses.replace(
+        best, error_after=error_record(after), where_after=tuple(where(after)[:3]),
+        after=after, tests=data.tests, model=refit,
+        parameters={p: float(refit.parameters[p]) for p in best.parameters})
+
+
+def net_check_stage(best: Candidate | None, say: Progress) -> Candidate | None:
+    """Is what a significant best candidate leaves beyond the noise its net's own error?
+
+    When its refit stays above ``ADEQUATE`` on a formed part, the measurements it still
+    misses are checked for resolution as the baseline's were (the candidate formed on half
+    the cell); each entry says whether what it leaves beyond the noise is within the net's
+    own error e_Δ (``within_net_error``). Returns the candidate with ``resolution_after``
+    (itself when it needs no check).
+    """
+    if (best is None or not best.significant or best.error_after["normalised"] <= ADEQUATE
+            or not any(is_formed(t) for t in best.tests)):
+        return best
+    say(f"candidate {best.effect}: is what it leaves the net's?")
+    checked = check_resolution(best.tests, best.model, best.after, ADEQUATE, say)
+    entries = []
+    for e in checked:
+        error = e.get("discretisation_error")
+        entries.append({**e, "within_net_error": bool(error is not None and math.sqrt(
+            max(0.0, e["residual"] ** 2 - e["noise"] ** 2)) <= error)})
+    return dataclasses.replace(best, resolution_after=tuple(entries))
+
+
+def measures_stage(base: Baseline, ranked: Sequence[Candidate]) -> dict[str, Any]:
+    """The kinds' own measures of the baseline and of each ranked candidate (``metrics``).
+
+    Empty when no test has measures of its own (coupons only).
+    """
+    if not any(is_formed(t) for t in base.data.tests):
+        return {}
+    out = {"baseline": kind_metrics(base.data.tests, base.compared, base.model)}
+    for c in ranked:
+        out[c.effect] = kind_metrics(base.data.tests, c.after, c.model)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# The confirmation on a finer net
+
+
+def confirm(bundle: Bundle, report: Report, cell_mm: float = FULL_CELL_MM,
+            progress: Progress | None = None) -> dict[str, Any]:
+    """The screening's baseline and best candidate again on the full mesh.
+
+    Each model of a diagnosis :class:`~fenicsx_drape.diagnosis.report.Report` keeps its
+    material; its forming parameters are refitted on cells of ``cell_mm`` and it is compared
+    with the forming tests there.
+
+    Returns:
+        ``{"cell_mm", label: {"error", "metrics", "forming_parameters"}}`` for the baseline
+        and the first-ranked candidate.
+    """
+    from fenicsx_drape.diagnosis.kinds import find_kind
+    from fenicsx_drape.diagnosis.kinds.forming import fit_forming, forming_parameters
+    from fenicsx_drape.runs import resolution
+
+    tests = [t for t in bundle.tests if is_formed(t)]
+    labels = ["baseline"] + [c["effect"] for c in report["candidates"][:1]]
+    out: dict[str, Any] = {"cell_mm": cell_mm}
+    with resolution(cell_mm):
+        for label in labels:
+            model = fit_forming(bundle, report.models[label], kind_of=find_kind,
+                                progress=progress)
+            values = {t.id: kind_of(t).simulate(t, model) for t in tests}
+            out[label] = {"error": error_record(compare_tests(tests, values)),
+                          "metrics": {t.id: kind_of(t).metrics(t, values[t.id], model)
+                                      for t in tests},
+                          "forming_parameters": {n: float(model.parameters[n])
+                                                 for n in forming_parameters(model)}}
+    return out

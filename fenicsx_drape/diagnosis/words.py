@@ -1,0 +1,195 @@
+"""The diagnosis in words: why untestable, where the residual is, explanations, conclusion.
+
+Also the coupon fit's records in the report (how the optimiser knows it is at its best, the
+noise of each test).
+
+Plain functions of the stages' results (:mod:`~fenicsx_drape.diagnosis.results`): nothing
+here fits or forms.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from fenicsx_drape.diagnosis.comparison import locate, normalised_error, trends
+from fenicsx_drape.diagnosis.decision import ADEQUATE, EVIDENCE_THRESHOLD, UNTESTABLE_BELOW
+from fenicsx_drape.diagnosis.resolution import finer_net
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from fenicsx_drape.diagnosis.kinds import Comparison
+    from fenicsx_drape.diagnosis.results import Candidate, Prepared
+
+
+def untestable_reason(effect, data: Prepared, change: float, per_test: dict[str, float]) -> str:
+    """Why an effect is untestable: how little it changes which tests, and what they lack."""
+    kinds = sorted({t.kind for t in data.tests})
+    if change == 0.0:
+        text = "adding it at its default strength changes none of the simulated tests"
+    else:
+        largest = max(per_test, key=per_test.get)
+        text = (f"adding it at its default strength changes the simulated tests by only "
+                f"{change:.2g} × their noise (at most {per_test[largest]:.2g} in {largest}; "
+                f"testable from {UNTESTABLE_BELOW})")
+    if not set(kinds) & set(effect.test_kinds):
+        return (f"{text}: it acts on the {effect.acts_on} in {' and '.join(effect.test_kinds)} "
+                f"tests, and the bundle has only {' and '.join(kinds)} tests")
+    fixed = [c for c in effect.conditions if len({t.conditions.get(c) for t in data.tests}) < 2]
+    if fixed:
+        return f"{text}: {', '.join(fixed)} does not vary across the tests"
+    return f"{text}: these tests do not exercise it"
+
+
+def pattern_of(base: Sequence[Comparison]) -> str:
+    """One clause on where the baseline's residual is, from trends and regions."""
+    normalised = normalised_error(base)
+    if normalised <= 1.2:
+        return f"the residual is at the noise floor (normalised {normalised:.2f})"
+    for trend in trends(base):
+        if trend["says"]:
+            return trend["says"]
+    regions = [e for e in locate(base) if "region" in e]
+    if not regions:
+        return f"the residual is {normalised:.3g} × the noise"
+    top = max(regions, key=lambda e: e["share_of_error"])  # a kind's sum beats its parts
+    tests = (f"the {top['kind'].replace('_', ' ')} tests" if len(top["tests"]) > 1
+             else f"test {top['test']}")
+    return (f"{100 * top['share_of_error']:.0f} % of the residual sits in the {top['region']} "
+            f"region of {tests}")
+
+
+def addition(c: Candidate) -> str:
+    """How a candidate changes the model, in words."""
+    from fenicsx_drape.effects import EFFECTS
+
+    if all(e in EFFECTS for e in c.effects):
+        return f"the model gets {c.effect} ({c.summary})"
+    summary = c.summary.rstrip(".")
+    return (f"the user law {c.effect} replaces the {c.acts_on} law "
+            f"({summary[:1].lower() + summary[1:]})")
+
+
+def explain(c: Candidate, pattern: str, base_norm: float, base_ho: float) -> str:
+    """A candidate's ``explanation``: the residual's pattern, and what adding it does."""
+    after = c.error_after["normalised"]
+    gain = (f"error {base_norm:.3g} → {after:.3g} × noise, held-out {base_ho:.3g} → "
+            f"{c.heldout_normalised:.3g} (evidence {c.evidence:.3g})")
+    what = addition(c)
+    if c.significant and after <= ADEQUATE:
+        return f"{pattern[:1].upper() + pattern[1:]}, and it vanishes when {what}: {gain}."
+    if c.significant:
+        remains = c.where_after[0] if c.where_after else None
+        rest = (f"; what remains sits in {remains['test']} ({remains['says']})"
+                if remains else "")
+        return (f"{pattern[:1].upper() + pattern[1:]}; it shrinks but stays above {ADEQUATE} × "
+                f"noise when {what}: {gain}{rest}.")
+    return (f"{pattern[:1].upper() + pattern[1:]}; no real gain when {what}: {gain}, "
+            f"evidence below {EVIDENCE_THRESHOLD}.")
+
+
+def optimiser_record(coupons) -> dict[str, Any]:
+    """How the baseline's coupon fit knows it is at its best (the global stage's record).
+
+    ``at_best`` is true when every block's best minimum was reached from at least two of the
+    independent starts (curve features, Table 2, MODEL.toml, Sobol points); the
+    ``statement`` says so in words, block by block.
+    """
+    if coupons is None:
+        return {"global_stage": False, "at_best": None, "blocks": [],
+                "statement": "no coupon fit (the baseline has no coupon test)"}
+    blocks = [{"label": b["label"], **{k: b["global"][k] for k in
+                                       ("best_found_by", "n_best", "spread_normalised",
+                                        "statement")},
+               "starts": len(b["global"]["starts"])} for b in coupons.blocks if "global" in b]
+    at_best = bool(blocks) and all(b["n_best"] >= 2 for b in blocks)
+    parts = [f"{b['label']}: {b['statement']}" for b in blocks]
+    head = ("the baseline is at the best minimum the global stage found from independent "
+            "starts" if at_best else "the baseline's best minimum was reached from a single "
+            "start only, so the optimiser may have stopped short of the model's best")
+    undetermined = [u["parameter"] for u in coupons.undetermined]
+    tail = (f"; held (undetermined by these tests): {', '.join(undetermined)}"
+            if undetermined else "")
+    return {"global_stage": bool(blocks), "at_best": at_best, "blocks": blocks,
+            "undetermined": coupons.undetermined,
+            "statement": f"{head} ({'; '.join(parts)}){tail}"}
+
+
+def noise_notes(coupons) -> dict[str, Any]:
+    """Where each coupon test's noise came from and, if so, why its estimate is implausible."""
+    if coupons is None:
+        return {}
+    notes = {k: v["says"] for k, v in coupons.noise.items()}
+    implausible = sorted(k for k, v in coupons.noise.items() if v["source"] == "relative_floor")
+    return {"says": notes, "implausible": implausible}
+
+
+def groups_conclusion(groups: dict[str, Any] | None, missing) -> str:
+    """The conclusion when no effect is missing but one lab, size or kind explains the misfit.
+
+    The rest fit at the noise without it: that group, not the physics, is the suspect.
+    """
+    if missing or not groups or groups["verdict"] in ("consistent", "missing_physics"):
+        return ""
+    return (f"Not missing physics but a {groups['verdict'].replace('_', ' ')}: "
+            f"{groups['says']}. Check that group's set-up (load cell, normalisation, "
+            "specimen, conditioning) or leave it out, and diagnose again.")
+
+
+def groups_sentence(groups: dict[str, Any] | None) -> str:
+    """A lab offset, size effect or kind mismatch, said beside the physics' conclusion."""
+    if not groups or groups["verdict"] in ("consistent", "missing_physics"):
+        return ""
+    return (f" Before physics, the tests' groups: {groups['verdict']}: {groups['says']} "
+            "(consistency).")
+
+
+def conclusion(missing: Candidate | None, best: Candidate | None, base: Sequence[Comparison],
+               pattern: str, optimiser: dict[str, Any] | None = None, coupons=None,
+               resolved: frozenset[str] = frozenset()) -> str:
+    """The conclusion on the physics: the missing effect, none, or why none was found."""
+    normalised = normalised_error(base)
+    rest = [c for c in base if c.id not in resolved]
+    if resolved and not missing and (not rest or normalised_error(rest) <= ADEQUATE):
+        return ("No effect is named: the residual the model leaves is its net's own "
+                "discretisation error (resolution).")
+    noise = ""
+    floored = [k for k, v in (coupons.noise.items() if coupons is not None else ())
+               if v["source"] == "relative_floor"]
+    if floored:
+        noise = (f" Noise: the model-free estimates of {', '.join(floored)} are implausibly "
+                 "small for the curves (smoothed or digitised), so their errors are measured "
+                 "against 2 % of each test's peak force; declare the noise (force_sd_N or "
+                 "force_sd_rel in bundle.toml, [noise] in MODEL.toml) to judge against the "
+                 "real one.")
+    if missing:
+        nets = [e for e in (missing.resolution_after or ())
+                if e["explains"] or e["within_net_error"]]
+        rest = (f" What it leaves on {', '.join(e['measurement'] for e in nets)} is its "
+                f"{nets[0]['cell_mm']:g} mm net's own error (resolution_after): "
+                f"{finer_net(nets)}." if nets else "")
+        return (f"Missing effect: {missing.effect} ({missing.summary.rstrip('.')}); adding "
+                f"it brings the normalised error from {normalised:.3g} to "
+                f"{missing.error_after['normalised']:.3g}.{rest}")
+    if normalised <= ADEQUATE:
+        return (f"No effect is missing: the model is at {normalised:.3g} × the noise "
+                f"(adequate at ≤ {ADEQUATE}).{noise}")
+    if best and best.significant:
+        return (f"No single candidate brings the error ({normalised:.3g} × the noise) to the "
+                f"noise floor: the best, {best.effect}, is a real gain (evidence "
+                f"{best.evidence:.3g}) but reaches only "
+                f"{best.error_after['normalised']:.3g} × noise. More than one effect may be "
+                f"missing: add it and diagnose again.")
+    closest = (f" The closest candidate, {best.effect}, reaches "
+               f"{best.error_after['normalised']:.3g} × noise (evidence "
+               f"{best.evidence:.3g}).") if best else ""
+    if optimiser is not None and optimiser.get("at_best") is False:
+        return (f"None of the candidates explains the residual ({normalised:.3g} × the noise): "
+                f"{pattern}. But {optimiser['statement']}: the residual may be the optimiser's, "
+                f"not missing physics; give better starting values in MODEL.toml and diagnose "
+                f"again.{closest}{noise}")
+    how = (f" How the baseline is known to be at its best: {optimiser['statement']}."
+           if optimiser is not None and optimiser.get("at_best") else "")
+    return (f"None of the candidates explains the residual ({normalised:.3g} × the noise): "
+            f"{pattern}. The missing physics is not in the catalogue; write it as a user law "
+            f"(plugins in MODEL.toml) and diagnose again.{closest}{how}{noise}")
