@@ -44,15 +44,17 @@ def make(work: Path) -> Path:
 def follow(folder: Path) -> dict:
     """The diagnosis's own steps for the rate_dependence candidate, each with its numbers."""
     from fenicsx_drape.calibration.coupons import declare_noise
-    from fenicsx_drape.diagnosis import diagnose as dg
-    from fenicsx_drape.diagnosis.compare import normalised_error, simulate
+    from fenicsx_drape.diagnosis import refits
+    from fenicsx_drape.diagnosis.decision import BASELINE_ITERATIONS
+    from fenicsx_drape.diagnosis.pipeline import prepare_tests
+    from fenicsx_drape.diagnosis.comparison import normalised_error, simulate
     from fenicsx_drape.forming.case.format import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
 
     bundle = load_bundle(folder / "bundle", read_case=case_for_test)
     given = load_model(folder / "model.toml")
-    data = dg._prepare(declare_noise(bundle, given.noise))
+    data = prepare_tests(declare_noise(bundle, given.noise))
     out: dict = {}
 
     def error(model, label: str) -> float:
@@ -68,26 +70,26 @@ def follow(folder: Path) -> dict:
 
     truth = default_model()
     error(truth, "the truth's model, as formed (mu 0.3)")
-    fitted_truth = dg._fit(data.bundle, truth, max_iterations=dg.BASELINE_ITERATIONS,
+    fitted_truth = refits.fit(data.bundle, truth, max_iterations=BASELINE_ITERATIONS,
                            from_features=True)
     error(fitted_truth, "the truth's model, its mu fitted as the baseline is")
-    base = dg._fit(data.bundle, given, max_iterations=dg.BASELINE_ITERATIONS,
+    base = refits.fit(data.bundle, given, max_iterations=BASELINE_ITERATIONS,
                    from_features=True)
     error(base, "baseline (less rate_dependence), fitted")
     start_model = base.with_effects("rate_dependence")
-    names = dg._refit_parameters(start_model, "rate_dependence")
+    names = refits.refit_parameters(start_model, "rate_dependence")
     own = [n for n in names if n not in set(base.active_parameters())
            and n in ("eta_o", "E_v")]
     print(f"refitted parameters: {names}; own: {own}", flush=True)
     out["refit_parameters"] = list(names)
-    weak = {n: dg.WEAK * float(start_model.parameters[n]) for n in own}
+    weak = {n: refits.WEAK * float(start_model.parameters[n]) for n in own}
     error(start_model, "start 1: the effect at its default on the baseline's fit")
     error(start_model.with_parameters(**weak), "start 2: the effect weak")
-    best = dg._best_start(data, start_model, own, names)
-    error(best, "the best start (chosen by _best_start)")
-    refit = dg._fit(data.bundle, best, parameters=names, max_iterations=dg.REFIT_ITERATIONS)
+    best = refits.best_start(data, start_model, own, names)
+    error(best, "the best start (chosen by refits.best_start)")
+    refit = refits.fit(data.bundle, best, parameters=names, max_iterations=refits.REFIT_ITERATIONS)
     error(refit, "the refit (fit_bundle from the best start, parameters=names)")
-    kept = dg._no_worse(data, refit, best)
+    kept = refits.no_worse(data, refit, best)
     error(kept, "the candidate's refit as the diagnosis keeps it")
     return out
 
