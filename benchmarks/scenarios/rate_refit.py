@@ -45,9 +45,9 @@ def follow(folder: Path) -> dict:
     """The diagnosis's own steps for the rate_dependence candidate, each with its numbers."""
     from fenicsx_drape.calibration.coupons import declare_noise
     from fenicsx_drape.diagnosis import refits
+    from fenicsx_drape.diagnosis.comparison import normalised_error, simulate
     from fenicsx_drape.diagnosis.decision import BASELINE_ITERATIONS
     from fenicsx_drape.diagnosis.pipeline import prepare_tests
-    from fenicsx_drape.diagnosis.comparison import normalised_error, simulate
     from fenicsx_drape.forming.case.format import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
