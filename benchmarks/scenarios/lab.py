@@ -168,7 +168,7 @@ def _lattice(X, x, bars, kind, planes, ply) -> Sheet:
     e1, e2 = _unit(warp), _unit(weft)
     if e1[0] < 0:
         e1 = -e1
-    if np.cross(e1, e2) < 0:
+    if e1[0] * e2[1] - e1[1] * e2[0] < 0:  # the weft to the warp's left
         e2 = -e2
     delta = (float(np.median(np.abs(warp @ e1))), float(np.median(np.abs(weft @ e2))))
     ref = nodes[np.argmin(np.linalg.norm(Xp[nodes], axis=1))]
