@@ -28,8 +28,9 @@ tell them apart: when both are tried, ``mu`` is not formed again but reported fr
 force's fit (μ · F'/F, the same errors and evidence, ``tied_to`` and ``confounded_with``).
 
 Before the candidates, the stated set-up's own residual is checked against its net
-(:mod:`~fenicsx_drape.diagnosis.resolution`): a measurement whose residual is within the
-net's own error still counts, its noise widened by that error (:func:`widened`). The stage
+(:mod:`~fenicsx_drape.diagnosis.resolution`): a measurement whose residual the finer net
+shows to be the net's own error (:func:`~fenicsx_drape.diagnosis.resolution.shown`) still
+counts, its noise widened by that error (:func:`widened`). The stage
 judges its candidates (evidence, sd, significance) on that widened noise; the errors it
 reports are on the stated noise, one scale with every other model of the report, and what it
 judged with is kept beside them (``widened``: :func:`restated`).
@@ -50,7 +51,7 @@ from fenicsx_drape.diagnosis.decision import Rules
 from fenicsx_drape.diagnosis.folds import NODE_SCHEME
 from fenicsx_drape.diagnosis.kinds import is_formed, kind_of, row_sd
 from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
-from fenicsx_drape.diagnosis.resolution import check_resolution, explained
+from fenicsx_drape.diagnosis.resolution import check_resolution, shown
 from fenicsx_drape.diagnosis.results import SetupBest, SetupResult
 from fenicsx_drape.diagnosis.setup_fit import (
     DISTINCT_SD,
@@ -194,14 +195,19 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
             functools.partial(check_resolution, tests, model, base_cmp, rules.adequate),
             *(functools.partial(first_runs, name, tests, test0, model) for name in own)], say)
         resolution = tuple(checked)
-        resolved = explained(resolution)
+        # Widened where the finer net shows the residual to be the net's own error (it comes
+        # nearer the data, within its own error): a residual the net's error could hide but
+        # a finer net does not shrink (data of this very net) is left to the set-up's own
+        # evidence: a blank 10 mm off is 20 × the noise and within a 20 mm net's error.
+        resolved = {e["measurement"] for e in resolution if shown(e)}
         if resolved:
             # They still count: a set-up that moves the part far from them must pay for it.
             # Their noise is widened by the net's own error (what the net cannot resolve).
-            say(f"  set-up stage: the residual of {', '.join(sorted(resolved))} is within the "
-                "net's own error; their noise is widened by it")
+            say(f"  set-up stage: the finer net shows the residual of "
+                f"{', '.join(sorted(resolved))} to be the net's own error; their noise is "
+                "widened by it")
             net_error = {e["measurement"]: e["discretisation_error"] for e in resolution
-                         if e["explains"]}
+                         if shown(e)}
             tests = [widened(t, net_error[t.id]) if t.id in net_error else t for t in tests]
             test0 = tests[0]
             base_cmp = stated_comparisons(tests, model)
