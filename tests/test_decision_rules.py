@@ -218,3 +218,14 @@ def test_a_set_up_fitted_and_nothing_else_is_said_with_the_model_at_it():
     assert words.startswith("No missing physics is concluded: with blank_offset_mm fitted")
     assert "user law" not in words
 
+
+
+def test_a_measurement_the_named_effect_predicts_at_the_noise_is_not_called_unjudged():
+    from fenicsx_drape.diagnosis.words import unjudged
+
+    checked = [entry("ply1", 3.83, 0.3, 5.36, 3.40, "mm"), entry("ply2", 4.71, 0.3, 3.2, 4.5, "mm")]
+    assert all(e["explains"] for e in checked)
+    named = candidate("interply_friction", [comparison("ply1", 0.28, 0.3, "mm"),
+                                            comparison("ply2", 0.6, 0.3, "mm")])
+    assert [e["measurement"] for e in unjudged(checked, named)] == ["ply2"]
+    assert [e["measurement"] for e in unjudged(checked, None)] == ["ply1", "ply2"]

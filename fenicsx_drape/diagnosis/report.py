@@ -45,6 +45,7 @@ from fenicsx_drape.diagnosis.words import (
     groups_sentence,
     noise_notes,
     pattern_of,
+    unjudged,
 )
 
 if TYPE_CHECKING:
@@ -128,7 +129,7 @@ def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: H
         groups_conclusion(groups, missing)
         or conclusion(missing, decision.best, compared, pattern, base.optimiser, coupons,
                       resolution.entries, setup_fitted=fitted),
-        setup_sentence(stage), resolution_sentence(resolution.entries),
+        setup_sentence(stage), resolution_sentence(unjudged(resolution.entries, missing)),
         "" if groups_conclusion(groups, missing) else groups_sentence(groups)) if w.strip())
     if missing and missing.setup_refitted:
         j = missing.setup_refitted

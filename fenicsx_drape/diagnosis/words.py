@@ -199,6 +199,17 @@ def conclusion(missing: Candidate | None, best: Candidate | None, base: Sequence
             f"again.{closest}{how}{noise}")
 
 
+def unjudged(entries: Sequence[dict[str, Any]], missing: Candidate | None
+             ) -> list[dict[str, Any]]:
+    """The resolution entries no physics is concluded from.
+
+    Those within the net's own error, less those the named effect predicts at the noise (its
+    evidence: the net judges them).
+    """
+    at_noise = {c.id for c in (missing.after if missing else ()) if c.normalised <= ADEQUATE}
+    return [e for e in entries if e["explains"] and e["measurement"] not in at_noise]
+
+
 def _missing_words(missing: Candidate, normalised: float, setup_fitted: str | None) -> str:
     """The named effect: the error it brings, at the noise or how far above it and why."""
     from fenicsx_drape.diagnosis.decision import judged
