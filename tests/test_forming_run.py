@@ -136,7 +136,7 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
                 "edge_displacement_mm", "draw_in_mm", "nodes", "steps", "cutbacks",
                 "snes_iterations", "wall_time_s", "max_penetration_mm", "ranks", "case"):
         assert key in summary
-    assert summary["nodes"] == 25 and summary["case"]["holder"]["force_N"] == 200.0
+    assert summary["nodes"] == 25 and summary["case"]["holder"]["holder_force_N"] == 200.0
     reference = run_case(load_case("hemisphere", **COARSE, holder_force_N=200.0),
                                comm=MPI.COMM_SELF)
     assert summary["max_shear_deg"] == np.abs(reference.grid.shear_deg()).max()
