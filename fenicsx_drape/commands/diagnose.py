@@ -1,7 +1,7 @@
 """``drape diagnose BUNDLE --model MODEL.toml --json REPORT.json [--out DIR]``.
 
 Which physical effect is the model missing? Writes the report of the diagnosis contract
-(version 2, ``docs/measurements.md``). Exit status 0 when the report was written,
+(the measurement spec's version, ``docs/measurements.md``: ``REPORT.json``'s ``contract``). Exit status 0 when the report was written,
 whatever it concludes; 2 for bad input; 1 for an internal failure.
 """
 
