@@ -100,8 +100,9 @@ class BlankHolder:
         law: the friction bar's law (role ``"friction"``; force in N against slip in mm),
             e.g. ``model.laws()["friction"]``; its conditions ``holder_force_N`` and
             ``holder_nodes`` are set here, node by node and step by step.
-        force_N: the holding force on the whole part (N; the case's ``[holder] holder_force_N``); the
-            modelled part carries :attr:`part_force_N` of it, as ``force_share`` says.
+        force_N: the holding force on the whole part (N; the case's ``[holder]
+            holder_force_N``); the modelled part carries :attr:`part_force_N` of it, as
+            ``force_share`` says.
         clamp_stiffness_N_per_mm: penalty stiffness ``k`` holding the nodes on the surface.
         surface: the clamping surface: ``gap(x, t)``, ``covers(x, t)`` and optionally
             ``displacement(x, t0, t1)`` (a tool of role holder).
