@@ -17,8 +17,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import traceback
+import warnings
 from types import ModuleType
 
 from fenicsx_drape import __version__
@@ -173,7 +175,9 @@ def main(argv: list[str] | None = None) -> int:
             from fenicsx_drape.fe.newton import set_petsc_options
 
             set_petsc_options(args.petsc_options)
-        return int(module.run(args) or 0)
+        with warnings.catch_warnings():  # an old name read: a note, as the command's own
+            warnings.showwarning = _old_name_notes(warnings.showwarning)
+            return int(module.run(args) or 0)
     except DrapeInputError as err:
         print(f"drape {name}: error: {err}", file=sys.stderr)
         return 2
@@ -186,6 +190,23 @@ def main(argv: list[str] | None = None) -> int:
         traceback.print_exc()
         print(f"drape {name}: internal error (see the traceback above)", file=sys.stderr)
         return 1
+
+
+def _old_name_notes(show):
+    """A ``warnings.showwarning`` that prints the package's notes of an earlier name read.
+
+    The package's :class:`FutureWarning` becomes one line, ``drape: note: case.toml: [holder]
+    'force_N' is now called 'holder_force_N' (...)``; any other warning goes to ``show``.
+    """
+    package = os.path.dirname(os.path.abspath(__file__))
+
+    def note(message, category, filename, lineno, file=None, line=None) -> None:
+        if issubclass(category, FutureWarning) and str(filename).startswith(package):
+            print(f"drape: note: {message}", file=sys.stderr if file is None else file)
+        else:
+            show(message, category, filename, lineno, file, line)
+
+    return note
 
 
 def positive_float(text: str) -> float:
