@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 import traceback
 import warnings
@@ -195,13 +194,11 @@ def main(argv: list[str] | None = None) -> int:
 def _old_name_notes(show):
     """A ``warnings.showwarning`` that prints the package's notes of an earlier name read.
 
-    The package's :class:`FutureWarning` becomes one line, ``drape: note: case.toml: [holder]
+    The package's :class:`FutureWarning` of a renamed key becomes one line, ``drape: note: case.toml: [holder]
     'force_N' is now called 'holder_force_N' (...)``; any other warning goes to ``show``.
     """
-    package = os.path.dirname(os.path.abspath(__file__))
-
     def note(message, category, filename, lineno, file=None, line=None) -> None:
-        if issubclass(category, FutureWarning) and str(filename).startswith(package):
+        if issubclass(category, FutureWarning) and " is now called " in str(message):
             print(f"drape: note: {message}", file=sys.stderr if file is None else file)
         else:
             show(message, category, filename, lineno, file, line)
