@@ -194,8 +194,9 @@ def main(argv: list[str] | None = None) -> int:
 def _old_name_notes(show):
     """A ``warnings.showwarning`` that prints the package's notes of an earlier name read.
 
-    The package's :class:`FutureWarning` of a renamed key becomes one line, ``drape: note: case.toml: [holder]
-    'force_N' is now called 'holder_force_N' (...)``; any other warning goes to ``show``.
+    The package's :class:`FutureWarning` of a renamed key becomes one line, ``drape: note:
+    case.toml: [holder] 'force_N' is now called 'holder_force_N' (...)``; any other warning
+    goes to ``show``.
     """
     def note(message, category, filename, lineno, file=None, line=None) -> None:
         if issubclass(category, FutureWarning) and " is now called " in str(message):
