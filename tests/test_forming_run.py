@@ -153,7 +153,7 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
     # The case file is the paper's hemisphere, but not under the paper's conditions: no
     # paper comparison and no paths (Figs. 10-11), with what differs.
     assert not (out / "paths.png").exists()
-    assert summary["paper_differences"] == ["cell 30 mm", "holder force 200 N", "8 s"]
+    assert summary["paper_differences"] == ["cell 30 mm", "holder_force_N 200", "8 s"]
     provenance = json.loads((out / "provenance.json").read_text())
     assert provenance["case"]["blank"]["cell_mm"] == 30.0
     # The bundle names a copy of the case, which loads and is the case that ran.
