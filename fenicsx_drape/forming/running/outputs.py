@@ -274,8 +274,8 @@ def case_bundle(run: FormingRun, friction: float, grid_mm: float | None = None,
     The test's keys (``duration_s``, ``holder_force_N``, ``travel_mm``, ``grid_mm``) repeat
     the case's values; ``case_file`` is relative to the bundle folder (write the case there
     with :func:`~fenicsx_drape.forming.case.writing.write_case`). The holder's μ the part was
-    formed with is the test's condition ``mu`` (a record: the case's own ``[holder] mu`` is
-    what a diagnosis reads). ``grid_mm`` None: :func:`default_grid_mm` of the net's cell.
+    formed with is the test's condition ``mu`` (a record: a condition changes nothing in the
+    case the test names). ``grid_mm`` None: :func:`default_grid_mm` of the net's cell.
     """
     case = run.case
     grid_mm = grid_mm or default_grid_mm(run.grid.cell_mm)
