@@ -114,7 +114,7 @@ def forming_runs_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=positive_int, default=None, metavar="N",
                         help="processes forming at once (default: DRAPE_WORKERS, else one "
                         "per core; under 'python3 -m mpi4py.futures' the job's other ranks). "
-                        "More than the cores (here or in DRAPE_WORKERS) is capped to them, "
+                        "More than the cores (given here or in DRAPE_WORKERS) is capped to them, "
                         "with a note: a run is one "
                         "process's work, and a worker beyond the cores only waits, holding "
                         "DOLFINx and a run in memory")
