@@ -1,8 +1,9 @@
 """``drape diagnose BUNDLE --model MODEL.toml --json REPORT.json [--out DIR]``.
 
 Which physical effect is the model missing? Writes the report of the diagnosis contract
-(version 2, ``docs/measurements.md``). Exit status 0 when the report was written,
-whatever it concludes; 2 for bad input; 1 for an internal failure.
+(``docs/measurements.md``; ``REPORT.json``'s ``contract`` is the spec's version). Exit status
+0 when the report was written, whatever it concludes; 2 for bad input; 1 for an internal
+failure.
 """
 
 from __future__ import annotations
