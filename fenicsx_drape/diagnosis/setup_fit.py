@@ -22,9 +22,8 @@ The set-up stage (:mod:`~fenicsx_drape.diagnosis.setup_stage`) fits each candida
    spread, step/√3, and the lack of fit in the parameter's units,
    ``|p − p0| · √((A² − 1 − 2√(2/n)) / (S² − 1))`` (p0 the stated value), A the normalised
    error after the fit
-   and S the stated set-up's on the same model, each on the noise widened by the net's own
-   error where that error is known (what the net cannot judge is no lack of fit), n the
-   residual coordinates (0 when A is within the noise's own spread): the error the
+   and S the stated set-up's on the same model, n the residual coordinates (0 when A is
+   within the noise's own spread): the error the
    fit leaves is a correlated one (a whole sheet's slide, a clipped net's edge), which
    χ²/dof, made for independent noise, hardly widens.
    **Nothing to gain**: when neither a scan point nor a Gauss-Newton step on the scan's
@@ -269,13 +268,9 @@ def first_runs(name: str, tests: Sequence[Test], test0: Test, model: Model, say:
         SetupRuns(tests, model, name).values([start, *scan(name, start)[1]], mirror=True)
 
 
-def fit_candidate(runs: SetupRuns, test0: Test, below: float, say: Progress,
-                  net_error: Mapping[str, float] | None = None) -> SetupFit | Untestable:
-    """Fit one set-up parameter, its held-out error and evidence (module doc, 1.-4.).
-
-    ``net_error``: the net's own discretisation error of measurements whose noise is not
-    widened by it; the lack of fit counts only what the net can judge (:func:`judgeable`).
-    """
+def fit_candidate(runs: SetupRuns, test0: Test, below: float, say: Progress
+                  ) -> SetupFit | Untestable:
+    """Fit one set-up parameter, its held-out error and evidence (module doc, 1.-4.)."""
     name, model = runs.name, runs.model
     start = stated_point(name, test0, model)
     lo, hi = BOUNDS[name]
@@ -336,8 +331,7 @@ def fit_candidate(runs: SetupRuns, test0: Test, below: float, say: Progress,
     # one correlated error, and widened the sd by 7 % where the fit was 18 sd off).
     # Beyond the noise: A² of pure noise is 1 ± √(2/n) over n coordinates (2 sd allowed).
     sd_fit = sd
-    A = judgeable(after, net_error)
-    S = judgeable(runs.compare(base_values), net_error)
+    A, S = normalised_error(after), base_ho
     floor = 1.0 + 2.0 * math.sqrt(2.0 / runs.size)
     lack = np.abs(p - start) * math.sqrt(max(0.0, A**2 - floor) / max(S**2 - 1.0, 1e-12))
     sd = np.sqrt(sd**2 + unresolved**2 / 3.0 + lack**2)
@@ -367,19 +361,6 @@ def fit_candidate(runs: SetupRuns, test0: Test, below: float, say: Progress,
     evidence = base_ho / heldout if heldout > 0 else math.inf
     return SetupFit(p, start, sd, sd_fit, after, heldout, evidence, change, fitted_values,
                     base_ho, len(far), {c.id: c.rmse for c in held})
-
-
-def judgeable(compared: Sequence[Comparison], net_error: Mapping[str, float] | None) -> float:
-    """The normalised error of what the net can judge: each noise widened by its net error.
-
-    A leftover within the net's own discretisation error (a lab's shear definition at the
-    cell's scale, a coarse net's edge) is no lack of fit of a set-up parameter: added in
-    quadrature to the noise of the measurements it is known for (the others as they are).
-    """
-    if not net_error:
-        return normalised_error(compared)
-    ratios = [c.rmse / math.hypot(c.noise, net_error.get(c.id, 0.0)) for c in compared]
-    return float(np.sqrt(np.mean(np.square(ratios))))
 
 
 def distinct(c: SetupFit) -> bool:

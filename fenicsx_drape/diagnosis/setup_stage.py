@@ -94,14 +94,12 @@ MODELS_DIFFER = 2.0
 
 
 def setup_candidate(name: str, tests: Sequence[Test], test0: Test, model: Model,
-                    base_ho: float, rules: Rules, say: Progress, widened_noise: bool = False,
-                    net_error: dict[str, float] | None = None
+                    base_ho: float, rules: Rules, say: Progress, widened_noise: bool = False
                     ) -> tuple[dict[str, Any], SetupFit | None]:
     """One set-up candidate: its report entry and its fit, or (its untestable entry, None).
 
     ``base_ho`` is the stated set-up's held-out error (its evidence's numerator);
-    ``widened_noise``: the tests' noise is widened by the net's own error (said so);
-    ``net_error``: the net's error of the other measurements checked (for the lack of fit).
+    ``widened_noise``: the tests' noise is widened by the net's own error (said so).
     """
     reason = why_not(name, tests)
     if reason is not None:
@@ -110,7 +108,7 @@ def setup_candidate(name: str, tests: Sequence[Test], test0: Test, model: Model,
     start = stated_point(name, test0, model)
     say(f"set-up candidate {name}: from {show(name, start, test0, model)}")
     try:
-        c = fit_candidate(runs, test0, rules.untestable_below, say, net_error)
+        c = fit_candidate(runs, test0, rules.untestable_below, say)
     except (SolverError, DrapeInputError) as err:
         return {"effect": name, "setup": True,
                 "reason": f"the part cannot be formed so: {err}"}, None
@@ -227,14 +225,9 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
             f"ranked by held-out error, "
             f"near-ties ({100 * rules.parsimony:g} %) to fewer parameters, then to the "
             f"order {', '.join(SETUP_PARAMETERS)}")
-    # The net's error of the measurements not widened by it: the lack of fit of a candidate
-    # counts only what the net can judge (setup_fit.judgeable).
-    unwidened = {e["measurement"]: e["discretisation_error"] for e in resolution or ()
-                 if e["measurement"] not in net_error
-                 and e.get("discretisation_error") is not None}
     outcomes = dict(zip(own, together([functools.partial(
         setup_candidate, name, tests, test0, model, base_ho, rules,
-        widened_noise=bool(net_error), net_error=unwidened) for name in own], say)))
+        widened_noise=bool(net_error)) for name in own], say)))
     tried: list[tuple[dict[str, Any], SetupFit]] = []
     untestable: list[dict[str, Any]] = []
     for name in names:
