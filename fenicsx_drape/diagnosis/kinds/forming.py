@@ -11,7 +11,8 @@ positions it is read at (:func:`moved`). They share one fit hook, :func:`fit_fri
 **Fitting.** In a forming test only the forming parameters are fitted
 (:func:`fit_forming`):
 the friction coefficients of the model's forming effects (``mu`` of ``holder_friction``,
-``mu_tool`` of ``tool_friction``), the material parameters staying at their coupon-fitted (or
+``mu_tool`` of ``tool_friction``, ``mu_ply`` and the film's ``eta_f_MPa_s_per_mm`` of
+``interply_friction`` on a stack), the material parameters staying at their coupon-fitted (or
 given) values. The fit is Gauss-Newton on the per-coordinate residuals in noise units, with
 forward differences of :data:`FD_STEP`, from the better of two starts (the model's values and
 the parameters' defaults, judged in the first batch of runs: a warm start from a model
@@ -26,7 +27,8 @@ needed: on one worker, a fifth of the lab README diagnosis's runs). The fit is t
 either way.
 
 The holder's μ is fitted only where a test's holder does not fix it (a case's
-``[holder] mu``).
+``[holder] mu``), and the inter-ply μ and η_f only on a stack whose ``[interply]`` table does
+not give them (:func:`interply_free`).
 
 **Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
 a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
@@ -63,8 +65,14 @@ if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
-FORMING_PARAMETERS = ("mu", "mu_tool")  # what a forming test fits (friction coefficients)
-FD_STEP = 0.02  # forward-difference step in a friction coefficient
+# What a forming test fits: the friction coefficients (holder, tools, between plies) and the
+# inter-ply film's η_f.
+FORMING_PARAMETERS = ("mu", "mu_tool", "mu_ply", "eta_f_MPa_s_per_mm")
+# The fit works on each parameter over its scale (a friction coefficient as it is; η_f in
+# units of 0.01 MPa·s/mm, so that the steps and bounds below span its published range,
+# 0.0005-0.01, as they span a μ's).
+SCALE = {"eta_f_MPa_s_per_mm": 0.01}
+FD_STEP = 0.02  # forward-difference step in a friction coefficient (scaled units)
 XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
 MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
 MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
@@ -166,6 +174,16 @@ def holder_mu_free(test: Test) -> bool:
     return holder is not None and holder.mu is None
 
 
+def interply_free(test: Test, name: str) -> bool:
+    """Whether the model's inter-ply ``name`` (μ_ply, η_f) acts in a test.
+
+    On a stack whose ``[interply]`` table does not give it (the case's value wins, as a
+    holder's μ).
+    """
+    case = forming_case_of(test)
+    return case.stack and not case.interply_given(name)
+
+
 def forming_parameters(model: Model) -> tuple[str, ...]:
     """The forming parameters the model fits: those of :data:`FORMING_PARAMETERS` it uses."""
     active = model.active_parameters()
@@ -212,14 +230,21 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
     names = forming_parameters(model)
     if not any(holder_mu_free(t) for t in chosen):
         names = tuple(n for n in names if n != "mu")
+    names = tuple(n for n in names if n not in ("mu_ply", "eta_f_MPa_s_per_mm")
+                  or any(interply_free(t, n) for t in chosen))
     if not chosen or not names:
         return model
-    p = np.array([float(model.parameters[n]) for n in names])
+    scale = np.array([SCALE.get(n, 1.0) for n in names])
+    p = np.array([float(model.parameters[n]) for n in names]) / scale
     k = len(names)
     h = FD_STEP * np.eye(k)
 
     def residuals(*points: np.ndarray) -> np.ndarray:
-        return _residuals(chosen, kinds, model, names, np.vstack(points))
+        return _residuals(chosen, kinds, model, names, np.vstack(points) * scale)
+
+    def values(q: np.ndarray) -> dict[str, float]:
+        return {n: round(float(v), 4 - round(math.log10(c)))
+                for n, v, c in zip(names, q * scale, scale)}
 
     def slopes(p: np.ndarray, r: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
         R = residuals(*(p + h)) if R is None else R
@@ -251,12 +276,11 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
 
     # Two starts, judged in the first batch of runs: the model's values and the parameters'
     # defaults (a warm start from a model without the right physics can sit far off).
-    default = np.clip([parameter_info(n).default for n in names], *MU_BOUNDS)
+    default = np.clip([parameter_info(n).default for n in names] / scale, *MU_BOUNDS)
     R, Js = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
     r, J = R[0], Js[0]
     if len(R) > 1 and R[1] @ R[1] < r @ r:
-        say(f"  forming fit: starting from the defaults "
-            f"{ {n: round(float(v), 4) for n, v in zip(names, default)} } "
+        say(f"  forming fit: starting from the defaults {values(default)} "
             f"(cost {R[1] @ R[1]:.4g}, was {r @ r:.4g})")
         p, r, J = default, R[1], Js[1]
     for iteration in range(min(max_iterations, MAX_ITERATIONS)):
@@ -268,8 +292,7 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
             if np.abs(trial - p).max() < XTOL:
                 break
             (r_new,), (J_new,) = evaluate(trial)
-            say(f"  forming fit {iteration + 1}: "
-                f"{ {n: round(float(v), 4) for n, v in zip(names, trial)} }, "
+            say(f"  forming fit {iteration + 1}: {values(trial)}, "
                 f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
             if r_new @ r_new < r @ r:
                 break
@@ -278,7 +301,7 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
         if np.abs(trial - p).max() < XTOL:
             break
         p, r, J = trial, r_new, J_new
-    return model.with_parameters(**{n: float(v) for n, v in zip(names, p)})
+    return model.with_parameters(**{n: float(v) for n, v in zip(names, p * scale)})
 
 
 def fit_friction(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
