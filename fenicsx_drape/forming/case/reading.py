@@ -20,7 +20,6 @@ import itertools
 import math
 import os
 import tomllib
-import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -227,11 +226,9 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
             except DrapeInputError as err:
                 at = f"[[ply]] {k}" if case.plies else "[blank]"
                 raise InputFileError([f"{fname}: {at}: {err}"]) from None
-    errors, warns = builtin_stack_fit(case, stated)  # the tools as overridden (a gap, no die)
+    errors = builtin_stack_fit(case, stated)  # the tools as overridden (a gap, no die)
     if errors:
         raise InputFileError([f"{fname}: [[ply]]: {e}" for e in errors])
-    for text in warns:
-        warnings.warn(f"{fname}: [[ply]]: {text}", stacklevel=2)
     try:
         check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
         check_run_size(case)  # and the run's length
