@@ -14,17 +14,17 @@ the friction coefficients of the model's forming effects (``mu`` of ``holder_fri
 ``mu_tool`` of ``tool_friction``, ``mu_ply`` and the film's ``eta_f_MPa_s_per_mm`` of
 ``interply_friction`` on a stack), the material parameters staying at their coupon-fitted (or
 given) values. The fit is Gauss-Newton on the per-coordinate residuals in noise units, with
-forward differences of :data:`FD_STEP`, from the better of two starts (the model's values and
-the parameters' defaults, judged in the first batch of runs: a warm start from a model
-lacking the right physics can sit far off, e.g. a holder μ driven up by a model whose tows
-carry compression), steps of at most :data:`MAX_STEP` within :data:`MU_BOUNDS` and halved
-once when they do not lower the cost; every forming run is cached by its case and
-parameters. The runs of one iteration (the point and its perturbations) go to the workers
-at once (:mod:`~fenicsx_drape.runs`) when the point fits in the
-perturbations' last batch for no extra time (one parameter on two workers); else a point's
-perturbations are formed only once the fit takes the point (a rejected step's are not
-needed: on one worker, a fifth of the lab README diagnosis's runs). The fit is the same
-either way.
+forward differences of :data:`FD_STEP` (η_f: :data:`FD_STEPS`), from the best start (the
+model's values, the parameters' defaults and η_f's multiples :data:`STARTS`, judged in the
+first batch of runs: a warm start from a model lacking the right physics can sit far off,
+e.g. a holder μ driven up by a model whose tows carry compression), steps of at most
+:data:`MAX_STEP` within :data:`MU_BOUNDS` and halved once when they do not lower the cost;
+every forming run is cached by its case and parameters. The runs of one iteration (the
+point and its perturbations) go to the workers at once (:mod:`~fenicsx_drape.runs`) when the
+point fits in the perturbations' last batch for no extra time (one parameter on two
+workers); else a point's perturbations are formed only once the fit takes the point (a
+rejected step's are not needed: on one worker, a fifth of the lab README diagnosis's runs).
+The fit is the same either way.
 
 The holder's μ is fitted only where a test's holder does not fix it (a case's
 ``[holder] mu``), and the inter-ply μ and η_f only on a stack whose ``[interply]`` table does
@@ -73,6 +73,13 @@ FORMING_PARAMETERS = ("mu", "mu_tool", "mu_ply", "eta_f_MPa_s_per_mm")
 # 0.0005-0.01, as they span a μ's).
 SCALE = {"eta_f_MPa_s_per_mm": 0.01}
 FD_STEP = 0.02  # forward-difference step in a friction coefficient (scaled units)
+# A stack's runs are not smooth in η_f on the scale of 0.0002 MPa·s/mm (the hemisphere's
+# [0/90, ±45] at 30 mm cells: the cost 17.2, 28.0, 16.5 at 0.0031, 0.0033, 0.0035, falling
+# from 80 at 0.002 to 1.8 at 0.006): its difference is taken over 0.001 MPa·s/mm.
+FD_STEPS = {"eta_f_MPa_s_per_mm": 0.1}
+# And the fit starts from the best of η_f's model value and these multiples of it, formed in
+# its first batch (η_f spans a factor 20 between published films).
+STARTS = {"eta_f_MPa_s_per_mm": (0.5, 2.0, 4.0)}
 XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
 MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
 MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
@@ -235,7 +242,8 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
     scale = np.array([SCALE.get(n, 1.0) for n in names])
     p = np.array([float(model.parameters[n]) for n in names]) / scale
     k = len(names)
-    h = FD_STEP * np.eye(k)
+    fd = np.array([FD_STEPS.get(n, FD_STEP) for n in names])
+    h = np.diag(fd)
 
     def residuals(*points: np.ndarray) -> np.ndarray:
         return _residuals(chosen, kinds, model, names, np.vstack(points) * scale)
@@ -246,7 +254,7 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
 
     def slopes(p: np.ndarray, r: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
         R = residuals(*(p + h)) if R is None else R
-        return (R - r).T / FD_STEP
+        return (R - r).T / fd
 
     def evaluate(*points: np.ndarray) -> tuple[np.ndarray, list[np.ndarray | None]]:
         """The residuals at ``points`` and each one's Jacobian where its runs were at hand.
@@ -272,15 +280,23 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
                 Js.append(None)
         return R, Js
 
-    # Two starts, judged in the first batch of runs: the model's values and the parameters'
-    # defaults (a warm start from a model without the right physics can sit far off).
+    # The starts, judged in the first batch of runs: the model's values, the parameters'
+    # defaults (a warm start from a model without the right physics can sit far off) and
+    # η_f's scan (STARTS: its runs are not smooth enough for Gauss-Newton to cross its range).
     default = np.clip([parameter_info(n).default for n in names] / scale, *MU_BOUNDS)
-    R, Js = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
+    starts = [p] + ([default] if np.abs(default - p).max() > XTOL else [])
+    for i, n in enumerate(names):
+        for factor in STARTS.get(n, ()):
+            starts.append(p.copy())
+            starts[-1][i] = np.clip(p[i] * factor, *MU_BOUNDS)
+    R, Js = evaluate(*starts)
     r, J = R[0], Js[0]
-    if len(R) > 1 and R[1] @ R[1] < r @ r:
-        say(f"  forming fit: starting from the defaults {values(default)} "
-            f"(cost {R[1] @ R[1]:.4g}, was {r @ r:.4g})")
-        p, r, J = default, R[1], Js[1]
+    best = int(np.argmin([q @ q for q in R]))
+    if best:
+        which = "the defaults " if starts[best] is default else ""
+        say(f"  forming fit: starting from {which}{values(starts[best])} "
+            f"(cost {R[best] @ R[best]:.4g}, was {r @ r:.4g})")
+        p, r, J = starts[best], R[best], Js[best]
     for iteration in range(min(max_iterations, MAX_ITERATIONS)):
         J = slopes(p, r) if J is None else J
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
