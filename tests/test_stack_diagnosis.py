@@ -211,6 +211,10 @@ def test_the_set_up_stage_reads_each_plys_angle_of_a_stack(tmp_path):
         "ply_angle_deg", "ply_angle_deg/1", "ply_angle_deg/2", "mu"]
     assert setup_parameters.stated(tests[0], "ply_angle_deg/2", SLIDING) == 45.0
     assert setup_parameters.stated(tests[0], "ply_angle_deg/1", SLIDING) == 0.0
+    # A ply's angle is scanned wider than the whole stack's (a ply laid 10° off, or more).
+    assert setup_parameters.SCAN["ply_angle_deg/2"] == (-10.0, -4.0, 4.0, 10.0)
+    assert setup_parameters.SCAN["ply_angle_deg"] == (-4.0, 4.0)
+    assert setup_parameters.STEP["ply_angle_deg/2"] == setup_parameters.STEP["ply_angle_deg"]
     turned, _ = setup_parameters.applied(tests[0], "ply_angle_deg/2", [6.0], SLIDING)
     assert [p.angle_deg for p in forming_case_of(turned).plies] == [0.0, 51.0]
     # The whole stack turned: the blank's angle, the plies' own angles kept within it.
