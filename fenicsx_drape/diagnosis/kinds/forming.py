@@ -58,6 +58,7 @@ import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case import FormingCase, case_file, case_for_test, with_overrides
+from fenicsx_drape.forming.case.spec import MODEL_INTERPLY
 from fenicsx_drape.runs import Deferred, cell_override, memo, spare
 
 if TYPE_CHECKING:
@@ -189,6 +190,21 @@ def interply_free(test: Test, name: str) -> bool:
     return case.stack and not case.interply_given(name)
 
 
+def given_interply(tests: Sequence[Test], names: Sequence[str]) -> dict[str, float]:
+    """The inter-ply values of ``names`` that every test's case gives alike (the ones that act).
+
+    The fitted model carries them, so that its report says what acted, not a start of the
+    refit that never formed (the runs leave a given value out of their key).
+    """
+    out = {}
+    for name in (n for n in names if n in MODEL_INTERPLY):
+        cases = [forming_case_of(t) for t in tests]
+        values = {dict(c.interply).get(name) for c in cases if c.stack}
+        if values and None not in values and len(values) == 1:
+            out[name] = float(values.pop())
+    return out
+
+
 def forming_parameters(model: Model) -> tuple[str, ...]:
     """The forming parameters the model fits: those of :data:`FORMING_PARAMETERS` it uses."""
     active = model.active_parameters()
@@ -235,7 +251,8 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
     names = forming_parameters(model)
     if not any(holder_mu_free(t) for t in chosen):
         names = tuple(n for n in names if n != "mu")
-    names = tuple(n for n in names if n not in ("mu_ply", "eta_f_MPa_s_per_mm")
+    model = model.with_parameters(**given_interply(chosen, names))
+    names = tuple(n for n in names if n not in MODEL_INTERPLY
                   or any(interply_free(t, n) for t in chosen))
     if not chosen or not names:
         return model
