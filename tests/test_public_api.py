@@ -44,7 +44,7 @@ PUBLIC = {
         "TENSILE", "TEST_KINDS", "comparable", "find_kind", "is_formed", "kind_of", "row_sd"],
     "fenicsx_drape.errors": [
         "DrapeInputError", "InputFileError", "ParameterError", "SolverError",
-        "did_you_mean", "likely_typo"],
+        "did_you_mean", "likely_typo", "old_name"],
     "fenicsx_drape.fe": [
         "FieldWriter", "Results", "RunReport", "Sheet", "SolverOptions", "StepReport",
         "TrussGrid", "TrussProblem", "grid_points", "load_sheet", "read_grid", "run",
