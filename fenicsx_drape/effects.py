@@ -151,9 +151,12 @@ EFFECTS: dict[str, Effect] = {
             "The plies of a stack slide against each other under τ = τ₀ + μ p + η_f v (tack, "
             "Coulomb regularised over a small slip, a viscous resin film; "
             "materials/interply.py), with the values of the case's [interply] table (fitted "
-            "from interply_friction tests by drape fit). Without it adjacent plies are bonded: "
-            "they move together. It acts only on a stack of plies.",
-            "contact", (), (), ("forming",), (), False, "beyond the paper"),
+            "from interply_friction tests by drape fit); μ and η_f that the table does not "
+            "give are the model's mu_ply and eta_f_MPa_s_per_mm, which a forming fit fits. "
+            "Without it adjacent plies are bonded: they move together. It acts only on a "
+            "stack of plies.",
+            "contact", ("mu_ply", "eta_f_MPa_s_per_mm"), (), ("forming",), (), False,
+            "beyond the paper"),
     )
 }
 
@@ -167,6 +170,13 @@ EXTRA_PARAMETERS: dict[str, ParameterInfo] = {
                       "Coulomb friction coefficient between ply and punch/die"),
         ParameterInfo("tool_slip_mm", "mm", (1e-12, math.inf),
                       "regularisation slip of the tool friction (sticking below it)"),
+        # The inter-ply law's (materials/interply.py: the same bounds and defaults). A model
+        # has them only with interply_friction (Model: an effect's extra parameters).
+        ParameterInfo("mu_ply", "-", (0.0, 10.0),
+                      "inter-ply Coulomb coefficient μ of τ = τ₀ + μp + η_f v (0.1-0.3)", 0.2),
+        ParameterInfo("eta_f_MPa_s_per_mm", "MPa·s/mm", (0.0, 100.0),
+                      "inter-ply film viscosity over its thickness η_f = η/h "
+                      "(0.0005-0.01 MPa·s/mm)", 0.002),
     )
 }
 """Parameters of effects that act outside the material laws (contact, the unit cell)."""

@@ -183,6 +183,11 @@ class Model:
         object.__setattr__(self, "plugins", plugins)
         classes = self.law_classes()  # checks one law per role
         values = default_parameters()
+        # An effect's parameters outside Table 2 (the inter-ply law's) exist with the effect.
+        for name in effects:
+            for p in EFFECTS[name].parameters if name in EFFECTS else ():
+                if p not in values and p in EXTRA_PARAMETERS:
+                    values[p] = EXTRA_PARAMETERS[p].default
         for cls in classes.values():
             for f in fields_of(cls, "parameter"):
                 if f.name not in values and f.default is not dataclasses.MISSING:
@@ -214,7 +219,7 @@ class Model:
         if len(noise) > 1:
             raise DrapeInputError("[noise]: give force_sd_N or force_sd_rel, not both")
         object.__setattr__(self, "noise", {k: float(v) for k, v in noise.items()})
-        for name in EXTRA_PARAMETERS:
+        for name in (n for n in EXTRA_PARAMETERS if n in values):
             lo, hi = parameter_info(name).bounds
             value = np.asarray(values[name])
             if not (np.isfinite(value).all() and ((lo <= value) & (value <= hi)).all()):

@@ -20,7 +20,8 @@ from fenicsx_drape import runs
 from fenicsx_drape.diagnosis import diagnose, setup_parameters
 from fenicsx_drape.diagnosis.comparison import compare_tests, prepare, simulate
 from fenicsx_drape.diagnosis.decision import setup_rules
-from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
+from fenicsx_drape.diagnosis.kinds import kind_of
+from fenicsx_drape.diagnosis.kinds.forming import fit_forming, forming_case_of, forming_parameters
 from fenicsx_drape.diagnosis.setup_stage import fit_setup
 from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
 from fenicsx_drape.forming.case.format import PlySpec, case_for_test, load_case
@@ -61,6 +62,49 @@ def test_a_run_keeps_every_ply_and_a_single_ply_ignores_interply_friction():
     single = load_case("hemisphere", cell_mm=30.0)
     assert runs.key_of(single, SLIDING) == runs.key_of(single, BONDED)
     assert runs.key_of(stack_case(), SLIDING) != runs.key_of(stack_case(), BONDED)
+
+
+def without_film(case):
+    """The stack's case without [interply]'s η_f: the model's acts (interply_friction's)."""
+    return dataclasses.replace(case, interply=tuple(
+        (k, v) for k, v in case.interply if k != "eta_f_MPa_s_per_mm"))
+
+
+def test_the_model_gives_the_inter_ply_values_the_case_leaves_out():
+    """μ_ply and η_f are interply_friction's parameters: a model has them with the effect, and
+    they act where the case's [interply] table does not give them (the table's value wins)."""
+    assert "mu_ply" not in BONDED.parameters and SLIDING.parameters["mu_ply"] == 0.2
+    assert SLIDING.parameters["eta_f_MPa_s_per_mm"] == 0.002
+    thick = SLIDING.with_parameters(mu_ply=0.35, eta_f_MPa_s_per_mm=0.006)
+    case, free = stack_case(), without_film(stack_case())
+    assert case.interply_law(thick).mu_ply == 0.2  # given by the case
+    assert case.interply_law(thick).eta_f_MPa_s_per_mm == 0.002
+    assert free.interply_law(thick).eta_f_MPa_s_per_mm == 0.006  # left to the model
+    assert free.interply_law(thick).mu_ply == 0.2
+    # A run depends on the model's value only where it acts.
+    assert runs.key_of(case, thick) == runs.key_of(case, SLIDING)
+    assert runs.key_of(free, thick) != runs.key_of(free, SLIDING)
+    single = load_case("hemisphere", cell_mm=30.0)
+    assert runs.key_of(single, thick) == runs.key_of(single, BONDED)
+    assert forming_parameters(SLIDING) == ("mu", "mu_ply", "eta_f_MPa_s_per_mm")
+    assert forming_parameters(BONDED) == ("mu",)
+
+
+@pytest.mark.slow
+def test_the_forming_fit_fits_the_film_the_case_leaves_to_the_model(tmp_path):
+    """Grids on both plies of a stack formed with η_f = 0.006 MPa·s/mm, the case giving μ_ply
+    and the holder's μ but not η_f: the forming fit, from the model's 0.002, finds it."""
+    case = without_film(stack_case())
+    truth = SLIDING.with_parameters(eta_f_MPa_s_per_mm=0.006)
+    write(tmp_path, truth, case, plies=(1, 2))
+    bundle = load(tmp_path)
+    bundle = dataclasses.replace(bundle, tests=tuple(
+        dataclasses.replace(t, forming_case=case) for t in bundle.tests))
+    # The model's μ_ply does not act (the case gives 0.2): the fitted model carries the case's.
+    fitted = fit_forming(bundle, SLIDING.with_parameters(mu_ply=0.35), kind_of=kind_of)
+    assert fitted.parameters["mu_ply"] == 0.2
+    # Measured: 0.00644 (from the scan's 0.008, cost 3.2, to 1.87; 80 at the model's 0.002).
+    assert fitted.parameters["eta_f_MPa_s_per_mm"] == pytest.approx(0.006, rel=0.15)
 
 
 def test_a_measurement_is_compared_with_the_ply_it_names(tmp_path):
@@ -168,6 +212,10 @@ def test_the_set_up_stage_reads_each_plys_angle_of_a_stack(tmp_path):
         "ply_angle_deg", "ply_angle_deg/1", "ply_angle_deg/2", "mu"]
     assert setup_parameters.stated(tests[0], "ply_angle_deg/2", SLIDING) == 45.0
     assert setup_parameters.stated(tests[0], "ply_angle_deg/1", SLIDING) == 0.0
+    # A ply's angle is scanned wider than the whole stack's (a ply laid 10° off, or more).
+    assert setup_parameters.SCAN["ply_angle_deg/2"] == (-10.0, -4.0, 4.0, 10.0)
+    assert setup_parameters.SCAN["ply_angle_deg"] == (-4.0, 4.0)
+    assert setup_parameters.STEP["ply_angle_deg/2"] == setup_parameters.STEP["ply_angle_deg"]
     turned, _ = setup_parameters.applied(tests[0], "ply_angle_deg/2", [6.0], SLIDING)
     assert [p.angle_deg for p in forming_case_of(turned).plies] == [0.0, 51.0]
     # The whole stack turned: the blank's angle, the plies' own angles kept within it.

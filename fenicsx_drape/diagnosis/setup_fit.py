@@ -386,10 +386,10 @@ def nothing_to_gain(runs: SetupRuns, start: np.ndarray, r0: np.ndarray,
     """
     k = len(start)
     J = np.zeros((r0.size, k))
-    for i in range(k):
-        (a, va), (b, vb) = [(v, runs.residual(scanned[j]))
-                            for j, (axis, v) in enumerate(axes) if axis == i]
-        J[:, i] = (vb - va) / (b - a)
+    for i in range(k):  # the secant of the axis's two innermost points, one either side
+        on = [(v, j) for j, (axis, v) in enumerate(axes) if axis == i]
+        (a, ja), (b, jb) = (max(p for p in on if p[0] < 0), min(p for p in on if p[0] > 0))
+        J[:, i] = (runs.residual(scanned[jb]) - runs.residual(scanned[ja])) / (b - a)
     step = gauss_newton(J, r0, runs.name)
     rest = r0 + J @ step
     if float(rest @ rest) <= (1.0 - GAIN_BELOW) * float(r0 @ r0):

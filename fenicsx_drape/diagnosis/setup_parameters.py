@@ -61,14 +61,19 @@ def base_parameter(name: str) -> str:
 
 
 class _Table(dict):
-    """A table of the set-up parameters that answers ``ply_angle_deg/<k>`` as the ply angle."""
+    """A table of the set-up parameters that answers ``ply_angle_deg/<k>`` as the ply angle.
+
+    Its entry ``ply_angle_deg/`` (:data:`PLY`), where it has one, is every ply's own.
+    """
 
     def __missing__(self, name: str):
         if base_parameter(name) == name:
             raise KeyError(name)
-        return self[base_parameter(name)]
+        return self[PLY] if PLY in self else self[base_parameter(name)]
 
     def get(self, name: str, default=None):
+        if ply_index(name) and PLY in self:
+            return self[PLY]
         return super().get(base_parameter(name), default)
 
 
@@ -96,8 +101,12 @@ def setup_names(names: Sequence[str], tests: Sequence[Test]) -> list[str]:
 # A punch moved past its clearance to a matched die clashes with it (the double dome's die is
 # 0.3 mm off the punch): at 3 mm its runs took 2.4× as long, with cut-backs; 1 mm is the
 # finite-difference step, so a fit from the stated point reuses the scan's runs.
+# A ply laid wrong within a stack is often off by more than the few degrees a whole blank
+# is (35° for 45°, a ±45 ply laid at 0/90), and a turned net's error is not smooth enough for
+# Gauss-Newton to walk far from a ±4° scan: each ply's angle is scanned by ±4° and ±10°.
 SCAN = _Table({"ply_angle_deg": (-4.0, 4.0), "blank_offset_mm": (-8.0, 8.0),
-               "holder_force_N": (-0.4, 0.8), "mu": (-0.15, 0.3), "tool_offset_mm": (-1.0, 1.0)})
+               "holder_force_N": (-0.4, 0.8), "mu": (-0.15, 0.3), "tool_offset_mm": (-1.0, 1.0),
+               PLY: (-10.0, -4.0, 4.0, 10.0)})
 
 # The finite-difference step of the Gauss-Newton fit, per axis.
 STEP = _Table({"ply_angle_deg": (1.0,), "blank_offset_mm": (1.5, 1.5), "holder_force_N": (0.2,),

@@ -18,13 +18,15 @@ Krylov solve (GMRES on the full Jacobian) has two levels:
 Applied multiplicatively: z = R A_c⁻¹ Rᵀ r, then z += B⁻¹ (r − J z) with B the plies' blocks.
 Each level factors matrices of one ply's size: k + 1 factorisations of a ply for k plies.
 
-Measured (benchmarks/bench_laminates.py, the double dome's quarter at 10 mm, plies at 0°):
-the factors' flops grow as the plies (10.9 and 14.3 Mflop for two and four plies, against 15.0
-and 120 for the stack's factor), but the Krylov iterations grow too (5.4 and 21-25 a Newton
-iteration, against 2.1 and 2.2 on the stack's factor): the plies' friction holds them to each
-other more stiffly than a woven ply resists its own shear (the trellis mode), so the plies'
-relative shear modes are a stiff coupling across the stack that neither level resolves. It
-is the solver of ``SolverOptions(stack_solver="plies")``, not the default.
+Measured (benchmarks/bench_laminates.py, the double dome's quarter at 10 mm, plies at 0°,
+docs/laminates-internals.md): the factors' flops grow as the plies (10.6 and 14.2 Mflop for
+two and four plies, against 14.4 and 125 for the stack's factor), but the Krylov iterations
+grow too (5.6 and 21 a Newton iteration, against 2.1 and 2.2 on the stack's factor; eight
+plies do not converge): the plies' friction holds them to each other more stiffly than a
+woven ply resists its own shear (the trellis mode), so the plies' relative shear modes are a
+stiff coupling across the stack that neither level resolves. Its CPU time is 4.7 and 12.7
+times one ply's for two and four plies (the stack's factor: 3.1 and 7.5). It is the solver
+of ``SolverOptions(stack_solver="plies")``, not the default.
 """
 
 from __future__ import annotations

@@ -29,7 +29,11 @@ def key_of(case, model: Model) -> tuple:
 
     if "interply_friction" in model.effects and not case.stack:  # it acts on stacks only
         model = model.without_effects("interply_friction")
-    params = tuple(sorted((k, float(v)) for k, v in model.parameters.items()))
+    # The inter-ply law's μ and η_f act only with the effect and where [interply] leaves them
+    # to the model (FormingCase.interply_law).
+    unused = {name for name in ("mu_ply", "eta_f_MPa_s_per_mm")
+              if "interply_friction" not in model.effects or case.interply_given(name)}
+    params = tuple(sorted((k, float(v)) for k, v in model.parameters.items() if k not in unused))
     plugins = tuple(file_digest(p) if Path(p).is_file() else f"missing {p}"
                     for p in model.plugins)
     return (case_key(case), tuple(sorted(model.effects)), params, plugins, solver_options())

@@ -11,22 +11,24 @@ positions it is read at (:func:`moved`). They share one fit hook, :func:`fit_fri
 **Fitting.** In a forming test only the forming parameters are fitted
 (:func:`fit_forming`):
 the friction coefficients of the model's forming effects (``mu`` of ``holder_friction``,
-``mu_tool`` of ``tool_friction``), the material parameters staying at their coupon-fitted (or
+``mu_tool`` of ``tool_friction``, ``mu_ply`` and the film's ``eta_f_MPa_s_per_mm`` of
+``interply_friction`` on a stack), the material parameters staying at their coupon-fitted (or
 given) values. The fit is Gauss-Newton on the per-coordinate residuals in noise units, with
-forward differences of :data:`FD_STEP`, from the better of two starts (the model's values and
-the parameters' defaults, judged in the first batch of runs: a warm start from a model
-lacking the right physics can sit far off, e.g. a holder μ driven up by a model whose tows
-carry compression), steps of at most :data:`MAX_STEP` within :data:`MU_BOUNDS` and halved
-once when they do not lower the cost; every forming run is cached by its case and
-parameters. The runs of one iteration (the point and its perturbations) go to the workers
-at once (:mod:`~fenicsx_drape.runs`) when the point fits in the
-perturbations' last batch for no extra time (one parameter on two workers); else a point's
-perturbations are formed only once the fit takes the point (a rejected step's are not
-needed: on one worker, a fifth of the lab README diagnosis's runs). The fit is the same
-either way.
+forward differences of :data:`FD_STEP` (η_f: :data:`FD_STEPS`), from the best start (the
+model's values, the parameters' defaults and η_f's multiples :data:`STARTS`, judged in the
+first batch of runs: a warm start from a model lacking the right physics can sit far off,
+e.g. a holder μ driven up by a model whose tows carry compression), steps of at most
+:data:`MAX_STEP` within :data:`MU_BOUNDS` and halved once when they do not lower the cost;
+every forming run is cached by its case and parameters. The runs of one iteration (the
+point and its perturbations) go to the workers at once (:mod:`~fenicsx_drape.runs`) when the
+point fits in the perturbations' last batch for no extra time (one parameter on two
+workers); else a point's perturbations are formed only once the fit takes the point (a
+rejected step's are not needed: on one worker, a fifth of the lab README diagnosis's runs).
+The fit is the same either way.
 
 The holder's μ is fitted only where a test's holder does not fix it (a case's
-``[holder] mu``).
+``[holder] mu``), and the inter-ply μ and η_f only on a stack whose ``[interply]`` table does
+not give them (:func:`interply_free`).
 
 **Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
 a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
@@ -56,6 +58,7 @@ import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case import FormingCase, case_file, case_for_test, with_overrides
+from fenicsx_drape.forming.case.spec import MODEL_INTERPLY
 from fenicsx_drape.runs import Deferred, cell_override, memo, spare
 
 if TYPE_CHECKING:
@@ -63,8 +66,21 @@ if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
-FORMING_PARAMETERS = ("mu", "mu_tool")  # what a forming test fits (friction coefficients)
-FD_STEP = 0.02  # forward-difference step in a friction coefficient
+# What a forming test fits: the friction coefficients (holder, tools, between plies) and the
+# inter-ply film's η_f.
+FORMING_PARAMETERS = ("mu", "mu_tool", "mu_ply", "eta_f_MPa_s_per_mm")
+# The fit works on each parameter over its scale (a friction coefficient as it is; η_f in
+# units of 0.01 MPa·s/mm, so that the steps and bounds below span its published range,
+# 0.0005-0.01, as they span a μ's).
+SCALE = {"eta_f_MPa_s_per_mm": 0.01}
+FD_STEP = 0.02  # forward-difference step in a friction coefficient (scaled units)
+# A stack's runs are not smooth in η_f on the scale of 0.0002 MPa·s/mm (the hemisphere's
+# [0/90, ±45] at 30 mm cells: the cost 17.2, 28.0, 16.5 at 0.0031, 0.0033, 0.0035, falling
+# from 80 at 0.002 to 1.8 at 0.006): its difference is taken over 0.001 MPa·s/mm.
+FD_STEPS = {"eta_f_MPa_s_per_mm": 0.1}
+# And the fit starts from the best of η_f's model value and these multiples of it, formed in
+# its first batch (η_f spans a factor 20 between published films).
+STARTS = {"eta_f_MPa_s_per_mm": (0.5, 2.0, 4.0)}
 XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
 MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
 MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
@@ -164,6 +180,31 @@ def holder_mu_free(test: Test) -> bool:
     return holder is not None and holder.mu is None
 
 
+def interply_free(test: Test, name: str) -> bool:
+    """Whether the model's inter-ply ``name`` (μ_ply, η_f) acts in a test.
+
+    On a stack whose ``[interply]`` table does not give it (the case's value wins, as a
+    holder's μ).
+    """
+    case = forming_case_of(test)
+    return case.stack and not case.interply_given(name)
+
+
+def given_interply(tests: Sequence[Test], names: Sequence[str]) -> dict[str, float]:
+    """The inter-ply values of ``names`` that every test's case gives alike (the ones that act).
+
+    The fitted model carries them, so that its report says what acted, not a start of the
+    refit that never formed (the runs leave a given value out of their key).
+    """
+    out = {}
+    for name in (n for n in names if n in MODEL_INTERPLY):
+        cases = [forming_case_of(t) for t in tests]
+        values = {dict(c.interply).get(name) for c in cases if c.stack}
+        if values and None not in values and len(values) == 1:
+            out[name] = float(values.pop())
+    return out
+
+
 def forming_parameters(model: Model) -> tuple[str, ...]:
     """The forming parameters the model fits: those of :data:`FORMING_PARAMETERS` it uses."""
     active = model.active_parameters()
@@ -210,18 +251,27 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
     names = forming_parameters(model)
     if not any(holder_mu_free(t) for t in chosen):
         names = tuple(n for n in names if n != "mu")
+    model = model.with_parameters(**given_interply(chosen, names))
+    names = tuple(n for n in names if n not in MODEL_INTERPLY
+                  or any(interply_free(t, n) for t in chosen))
     if not chosen or not names:
         return model
-    p = np.array([float(model.parameters[n]) for n in names])
+    scale = np.array([SCALE.get(n, 1.0) for n in names])
+    p = np.array([float(model.parameters[n]) for n in names]) / scale
     k = len(names)
-    h = FD_STEP * np.eye(k)
+    fd = np.array([FD_STEPS.get(n, FD_STEP) for n in names])
+    h = np.diag(fd)
 
     def residuals(*points: np.ndarray) -> np.ndarray:
-        return _residuals(chosen, kinds, model, names, np.vstack(points))
+        return _residuals(chosen, kinds, model, names, np.vstack(points) * scale)
+
+    def values(q: np.ndarray) -> dict[str, float]:
+        return {n: round(float(v), 4 - round(math.log10(c)))
+                for n, v, c in zip(names, q * scale, scale)}
 
     def slopes(p: np.ndarray, r: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
         R = residuals(*(p + h)) if R is None else R
-        return (R - r).T / FD_STEP
+        return (R - r).T / fd
 
     def evaluate(*points: np.ndarray) -> tuple[np.ndarray, list[np.ndarray | None]]:
         """The residuals at ``points`` and each one's Jacobian where its runs were at hand.
@@ -247,16 +297,23 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
                 Js.append(None)
         return R, Js
 
-    # Two starts, judged in the first batch of runs: the model's values and the parameters'
-    # defaults (a warm start from a model without the right physics can sit far off).
-    default = np.clip([parameter_info(n).default for n in names], *MU_BOUNDS)
-    R, Js = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
+    # The starts, judged in the first batch of runs: the model's values, the parameters'
+    # defaults (a warm start from a model without the right physics can sit far off) and
+    # η_f's scan (STARTS: its runs are not smooth enough for Gauss-Newton to cross its range).
+    default = np.clip([parameter_info(n).default for n in names] / scale, *MU_BOUNDS)
+    starts = [p] + ([default] if np.abs(default - p).max() > XTOL else [])
+    for i, n in enumerate(names):
+        for factor in STARTS.get(n, ()):
+            starts.append(p.copy())
+            starts[-1][i] = np.clip(p[i] * factor, *MU_BOUNDS)
+    R, Js = evaluate(*starts)
     r, J = R[0], Js[0]
-    if len(R) > 1 and R[1] @ R[1] < r @ r:
-        say(f"  forming fit: starting from the defaults "
-            f"{ {n: round(float(v), 4) for n, v in zip(names, default)} } "
-            f"(cost {R[1] @ R[1]:.4g}, was {r @ r:.4g})")
-        p, r, J = default, R[1], Js[1]
+    best = int(np.argmin([q @ q for q in R]))
+    if best:
+        which = "the defaults " if starts[best] is default else ""
+        say(f"  forming fit: starting from {which}{values(starts[best])} "
+            f"(cost {R[best] @ R[best]:.4g}, was {r @ r:.4g})")
+        p, r, J = starts[best], R[best], Js[best]
     for iteration in range(min(max_iterations, MAX_ITERATIONS)):
         J = slopes(p, r) if J is None else J
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
@@ -266,8 +323,7 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
             if np.abs(trial - p).max() < XTOL:
                 break
             (r_new,), (J_new,) = evaluate(trial)
-            say(f"  forming fit {iteration + 1}: "
-                f"{ {n: round(float(v), 4) for n, v in zip(names, trial)} }, "
+            say(f"  forming fit {iteration + 1}: {values(trial)}, "
                 f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
             if r_new @ r_new < r @ r:
                 break
@@ -276,7 +332,7 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
         if np.abs(trial - p).max() < XTOL:
             break
         p, r, J = trial, r_new, J_new
-    return model.with_parameters(**{n: float(v) for n, v in zip(names, p)})
+    return model.with_parameters(**{n: float(v) for n, v in zip(names, p * scale)})
 
 
 def fit_friction(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],

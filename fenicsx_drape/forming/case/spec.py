@@ -138,6 +138,9 @@ class PlySpec:
 
 INTERPLY_KEYS = (*(f.name for f in fields_of(InterplyLaw, "parameter")), "interply_friction")
 """The keys of ``[interply]``: the inter-ply law's parameters and its effect switch."""
+MODEL_INTERPLY = ("mu_ply", "eta_f_MPa_s_per_mm")
+"""The inter-ply law's values a model gives (``interply_friction``'s parameters) where the
+case's ``[interply]`` table does not."""
 
 
 HOLDER_KEYS = ("tool", "holder_force_N", "mu", "holder_force_share")
@@ -217,12 +220,20 @@ class FormingCase:
 
         Whether the plies slide: the table's ``interply_friction`` when it says, else the
         effect ``interply_friction`` of ``model`` (spec version 4: without it the plies are
-        bonded), else they slide.
+        bonded), else they slide. μ and η_f the table does not give are the model's
+        (:data:`MODEL_INTERPLY`: the effect's parameters, which a forming fit fits).
         """
         values = dict(self.interply)
         if "interply_friction" not in values and model is not None:
             values["interply_friction"] = "interply_friction" in model.effects
+        for name in MODEL_INTERPLY:
+            if name not in values and model is not None and name in model.parameters:
+                values[name] = float(model.parameters[name])
         return InterplyLaw(**values)
+
+    def interply_given(self, name: str) -> bool:
+        """Whether the ``[interply]`` table fixes the inter-ply law's ``name`` (else the model)."""
+        return any(key == name for key, _ in self.interply)
 
     def tool(self, name: str) -> ToolSpec:
         """The tool of this name."""
