@@ -28,6 +28,14 @@ either way.
 The holder's μ is fitted only where a test's holder does not fix it (a case's
 ``[holder] mu``).
 
+In a candidate's refit the fit also moves the candidate's **own** parameters (``own`` of the
+fit hook: η_o and E_v of ``rate_dependence``, ...) that no coupon test of the fit fixes: on a
+bundle of forming tests only, nothing else can move them, and a refit held at its start's
+material is no measure of the candidate. They are fitted with the friction in their
+logarithms (forward differences of :data:`LOG_STEP`, steps of at most :data:`MAX_LOG_STEP`,
+within the parameters' bounds, at most :data:`MAX_MATERIAL_ITERATIONS` iterations): one more
+run per parameter, test and iteration.
+
 **Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
 a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
 in at most :data:`MAX_ITERATIONS` iterations), every run is cached, the runs of an iteration
@@ -69,6 +77,11 @@ XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
 MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
 MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
 MU_BOUNDS = (0.0, 2.0)  # friction coefficients fitted within (prepreg on steel: 0.1-0.5)
+# A candidate's own material parameters, fitted with the friction in their logarithms:
+LOG_STEP = 0.05  # forward-difference step in the logarithm (5 %)
+LOG_XTOL = 0.005  # a step smaller than this in every logarithm (and in μ) ends the fit
+MAX_LOG_STEP = math.log(10.0)  # largest change in one iteration: a factor of 10
+MAX_MATERIAL_ITERATIONS = 6  # Gauss-Newton iterations at most when material is fitted
 
 
 # --------------------------------------------------------------------------------------------
@@ -172,6 +185,17 @@ def forming_parameters(model: Model) -> tuple[str, ...]:
     return tuple(n for n in FORMING_PARAMETERS if n in active)
 
 
+def free_parameters(model: Model, tests: Sequence[Test]) -> tuple[str, ...]:
+    """The forming parameters a fit to the formed ``tests`` moves.
+
+    The holder's μ only where a test's holder does not fix it.
+    """
+    names = forming_parameters(model) if tests else ()
+    if not any(holder_mu_free(t) for t in tests):
+        names = tuple(n for n in names if n != "mu")
+    return names
+
+
 def _residuals(tests: Sequence[Test], kinds: Sequence[Kind], model: Model,
                names: Sequence[str], sets: np.ndarray) -> np.ndarray:
     """Residuals in noise units, cost = Σ_tests (RMSE / noise)², one row per parameter set."""
@@ -186,8 +210,39 @@ def _residuals(tests: Sequence[Test], kinds: Sequence[Kind], model: Model,
     return np.concatenate(out, axis=1)
 
 
+def _transforms(names: Sequence[str], material: Sequence[str]):
+    """The fit's coordinates: friction coefficients as they are, material in logarithms.
+
+    Returns the values of a point (rows of coordinates), the forward-difference steps, the
+    largest step, the step that ends the fit and the bounds, each per coordinate.
+    """
+    from fenicsx_drape.model import parameter_info
+
+    is_log = np.array([n in material for n in names])
+    lo, hi = [], []
+    for n, log in zip(names, is_log):
+        a, b = parameter_info(n).bounds if log else MU_BOUNDS
+        if log:  # a parameter at 0 is not fitted (see fit_forming): its bounds in logarithms
+            a, b = (math.log(a) if a > 0 else -math.inf), (math.log(b) if b < math.inf
+                                                           else math.inf)
+        lo.append(a)
+        hi.append(b)
+    h = np.where(is_log, LOG_STEP, FD_STEP)
+    largest = np.where(is_log, MAX_LOG_STEP, MAX_STEP)
+    tol = np.where(is_log, LOG_XTOL, XTOL)
+
+    def values(x: np.ndarray) -> np.ndarray:
+        return np.where(is_log, np.exp(np.where(is_log, x, 0.0)), x)
+
+    def coordinates(v: np.ndarray) -> np.ndarray:
+        return np.where(is_log, np.log(np.where(is_log, v, 1.0)), v)
+
+    return values, coordinates, h, largest, tol, (np.array(lo), np.array(hi))
+
+
 def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
-                tests: Sequence[str] | None = None, max_iterations: int = MAX_ITERATIONS,
+                tests: Sequence[str] | None = None, material: Sequence[str] = (),
+                max_iterations: int = MAX_ITERATIONS,
                 progress: Callable[[str], None] | None = None) -> Model:
     """Fit the model's forming parameters to the forming tests of ``bundle`` (module doc).
 
@@ -197,7 +252,11 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
         kind_of: Each test's kind (:func:`~fenicsx_drape.diagnosis.kinds.kind_of`; None: no
             kind compares it).
         tests: Only these test ids; all forming tests when None.
-        max_iterations: Gauss-Newton iterations at most (capped at :data:`MAX_ITERATIONS`).
+        material: Material parameters fitted with the friction, in their logarithms (a
+            candidate's own parameters that no coupon test fixes); each costs one more run
+            per test and iteration.
+        max_iterations: Gauss-Newton iterations at most (capped at :data:`MAX_ITERATIONS`,
+            :data:`MAX_MATERIAL_ITERATIONS` with ``material``).
         progress: Called with a line of text per iteration.
 
     Returns:
@@ -209,21 +268,28 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
     chosen = [t for t in bundle.tests if (kind := kind_of(t)) is not None and kind.formed
               and (tests is None or t.id in tests)]
     kinds = [kind_of(t) for t in chosen]
-    names = forming_parameters(model)
-    if not any(holder_mu_free(t) for t in chosen):
-        names = tuple(n for n in names if n != "mu")
+    names = free_parameters(model, chosen)
+    active = model.active_parameters()
+    material = tuple(n for n in dict.fromkeys(material) if n in active and n not in names
+                     and float(model.parameters[n]) > 0.0)
+    names = (*names, *material)
     if not chosen or not names:
         return model
-    p = np.array([float(model.parameters[n]) for n in names])
+    values, coordinates, step_h, largest, tol, (lo, hi) = _transforms(names, material)
+    p = coordinates(np.array([float(model.parameters[n]) for n in names]))
     k = len(names)
-    h = FD_STEP * np.eye(k)
+    h = np.diag(step_h)
+    cap = MAX_MATERIAL_ITERATIONS if material else MAX_ITERATIONS
+
+    def shown(x: np.ndarray) -> dict[str, float]:
+        return {n: float(f"{v:.4g}") for n, v in zip(names, values(x))}
 
     def residuals(*points: np.ndarray) -> np.ndarray:
-        return _residuals(chosen, kinds, model, names, np.vstack(points))
+        return _residuals(chosen, kinds, model, names, values(np.vstack(points)))
 
     def slopes(p: np.ndarray, r: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
         R = residuals(*(p + h)) if R is None else R
-        return (R - r).T / FD_STEP
+        return (R - r).T / step_h
 
     def evaluate(*points: np.ndarray) -> tuple[np.ndarray, list[np.ndarray | None]]:
         """The residuals at ``points`` and each one's Jacobian where its runs were at hand.
@@ -249,48 +315,61 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
                 Js.append(None)
         return R, Js
 
-    # Two starts, judged in the first batch of runs: the model's values and the parameters'
-    # defaults (a warm start from a model without the right physics can sit far off).
-    default = np.clip([parameter_info(n).default for n in names], *MU_BOUNDS)
+    # Two starts, judged in the first batch of runs: the model's values and the friction
+    # coefficients' defaults (a warm start from a model without the right physics can sit
+    # far off); the material stays at the model's values in both.
+    default = p.copy()
+    friction = np.array([n not in material for n in names])
+    default[friction] = np.clip([parameter_info(n).default for n in names if n not in material],
+                                *MU_BOUNDS)
     R, Js = evaluate(p, *([default] if np.abs(default - p).max() > XTOL else []))
     r, J = R[0], Js[0]
     if len(R) > 1 and R[1] @ R[1] < r @ r:
-        say(f"  forming fit: starting from the defaults "
-            f"{ {n: round(float(v), 4) for n, v in zip(names, default)} } "
+        say(f"  forming fit: starting from the defaults {shown(default)} "
             f"(cost {R[1] @ R[1]:.4g}, was {r @ r:.4g})")
         p, r, J = default, R[1], Js[1]
-    for iteration in range(min(max_iterations, MAX_ITERATIONS)):
+    for iteration in range(min(max_iterations, cap)):
         J = slopes(p, r) if J is None else J
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
-        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP)
+        step /= max(1.0, float(np.max(np.abs(step) / largest)))
         for attempt in range(2):  # the Gauss-Newton step, then half of it
-            trial = np.clip(p + step / 2**attempt, *MU_BOUNDS)
-            if np.abs(trial - p).max() < XTOL:
+            trial = np.clip(p + step / 2**attempt, lo, hi)
+            if np.all(np.abs(trial - p) < tol):
                 break
             (r_new,), (J_new,) = evaluate(trial)
-            say(f"  forming fit {iteration + 1}: "
-                f"{ {n: round(float(v), 4) for n, v in zip(names, trial)} }, "
+            say(f"  forming fit {iteration + 1}: {shown(trial)}, "
                 f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
             if r_new @ r_new < r @ r:
                 break
         else:
             break
-        if np.abs(trial - p).max() < XTOL:
+        if np.all(np.abs(trial - p) < tol):
             break
         p, r, J = trial, r_new, J_new
-    return model.with_parameters(**{n: float(v) for n, v in zip(names, p)})
+    return model.with_parameters(**{n: float(v) for n, v in zip(names, values(p))})
 
 
 def fit_friction(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
                  tests: Sequence[str] | None = None, parameters: Sequence[str] | None = None,
                  max_iterations: int = MAX_ITERATIONS, from_features: bool = True,
-                 progress: Callable[[str], None] | None = None, details: dict | None = None
-                 ) -> Model:
+                 progress: Callable[[str], None] | None = None, details: dict | None = None,
+                 own: Sequence[str] = ()) -> Model:
     """The forming kinds' fit hook (:class:`~fenicsx_drape.diagnosis.kinds.base.FitHook`).
 
-    The forming parameters only (:func:`fit_forming`), the material held as the coupons (or
-    the model) left it: ``parameters``, ``from_features`` and ``details`` concern the
-    material.
+    The forming parameters (:func:`fit_forming`), the material held as the coupons (or the
+    model) left it, but for ``own``: a candidate's own parameters that no coupon test of the
+    fit fixes, fitted with the friction (on a bundle of forming tests only, the forming
+    tests are all that can move them). ``from_features`` and ``details`` concern the
+    material; ``parameters``, when given, limits ``own``.
     """
+    from fenicsx_drape.diagnosis.kinds.coupon import coupon_parameters
+
+    fixed: set[str] = set()
+    for test in bundle.tests:
+        kind = kind_of(test)
+        if kind is not None and not kind.formed and (tests is None or test.id in tests):
+            fixed |= set(coupon_parameters(model, test.kind))
+    material = [n for n in own if n not in fixed and (parameters is None or n in parameters)]
     return fit_forming(bundle, model, kind_of=kind_of, tests=tests, progress=progress,
-                       max_iterations=max_iterations)
+                       max_iterations=max_iterations, material=material)
+
