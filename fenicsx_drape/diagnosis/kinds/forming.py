@@ -33,8 +33,9 @@ fit hook: η_o and E_v of ``rate_dependence``, ...) that no coupon test of the f
 bundle of forming tests only, nothing else can move them, and a refit held at its start's
 material is no measure of the candidate. They are fitted with the friction in their
 logarithms (forward differences of :data:`LOG_STEP`, steps of at most :data:`MAX_LOG_STEP`,
-within the parameters' bounds, at most :data:`MAX_MATERIAL_ITERATIONS` iterations): one more
-run per parameter, test and iteration.
+within the parameters' bounds, at most :data:`MAX_MATERIAL_ITERATIONS` iterations, ending
+when one lowers the cost by less than :data:`MATERIAL_FTOL` of it): one more run per
+parameter, test and iteration.
 
 **Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
 a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
@@ -79,9 +80,10 @@ MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
 MU_BOUNDS = (0.0, 2.0)  # friction coefficients fitted within (prepreg on steel: 0.1-0.5)
 # A candidate's own material parameters, fitted with the friction in their logarithms:
 LOG_STEP = 0.05  # forward-difference step in the logarithm (5 %)
-LOG_XTOL = 0.005  # a step smaller than this in every logarithm (and in μ) ends the fit
+LOG_XTOL = 0.02  # a step smaller than this in every logarithm (2 %, and XTOL in μ) ends the fit
 MAX_LOG_STEP = math.log(10.0)  # largest change in one iteration: a factor of 10
 MAX_MATERIAL_ITERATIONS = 6  # Gauss-Newton iterations at most when material is fitted
+MATERIAL_FTOL = 0.01  # with material: an iteration lowering the cost by less (share) ends it
 
 
 # --------------------------------------------------------------------------------------------
@@ -345,7 +347,10 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
             break
         if np.all(np.abs(trial - p) < tol):
             break
+        gain = 1.0 - (r_new @ r_new) / (r @ r)
         p, r, J = trial, r_new, J_new
+        if material and gain < MATERIAL_FTOL:
+            break  # each iteration costs 1 + k runs a test: a step gaining little ends it
     return model.with_parameters(**{n: float(v) for n, v in zip(names, values(p))})
 
 
