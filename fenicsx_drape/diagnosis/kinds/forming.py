@@ -29,13 +29,13 @@ The holder's μ is fitted only where a test's holder does not fix it (a case's
 ``[holder] mu``).
 
 In a candidate's refit the fit also moves the candidate's **own** parameters (``own`` of the
-fit hook: η_o and E_v of ``rate_dependence``, ...) that no coupon test of the fit fixes: on a
-bundle of forming tests only, nothing else can move them, and a refit held at its start's
-material is no measure of the candidate. They are fitted with the friction in their
-logarithms (forward differences of :data:`LOG_STEP`, steps of at most :data:`MAX_LOG_STEP`,
-within the parameters' bounds, at most :data:`MAX_MATERIAL_ITERATIONS` iterations, ending
-when one lowers the cost by less than :data:`MATERIAL_FTOL` of it): one more run per
-parameter, test and iteration.
+fit hook: η_o and E_v of ``rate_dependence``, ...; not a friction's regularisation slip,
+:data:`REGULARISATION`) that no coupon test of the fit fixes: on a bundle of forming tests
+only, nothing else can move them, and a refit held at its start's material is no measure of
+the candidate. They are fitted with the friction in their logarithms (forward differences of
+:data:`LOG_STEP`, steps of at most :data:`MAX_LOG_STEP`, within the parameters' bounds, at
+most :data:`MAX_MATERIAL_ITERATIONS` iterations, ending when one lowers the cost by less
+than :data:`MATERIAL_FTOL` of it): one more run per parameter, test and iteration.
 
 **Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
 a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
@@ -73,6 +73,9 @@ if TYPE_CHECKING:
     from fenicsx_drape.model import Model
 
 FORMING_PARAMETERS = ("mu", "mu_tool")  # what a forming test fits (friction coefficients)
+# Held in a candidate's refit: the slip over which a friction is regularised (sticking below
+# it), a numerical choice the forming tests do not decide (the coefficient acts alike).
+REGULARISATION = ("holder_slip_mm", "tool_slip_mm")
 FD_STEP = 0.02  # forward-difference step in a friction coefficient
 XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
 MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
@@ -364,8 +367,9 @@ def fit_friction(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind
     The forming parameters (:func:`fit_forming`), the material held as the coupons (or the
     model) left it, but for ``own``: a candidate's own parameters that no coupon test of the
     fit fixes, fitted with the friction (on a bundle of forming tests only, the forming
-    tests are all that can move them). ``from_features`` and ``details`` concern the
-    material; ``parameters``, when given, limits ``own``.
+    tests are all that can move them), but for a friction's regularisation slip
+    (:data:`REGULARISATION`). ``from_features`` and ``details`` concern the material;
+    ``parameters``, when given, limits ``own``.
     """
     from fenicsx_drape.diagnosis.kinds.coupon import coupon_parameters
 
@@ -374,7 +378,8 @@ def fit_friction(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind
         kind = kind_of(test)
         if kind is not None and not kind.formed and (tests is None or test.id in tests):
             fixed |= set(coupon_parameters(model, test.kind))
-    material = [n for n in own if n not in fixed and (parameters is None or n in parameters)]
+    material = [n for n in own if n not in fixed and n not in REGULARISATION
+                and (parameters is None or n in parameters)]
     return fit_forming(bundle, model, kind_of=kind_of, tests=tests, progress=progress,
                        max_iterations=max_iterations, material=material)
 
