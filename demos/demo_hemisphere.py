@@ -40,9 +40,9 @@ out = Path(args[0]) if args else Path("results/hemisphere")
 # its name; keyword arguments override its values (a finer net: `cell_mm=5.0`). Its tools are
 # exact closed-form surfaces (`geometry = "builtin:hemisphere"`), its blank a symmetric
 # quarter. Eq. 1 shares the holding force over the nodes under the holder; the paper does not
-# say how its quarter model did, and the file's `force_share = "model"` chooses (docs/paper.md,
-# "Eq. 1's force share and μ"). The material is the paper's model: its four coupon effects
-# plus the blank-holder friction bars.
+# say how its quarter model did, and the file's `holder_force_share = "model"` chooses
+# (docs/paper.md, "Eq. 1's force share and μ"). The material is the paper's model: its four
+# coupon effects plus the blank-holder friction bars.
 
 case = load_case("hemisphere", cell_mm=10.0, duration_s=40.0, holder_force_N=133.0)
 print(f"{case.name}: {case.description}; tools {', '.join(t.name for t in case.tools)}")

@@ -118,7 +118,7 @@ def stack_stl_case(folder: Path, angles=(0.0, 45.0), cell_mm: float = 20.0,
     ``[[ply]]`` of 0.3 mm per angle, ``interply`` the ``[interply]`` table's text.
     """
     from fenicsx_drape.forming.case import load_case
-    from fenicsx_drape.forming.tools.build import build_tools
+    from fenicsx_drape.forming.tools import build_tools
 
     folder.mkdir(parents=True, exist_ok=True)
     source = DOUBLE_DOME / "case.toml"

@@ -144,7 +144,7 @@ Mesh.MeshSizeMax = 20.0;
 #
 # The punch rises 25 mm in 20 s; the die and the holder stand still. The blank is a 200 mm
 # square of 10 mm cells, a quarter model; 200 N on the holder (the whole blank's, as
-# `force_share = "symmetric_part"`, the default, reads it). Every key is in the
+# `holder_force_share = "symmetric_part"`, the default, reads it). Every key is in the
 # {doc}`case format </case-format>`.
 
 (part / "case.toml").write_text("""\
@@ -161,7 +161,7 @@ symmetry = ["x", "y"]
 
 [holder]
 tool = "holder"
-force_N = 200.0
+holder_force_N = 200.0
 
 [[tool]]
 name = "punch"

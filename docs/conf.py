@@ -92,26 +92,30 @@ def escape_bars(lines):
 
 def cli_reference():
     """A directive writing every command's ``--help``, from the real parsers (``cli.md``)."""
-    import os
-
     from docutils import nodes
     from sphinx.util.docutils import SphinxDirective
 
-    from fenicsx_drape import cli
-
     class CommandLine(SphinxDirective):
         def run(self):
-            os.environ["COLUMNS"] = "100"  # argparse wraps at the terminal's width
             out = []
-            for name in cli.COMMANDS:
-                _, parser = cli.command_parser(name)
+            for name, block in cli_blocks():
                 section = nodes.section(ids=[f"drape-{name}"])
                 section += nodes.title(text=f"drape {name}")
-                section += nodes.literal_block(text=parser.format_help())
+                section += block
                 out.append(section)
             return out
 
     return CommandLine
+
+
+def cli_blocks():
+    """Each command's name and its ``--help`` as a plain-text literal block (not highlighted)."""
+    from docutils import nodes
+
+    from fenicsx_drape import cli
+
+    return [(name, nodes.literal_block(text, text, language="text"))
+            for name in cli.COMMANDS for text in [cli.help_text(name)]]
 
 
 def public_packages() -> list[str]:

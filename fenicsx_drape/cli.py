@@ -19,6 +19,7 @@ import argparse
 import importlib
 import sys
 import traceback
+import warnings
 from types import ModuleType
 
 from fenicsx_drape import __version__
@@ -53,13 +54,45 @@ def _top_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _HelpFormatter(argparse.HelpFormatter):
+    """argparse's help, its lines broken at spaces only (a path keeps its hyphens whole)."""
+
+    def _split_lines(self, text, width):
+        import textwrap
+
+        return textwrap.wrap(" ".join(text.split()), width, break_on_hyphens=False)
+
+
 def command_parser(name: str) -> tuple[ModuleType, argparse.ArgumentParser]:
     """The module of command ``name`` (one of :data:`COMMANDS`) and its argument parser."""
     module = importlib.import_module(f"fenicsx_drape.commands.{name}")
-    parser = argparse.ArgumentParser(prog=f"drape {name}", description=COMMANDS[name])
+    parser = argparse.ArgumentParser(prog=f"drape {name}", description=COMMANDS[name],
+                                     formatter_class=_HelpFormatter)
     module.configure(parser)
     add_trust_option(parser)  # the same rule in every command (fenicsx_drape.trust)
     return module, parser
+
+
+HELP_COLUMNS = 80  # the width of the CLI page's help (docs/cli.md): a code block's
+
+
+def help_text(name: str, columns: int = HELP_COLUMNS) -> str:
+    """Command ``name``'s ``--help`` as a terminal ``columns`` wide prints it (the CLI page's).
+
+    The text is the machine's own only in the terminal's width: no option's help names this
+    machine's cores, memory or paths.
+    """
+    import os
+
+    before = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = str(columns)  # argparse wraps at the terminal's width
+    try:
+        return command_parser(name)[1].format_help()
+    finally:
+        if before is None:
+            del os.environ["COLUMNS"]
+        else:
+            os.environ["COLUMNS"] = before
 
 
 def petsc_option_argument(parser: argparse.ArgumentParser) -> None:
@@ -78,13 +111,11 @@ def petsc_option_argument(parser: argparse.ArgumentParser) -> None:
 
 def forming_runs_arguments(parser: argparse.ArgumentParser) -> None:
     """``--workers``, ``--cache``, ``--no-cache``, ``--ranks-per-run``: where runs go, kept."""
-    from fenicsx_drape.runs.workers import cores
-
     parser.add_argument("--workers", type=positive_int, default=None, metavar="N",
-                        help="processes forming at once (default: DRAPE_WORKERS, else this "
-                        f"machine's cores, here {cores()}; under 'python3 -m mpi4py.futures' "
-                        "the job's other ranks). More than the cores (here or in "
-                        "DRAPE_WORKERS) is capped to them, with a note: a run is one "
+                        help="processes forming at once (default: DRAPE_WORKERS, else one "
+                        "per core; under 'python3 -m mpi4py.futures' the job's other ranks). "
+                        "More than the cores (given here or in DRAPE_WORKERS) is capped to them, "
+                        "with a note: a run is one "
                         "process's work, and a worker beyond the cores only waits, holding "
                         "DOLFINx and a run in memory")
     parser.add_argument("--cache", metavar="DIR", default=None,
@@ -143,7 +174,9 @@ def main(argv: list[str] | None = None) -> int:
             from fenicsx_drape.fe.newton import set_petsc_options
 
             set_petsc_options(args.petsc_options)
-        return int(module.run(args) or 0)
+        with warnings.catch_warnings():  # an old name read: a note, as the command's own
+            warnings.showwarning = _old_name_notes(warnings.showwarning)
+            return int(module.run(args) or 0)
     except DrapeInputError as err:
         print(f"drape {name}: error: {err}", file=sys.stderr)
         return 2
@@ -156,6 +189,22 @@ def main(argv: list[str] | None = None) -> int:
         traceback.print_exc()
         print(f"drape {name}: internal error (see the traceback above)", file=sys.stderr)
         return 1
+
+
+def _old_name_notes(show):
+    """A ``warnings.showwarning`` that prints the package's notes of an earlier name read.
+
+    The package's :class:`FutureWarning` of a renamed key becomes one line, ``drape: note:
+    case.toml: [holder] 'force_N' is now called 'holder_force_N' (...)``; any other warning
+    goes to ``show``.
+    """
+    def note(message, category, filename, lineno, file=None, line=None) -> None:
+        if issubclass(category, FutureWarning) and " is now called " in str(message):
+            print(f"drape: note: {message}", file=sys.stderr if file is None else file)
+        else:
+            show(message, category, filename, lineno, file, line)
+
+    return note
 
 
 def positive_float(text: str) -> float:

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import difflib
+import warnings
 from collections.abc import Iterable
 
 __all__ = ["DrapeInputError", "InputFileError", "ParameterError", "SolverError",
-           "did_you_mean", "likely_typo"]
+           "did_you_mean", "likely_typo", "old_name"]
 
 
 class DrapeInputError(ValueError):
@@ -69,3 +70,16 @@ def did_you_mean(name: str, known: Iterable[str]) -> str:
     """`` (did you mean `x`?)`` when ``name`` is a likely typo of a known name, else ``""``."""
     guess = likely_typo(name, known)
     return f" (did you mean `{guess}`?)" if guess else ""
+
+
+def old_name(at: str, old: str, new: str, stacklevel: int = 3) -> str:
+    """``new``, after a note that ``old``, an earlier name of the same value, was read as it.
+
+    One name per quantity in case files, bundles and reports; the earlier name is read for one
+    release with this note (a :class:`FutureWarning`, which Python shows to a command's user),
+    ``at`` naming the file and table or key: ``case.toml: [holder] 'force_N' is now called
+    'holder_force_N' (read as it; the old name goes in the next release)``.
+    """
+    warnings.warn(f"{at} '{old}' is now called '{new}' (read as it; the old name goes in the "
+                  "next release)", FutureWarning, stacklevel=stacklevel)
+    return new

@@ -114,6 +114,19 @@ def test_valid_bundle_loads(bundle_dir):
         bias.force_N[0] = 1.0  # columns are read-only
 
 
+def test_the_holders_friction_condition_has_one_name_the_earlier_one_still_reads(bundle_dir):
+    """A forming test's condition ``mu`` (the holder's μ, as ``drape form`` writes it); the
+    earlier ``friction_coefficient`` is read as ``mu``, with a note naming the file and test."""
+    path = bundle_dir / "bundle.toml"
+    path.write_text(TOML + "\n[test.conditions]\nfriction_coefficient = 0.25\n")
+    with pytest.warns(FutureWarning, match=r"bundle.toml:.*'hemisphere'.* 'friction_coefficient' "
+                      r"is now called 'mu'"):
+        form = load_bundle(bundle_dir).tests[2]
+    assert form.conditions == {"mu": 0.25}
+    path.write_text(TOML + "\n[test.conditions]\nmu = 0.25\n")
+    assert load_bundle(bundle_dir).tests[2].conditions == {"mu": 0.25}
+
+
 def test_windows_files_load(bundle_dir):
     """A byte-order mark and CRLF line ends (spreadsheet exports) are not problems."""
     for name in ("bundle.toml", "tensile.csv"):

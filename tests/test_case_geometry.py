@@ -29,7 +29,7 @@ cell_mm = 20.0
 
 [holder]
 tool = "holder"
-force_N = 10.0
+holder_force_N = 10.0
 
 [[tool]]
 name = "punch"

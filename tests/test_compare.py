@@ -168,3 +168,24 @@ def test_compare_without_sd_uses_the_model_free_noise(tmp_path):
     assert c.noise_source == "second_differences"
     assert c.noise == pytest.approx(5.0, rel=0.2)
     assert result.to_dict()["noise_floor"]["source"] == "second_differences"
+
+
+def test_the_summary_leaves_out_a_percentage_of_nothing():
+    """An outline's measured values are distances to the edge, all 0: its % is of nothing."""
+    from fenicsx_drape.commands.compare import summary
+    from fenicsx_drape.diagnosis.comparison import CompareResult
+
+    rng = np.random.default_rng(4)
+    force = _comparison("bias", rng.normal(0, 1, 40), 0.5, [], {})
+    edge = dataclasses.replace(_comparison("dd/outline", rng.normal(0, 1, 12), 0.3, [], {}),
+                               unit="mm", measured=np.zeros(12))
+    result = CompareResult("b", Model(("rate_dependence",), default_parameters()), (force, edge),
+                           metrics={"dd/outline": {"unmatched": 0}})
+    text = summary(result)
+    assert "nan" not in text.lower()
+    rows = {line.split()[0]: line for line in text.splitlines()[2:4]}
+    assert f"{force.percent:.1f}" in rows["bias"]
+    assert len(rows["dd/outline"].split()) == len(rows["bias"].split()) - 1  # the % left out
+    assert "left blank where the measured values are all 0" in text
+    # Without a blank, no note.
+    assert "left blank" not in summary(dataclasses.replace(result, tests=(force,), metrics={}))

@@ -169,3 +169,50 @@ def test_every_command_shown_is_run_by_a_test():
     tests = "\n".join(p.read_text() for p in (ROOT / "tests").glob("test_*.py"))
     for name in sorted(shown):
         assert re.search(rf'main\(\[\s*"{name}"', tests), f"no test runs 'drape {name}'"
+
+
+def _docs_conf():
+    """``docs/conf.py`` as a module (the CLI page's blocks are made there)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("docs_conf", ROOT / "docs" / "conf.py")
+    conf = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(conf)
+    return conf
+
+
+def test_the_cli_page_is_each_command_s_help_as_plain_text_that_fits():
+    """docs/cli.md's blocks: what ``drape CMD --help`` prints, unhighlighted, lines that fit."""
+    import os
+    import subprocess
+    import sys
+
+    pytest.importorskip("docutils")
+    assert "{drape-commands}" in (ROOT / "docs" / "cli.md").read_text()
+    blocks = dict(_docs_conf().cli_blocks())
+    assert list(blocks) == list(cli.COMMANDS)
+    env = {**os.environ, "COLUMNS": str(cli.HELP_COLUMNS), "PYTHONPATH": str(ROOT)}
+    for name, block in blocks.items():
+        assert block["language"] == "text", f"drape {name}: its help is highlighted as code"
+        text = block.astext()
+        printed = subprocess.run([sys.executable, "-m", "fenicsx_drape", name, "--help"],
+                                 env=env, capture_output=True, text=True, check=True).stdout
+        assert text == printed, f"drape {name}: the page's help is not what --help prints"
+        too_long = [line for line in text.splitlines() if len(line) > cli.HELP_COLUMNS]
+        assert not too_long, f"drape {name}: lines wider than the page's block: {too_long}"
+        broken = re.findall(r"\S+-\n\s*\S+", text)
+        assert not broken, f"drape {name}: words broken at a hyphen: {broken}"
+
+
+def test_the_help_names_nothing_of_the_machine_it_was_made_on(monkeypatch):
+    """The page is made on one machine and read on others: no core count in the help."""
+    import os
+
+    from fenicsx_drape.runs import workers
+
+    texts = {name: cli.help_text(name) for name in cli.COMMANDS}
+    monkeypatch.setattr(workers, "cores", lambda: 97)
+    monkeypatch.setattr(os, "cpu_count", lambda: 97)
+    for name in cli.COMMANDS:
+        assert cli.help_text(name) == texts[name], f"drape {name}: its help names the cores"
+        assert not re.search(r"\bhere \d", texts[name]), f"drape {name}: 'here N' in its help"

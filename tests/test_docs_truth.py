@@ -60,6 +60,18 @@ def test_the_docs_quote_the_contract_version_of_the_code():
     assert all(n == CONTRACT for n, _ in quoted), quoted
 
 
+def test_one_version_number_for_the_spec_in_the_code_the_report_and_the_pages():
+    """The spec's version (its title) is the report's ``contract``; a page that names the
+    spec's version names that one."""
+    title = (ROOT / "docs" / "measurements.md").read_text().splitlines()[0]
+    assert re.fullmatch(r"# .*\(version (\d+)\)", title), title
+    assert int(re.findall(r"\d+", title)[-1]) == CONTRACT
+    for page in PAGES:
+        for number, line in enumerate(page.read_text().splitlines(), start=1):
+            for n in re.findall(r"spec,? version (\d+)", line):
+                assert int(n) == CONTRACT, f"{page.relative_to(ROOT)}:{number}: version {n}"
+
+
 def readme_loop() -> list[list[str]]:
     """The README's diagnosis loop: the code block after "The loop:", as argument lists."""
     text = (ROOT / "README.md").read_text()

@@ -27,7 +27,7 @@ cell_mm = 10.0
 
 [holder]
 tool = "clamp"
-force_N = 100.0
+holder_force_N = 100.0
 
 [[tool]]
 name = "punch"
@@ -84,8 +84,12 @@ MALFORMED = [
     ('role = "punch"', 'role = "punch"\nsheet_side = "up"', "[[tool]] 1 'sheet_side'"),
     ('tool = "clamp"', 'tool = "plates"', "[holder] 'tool': no tool named 'plates'"),
     ('tool = "clamp"', 'tool = "punch"', "[holder] 'tool': tool 'punch' has role 'punch'"),
-    ('force_N = 100.0', 'force_N = -1.0', "[holder] 'force_N': -1.0 must be >= 0"),
-    ('force_N = 100.0', 'force_N = 100.0\nforce_share = "half"', "[holder] 'force_share'"),
+    ('holder_force_N = 100.0', 'holder_force_N = -1.0',
+     "[holder] 'holder_force_N': -1.0 must be >= 0"),
+    ('holder_force_N = 100.0', 'holder_force_N = 100.0\nholder_force_share = "half"',
+     "[holder] 'holder_force_share'"),
+    ('holder_force_N = 100.0', 'holder_force_N = 100.0\nforce_N = 90.0',
+     "'force_N' and 'holder_force_N' name one value: give 'holder_force_N' only"),
     ('z_mm = [0.0, 20.0]', 'z_mm = [0.0, 20.0, 30.0]',
      "[[tool]] 1 [tool.motion] 'z_mm': 3 values for 2 times"),
     ('time_s = [0.0, 10.0]', 'time_s = [0.0, 12.0]', "past [case] duration_s = 10"),
@@ -178,6 +182,33 @@ def test_overrides_are_a_measured_tests_keys(tmp_path):
 
 
 
+def test_the_holders_force_has_one_name_and_the_earlier_keys_still_read(tmp_path):
+    """``holder_force_N`` and ``holder_force_share``: the case's [holder] keys, a test's keys
+    (overrides), drape form's options, the set-up candidate, the case as written; the earlier
+    [holder] keys ``force_N`` and ``force_share`` are read as them, with a note naming each."""
+    from fenicsx_drape.cli import command_parser
+    from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS
+    from fenicsx_drape.forming.case import case_dict
+    from fenicsx_drape.forming.case.format import OVERRIDES
+
+    assert {"holder_force_N", "holder_force_share"} <= set(OVERRIDES)
+    assert "holder_force_N" in SETUP_PARAMETERS
+    assert {"--holder-force-N", "--holder-force-share"} <= set(
+        command_parser("form")[1]._option_string_actions)
+    new = load_case(write(tmp_path, GOOD.replace(
+        "holder_force_N = 100.0", 'holder_force_N = 100.0\nholder_force_share = "model"')))
+    assert case_dict(new)["holder"] == {"tool": "clamp", "holder_force_N": 100.0,
+                                        "holder_force_share": "model"}
+    old_text = GOOD.replace("holder_force_N = 100.0", 'force_N = 100.0\nforce_share = "model"')
+    with pytest.warns(FutureWarning) as notes:
+        old = load_case(write(tmp_path, old_text, "old.toml"))
+    assert old == dataclasses.replace(new, path=old.path)
+    said = [str(n.message) for n in notes]
+    for key in ("force_N", "force_share"):
+        assert any(f"old.toml: [holder] '{key}' is now called 'holder_{key}'" in m
+                   for m in said), said
+
+
 def test_the_holders_friction_coefficient_has_one_name(tmp_path):
     """``mu``: the case's [holder] key, the override, drape form's option, the set-up
     candidate of the spec; the earlier override ``holder_mu`` is read as it, with a warning."""
@@ -197,8 +228,8 @@ def test_the_holders_friction_coefficient_has_one_name(tmp_path):
     with pytest.warns(FutureWarning, match="case.toml: test key: holder_mu"):
         case, used = case_for_test(tmp_path / "case.toml", {"holder_mu": 0.45})
     assert case.holder.mu == 0.45 and used == {"holder_mu": 0.45}
-    no_holder = write(tmp_path, GOOD.replace('[holder]\ntool = "clamp"\nforce_N = 100.0\n', ""),
-                      "bare.toml")
+    no_holder = write(tmp_path, GOOD.replace('[holder]\ntool = "clamp"\nholder_force_N = 100.0\n',
+                                             ""), "bare.toml")
     with pytest.raises(CaseError, match="no \\[holder\\]"):
         with_overrides(load_case(no_holder), mu=0.2)
 

@@ -156,7 +156,7 @@ z_mm = [0.0, 20.0]
 """
 _DIE = ('geometry = "builtin:hemisphere"\nparameters = { ' + TOOLS
         + ' }\n\n[[tool]]\nname = "holder"')
-NO_HOLDER = OCTAGON.replace('[holder]\ntool = "holder"\nforce_N = 100.0\n', "")
+NO_HOLDER = OCTAGON.replace('[holder]\ntool = "holder"\nholder_force_N = 100.0\n', "")
 NO_HOLDER = NO_HOLDER[:NO_HOLDER.rindex("[[tool]]")]
 
 

@@ -31,7 +31,7 @@ def test_form_command_writes_summary_bundle_fields_and_pictures(tmp_path):
     # The bundle names a copy of the case file (the hemisphere's tools are builtin).
     assert test.kind == "forming" and test.case == "case/case.toml"
     assert test.forming_case.blank.symmetry == ("x", "y")
-    assert test.conditions["friction_coefficient"] == 0.25
+    assert test.conditions["mu"] == 0.25  # the holder's μ: its one name
     assert test.forming["holder_force_N"] == 133.0 and test.forming["duration_s"] == 8.0
     # The drawn grid of the quarter: 10 mm is no whole number of 30 mm cells, so the net's
     # own nodes (5 × 5, with their shear), the apex on the punch's top.

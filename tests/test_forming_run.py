@@ -136,7 +136,7 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
                 "edge_displacement_mm", "draw_in_mm", "nodes", "steps", "cutbacks",
                 "snes_iterations", "wall_time_s", "max_penetration_mm", "ranks", "case"):
         assert key in summary
-    assert summary["nodes"] == 25 and summary["case"]["holder"]["force_N"] == 200.0
+    assert summary["nodes"] == 25 and summary["case"]["holder"]["holder_force_N"] == 200.0
     reference = run_case(load_case("hemisphere", **COARSE, holder_force_N=200.0),
                                comm=MPI.COMM_SELF)
     assert summary["max_shear_deg"] == np.abs(reference.grid.shear_deg()).max()
@@ -153,7 +153,7 @@ def test_drape_form_case_toml_end_to_end(tmp_path):
     # The case file is the paper's hemisphere, but not under the paper's conditions: no
     # paper comparison and no paths (Figs. 10-11), with what differs.
     assert not (out / "paths.png").exists()
-    assert summary["paper_differences"] == ["cell 30 mm", "holder force 200 N", "8 s"]
+    assert summary["paper_differences"] == ["cell 30 mm", "holder_force_N 200", "8 s"]
     provenance = json.loads((out / "provenance.json").read_text())
     assert provenance["case"]["blank"]["cell_mm"] == 30.0
     # The bundle names a copy of the case, which loads and is the case that ran.

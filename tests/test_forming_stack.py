@@ -25,7 +25,8 @@ COARSE = {"cell_mm": 30.0, "duration_s": 8.0}
 
 
 def stack(interply, **overrides):
-    case = load_case("hemisphere", **{**COARSE, **overrides})
+    # The die's gap is the two plies' thickness (a die closing on one ply's gap refuses them).
+    case = load_case("hemisphere", **{**COARSE, "ply_thickness_mm": 0.6, **overrides})
     return dataclasses.replace(case, plies=(PlySpec(0.0, 0.3), PlySpec(0.0, 0.3)),
                                interply=tuple(interply.items()))
 

@@ -33,6 +33,8 @@ def stack_case(tmp_path, text=STACK, symmetry="[]"):
     folder = write_case(base, tmp_path / "base").parent
     body = (folder / "case.toml").read_text().replace('symmetry = ["x", "y"]',
                                                        f"symmetry = {symmetry}")
+    # The die's gap: room for the stack (a die closing on one ply's gap refuses it).
+    body = body.replace("ply_thickness_mm = 0.3", "ply_thickness_mm = 0.6")
     path = tmp_path / "stack.toml"
     path.write_text(body + text)
     for f in folder.iterdir():

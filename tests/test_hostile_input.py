@@ -145,11 +145,17 @@ def test_a_stack_that_cannot_fit_the_builtin_dies_gap_is_refused_at_the_reader(t
     assert "cannot fit between the punch 'punch' and the die 'die'" in capsys.readouterr().err
     # The tools as the overrides leave them: without the die the stack has no gap to fit.
     assert load_case(path, die=False).stack
-    # Two plies of 0.3 mm: their mid-planes 0.3 mm apart fit the 0.3 mm gap; the stack, 0.6
-    # mm thick, is squeezed: warned.
-    with pytest.warns(UserWarning, match=r"the stack \(2 plies: 0\.3 \+ 0\.3 mm, 0\.6 mm thick\)"
-                                         r" is thicker than the gap of 0\.3 mm"):
-        load_case(hemisphere_stack(tmp_path, plies(0.3, 0.3)))
+    # Two plies of 0.3 mm: their mid-planes 0.3 mm apart fit the 0.3 mm gap, but the die
+    # would press the 0.6 mm stack into 0.3 mm: refused too, naming the plies and the gap.
+    thick = hemisphere_stack(tmp_path, plies(0.3, 0.3))
+    with pytest.raises(InputFileError) as err:
+        load_case(thick)
+    assert str(err.value) == (
+        f"{thick}: [[ply]]: the stack (2 plies: 0.3 + 0.3 mm, 0.6 mm thick) is thicker than the "
+        "gap of 0.3 mm between the punch 'punch' and the die 'die' (its ply_thickness_mm) at the "
+        "end of the motion: the die would press the plies into each other; make the gap the "
+        "stack's thickness (0.6 mm) or check the plies' thickness_mm")
+    assert load_case(thick, ply_thickness_mm=0.6).stack  # the gap made the stack's: it fits
 
 
 def test_a_stack_that_cannot_fit_a_meshed_die_is_refused_before_the_first_step(tmp_path):
@@ -166,12 +172,15 @@ def test_a_stack_that_cannot_fit_a_meshed_die_is_refused_before_the_first_step(t
     assert ("the stack (2 plies: 0.3 + 1000 mm, 1000.3 mm thick) cannot fit between the punch "
             "'punch' and the die 'die': the plies' mid-planes span 500.15 mm, more than the gap "
             "of 0.5 mm") in "\n".join(errors)
-    thin = dataclasses.replace(case, plies=(PlySpec(0.0, 0.3), PlySpec(0.0, 0.3)))
-    errors, warns = geometry_problems(thin, build_tools(thin), thin.blank.grid().nodes)
-    assert errors == [] and warns == [
+    thick = dataclasses.replace(case, plies=(PlySpec(0.0, 0.3), PlySpec(0.0, 0.3)))
+    errors, _ = geometry_problems(thick, build_tools(thick), thick.blank.grid().nodes)
+    assert errors == [
         "the stack (2 plies: 0.3 + 0.3 mm, 0.6 mm thick) is thicker than the gap of 0.5 mm "
-        "between the punch 'punch' and the die 'die' at the end of the motion: the die "
-        "squeezes it (a gap of 0.6 mm leaves it room)"]
+        "between the punch 'punch' and the die 'die' at the end of the motion: the die would "
+        "press the plies into each other; make the gap the stack's thickness (0.6 mm) or check "
+        "the plies' thickness_mm"]
+    thin = dataclasses.replace(case, plies=(PlySpec(0.0, 0.25), PlySpec(0.0, 0.25)))
+    assert geometry_problems(thin, build_tools(thin), thin.blank.grid().nodes)[0] == []
     assert problems(write_placed_case(tmp_path, die_z=19.5)) == ([], [])  # one ply: no stack
 
 

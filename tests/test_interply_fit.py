@@ -94,4 +94,8 @@ def test_drape_fit_fits_interply_tests(tmp_path, capsys):
     text = (tmp_path / "fit" / "interply.toml").read_text()
     assert "[interply]" in text and "mu_ply = 0.2" in text
     assert (tmp_path / "fit" / "interply.json").stat().st_size > 0
-    assert "inter-ply friction" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "inter-ply friction" in printed
+    # The printout names each value as interply.toml (and a case's [interply]) does.
+    for key in ("tau0_MPa", "mu_ply", "eta_f_MPa_s_per_mm"):
+        assert f"{key} = " in text and f"{key} = " in printed, key

@@ -42,6 +42,23 @@ def test_case_options_and_overrides(case):
                                atol=1e-8)
 
 
+def test_a_case_with_the_holders_earlier_keys_runs_with_a_note_naming_the_new_ones(tmp_path,
+                                                                                  capsys):
+    """``[holder] force_N`` and ``force_share`` (earlier names) are read as ``holder_force_N``
+    and ``holder_force_share``; the command says so in one note line each."""
+    old = tmp_path / "old.toml"
+    old.write_text(CASE.read_text().replace("holder_force_N =", "force_N =")
+                   .replace("holder_force_share =", "force_share ="))
+    assert main(["drape", str(old), "--out", str(tmp_path / "kin"), "--cell-mm", "20",
+                 "--no-pictures"]) == 0
+    err = capsys.readouterr().err
+    for key in ("force_N", "force_share"):
+        assert (f"drape: note: {old}: [holder] '{key}' is now called 'holder_{key}'" in err), err
+    assert "FutureWarning" not in err  # a note, not a traceback-like warning
+    holder = json.loads((tmp_path / "kin" / "summary.json").read_text())["case"]["holder"]
+    assert holder == {"tool": "holder", "holder_force_N": 133.0, "holder_force_share": "model"}
+
+
 def test_drape_command_on_a_case_file(tmp_path, capsys):
     out = tmp_path / "kin"
     assert main(["drape", str(CASE), "--out", str(out), "--cell-mm", "20"]) == 0

@@ -233,8 +233,9 @@ def test_a_partial_kinematic_drape_says_how_much_it_placed(tmp_path, monkeypatch
     monkeypatch.setattr(outputs, "plot_shear", lambda grid, path, title: titles.append(title))
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # said in the summary, not as a Python warning
-        net, numbers = outputs._kinematic_beside(load_case("square_box", cell_mm=20.0),
-                                                 SimpleNamespace(tools=None), tmp_path)
+        run = SimpleNamespace(tools=None, grid=SimpleNamespace(cell_mm=20.0))
+        net, numbers = outputs._kinematic_beside(load_case("square_box", cell_mm=20.0), run,
+                                                 tmp_path)
     placed = int(net.present.sum())
     assert numbers["kinematic_blank_nodes"] == 13 * 13
     assert numbers["kinematic_placed_nodes"] == placed < 13 * 13

@@ -44,7 +44,7 @@ PUBLIC = {
         "TENSILE", "TEST_KINDS", "comparable", "find_kind", "is_formed", "kind_of", "row_sd"],
     "fenicsx_drape.errors": [
         "DrapeInputError", "InputFileError", "ParameterError", "SolverError",
-        "did_you_mean", "likely_typo"],
+        "did_you_mean", "likely_typo", "old_name"],
     "fenicsx_drape.fe": [
         "FieldWriter", "Results", "RunReport", "Sheet", "SolverOptions", "StepReport",
         "TrussGrid", "TrussProblem", "grid_points", "load_sheet", "read_grid", "run",
@@ -96,11 +96,11 @@ PUBLIC = {
         "atomic_write_bytes", "atomic_write_text", "file_digest", "json_text", "run_record",
         "save_figure", "toml_text", "write_json", "write_provenance"],
     "fenicsx_drape.runs": [
-        "CACHE_ENV", "Deferred", "FULL_CELL_MM", "MEMORY_SIZE", "RunStore", "Runs",
+        "CACHE_ENV", "Deferred", "FULL_CELL_MM", "MEMORY_SIZE", "Memo", "RunStore", "Runs",
         "SCREEN_CELL_MM", "USER_OPTIONS", "WORKERS_ENV", "cached", "capped",
         "cell_override", "cores", "current", "default_folder", "default_workers",
         "describe", "execution", "execution_record", "executor", "form_many", "key_of",
-        "resolution", "runs_at_once", "runs_of", "solver_options", "spare", "stopped_at",
+        "memo", "resolution", "runs_at_once", "runs_of", "solver_options", "spare", "stopped_at",
         "together", "tool_forces"],
     "fenicsx_drape.trust": [
         "GEO_DENIED", "GEO_READABLE", "TRUST_ENV", "UntrustedCodeError", "add_trust_option",

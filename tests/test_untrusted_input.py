@@ -71,7 +71,7 @@ cell_mm = {cell_mm}
 
 [holder]
 tool = "holder"
-force_N = 10.0
+holder_force_N = 10.0
 
 [[tool]]
 name = "punch"

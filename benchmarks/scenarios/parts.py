@@ -137,7 +137,7 @@ def write_case(folder: Path, part: str, *, truth: bool, cell_mm: float | None = 
     if stack:
         blank["hold_origin"] = True
     text += lab.toml_table("[blank]", blank) + "\n"
-    holder = {"tool": "holder", "force_N": p["force_N"]}
+    holder = {"tool": "holder", "holder_force_N": p["force_N"]}
     if mu is not None:
         holder["mu"] = mu
     text += lab.toml_table("[holder]", holder) + "\n"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from fenicsx_drape.cli import forming_runs_arguments, petsc_option_argument
@@ -56,13 +57,18 @@ def summary(result) -> str:
              f"{'RMSE/noise':>10}"]
     for c in result.tests:
         lines.append(f"{c.id:<16} {c.rmse:>8.3g} {c.unit:<1} {c.mean_abs:>8.3g} {c.unit:<1} "
-                     f"{c.percent:>6.1f} {c.noise:>8.3g} {c.unit:<1} {c.normalised:>10.2f}")
+                     f"{percent_text(c.percent):>6} {c.noise:>8.3g} {c.unit:<1} "
+                     f"{c.normalised:>10.2f}")
+    if any(not math.isfinite(c.percent) for c in result.tests):
+        lines.append("(% is the mean error over the mean measured value; left blank where the "
+                     "measured values are all 0, as an outline's distances to the edge)")
     for test_id, m in (result.metrics or {}).items():
         if "mean_distance_mm" not in m:  # a lab measurement (spec version 3)
             lines.append(lab_line(test_id, m))
             continue
-        line = (f"{test_id}: mean distance {m['mean_distance_mm']:.2f} mm "
-                f"({m['percent_of_displacement']:.1f} % of the mean node displacement)")
+        line = f"{test_id}: mean distance {m['mean_distance_mm']:.2f} mm"
+        if math.isfinite(m.get("percent_of_displacement", math.nan)):
+            line += f" ({m['percent_of_displacement']:.1f} % of the mean node displacement)"
         if "shear_rmse_deg" in m:
             line += f", shear error {m['shear_rmse_deg']:.2f}° RMS"
         if "stopped_at_travel_mm" in m:
@@ -81,6 +87,11 @@ def summary(result) -> str:
         lines.append(f"normalised error without the outliers {without:.3f}")
     lines += [f"note: {s}" for s in result.skipped]
     return "\n".join(lines)
+
+
+def percent_text(percent: float) -> str:
+    """A percentage with one decimal; "" when it is of nothing (not finite)."""
+    return f"{percent:.1f}" if math.isfinite(percent) else ""
 
 
 def lab_line(test_id: str, m: dict) -> str:

@@ -1,8 +1,9 @@
 """``drape diagnose BUNDLE --model MODEL.toml --json REPORT.json [--out DIR]``.
 
 Which physical effect is the model missing? Writes the report of the diagnosis contract
-(version 2, ``docs/measurements.md``). Exit status 0 when the report was written,
-whatever it concludes; 2 for bad input; 1 for an internal failure.
+(``docs/measurements.md``; ``REPORT.json``'s ``contract`` is the spec's version). Exit status
+0 when the report was written, whatever it concludes; 2 for bad input; 1 for an internal
+failure.
 """
 
 from __future__ import annotations
@@ -56,12 +57,10 @@ def run(args: argparse.Namespace) -> int:
     with forming_runs_setting(args):  # provenance.json records its runs: written inside
         with resolution(args.forming_cell_mm):
             report = diagnose(bundle, model, progress=progress, setup=args.setup)
-        if forming and args.confirm_cell_mm and report["candidates"]:
+        if forming and args.confirm_cell_mm:
             report["confirmation"] = confirm(bundle, report, args.confirm_cell_mm, progress)
         write_diagnosis(report, args.json, args.out, bundle=bundle)
-    if any(e["suspect"] for e in report.get("data_check", ())):
-        print(report["conclusion"])  # data that cannot be of the case, first
-    print(summary(report))
+    print(summary(report))  # the conclusion once (first when data are suspect)
     for label, entry in report.get("confirmation", {}).items():
         if label != "cell_mm":
             print(f"confirmed on {args.confirm_cell_mm:g} mm cells, {label}: "

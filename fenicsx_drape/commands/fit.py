@@ -83,8 +83,9 @@ def _fit_interply(tests, out_dir) -> None:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     law = result.law
-    print(f"inter-ply friction: tau0 = {law.tau0_MPa:.4g} MPa, mu = {law.mu_ply:.4g}, "
-          f"eta_f = {law.eta_f_MPa_s_per_mm:.4g} MPa s/mm; normalised error "
+    # The names of interply.toml's (and a case's [interply]) keys: one name per value.
+    print(f"inter-ply friction: tau0_MPa = {law.tau0_MPa:.4g}, mu_ply = {law.mu_ply:.4g}, "
+          f"eta_f_MPa_s_per_mm = {law.eta_f_MPa_s_per_mm:.4g}; normalised error "
           f"{result.normalised:.3g} (1 = noise floor)")
     for name, why in result.held.items():
         print(f"  {name} held at {getattr(law, name):g}: {why}")

@@ -2,15 +2,22 @@
 
 The rules are the same for every bundle:
 
+- **what the net can judge**: a measurement whose residual is within its net's own error
+  (:func:`~fenicsx_drape.diagnosis.resolution.within_net`: at the noise floor once that
+  error is weighed as noise) is one the net cannot judge: no physics is concluded from it,
+  neither an effect nor missing physics (:func:`judged`). One rule for the baseline's
+  residual (``resolution``) and for what a candidate leaves (``resolution_after``); a
+  measurement a candidate predicts at the noise on held-out rows is one its net does judge
+  (the data then follow a model on this net to within their noise);
 - **significant**: a candidate's ``evidence`` (baseline held-out / candidate held-out
-  normalised error, on the tests of the kinds it acts on: :func:`evidence`) is at least
-  :data:`EVIDENCE_THRESHOLD` (1.2: it predicts unseen data with an error at least 17 %
-  lower);
+  normalised error, on the tests of the kinds it acts on that the net can judge:
+  :func:`evidence`) is at least :data:`EVIDENCE_THRESHOLD` (1.2: it predicts unseen data
+  with an error at least 17 % lower);
 - **ranked** by ``heldout_normalised``; among those within :data:`PARSIMONY` (5 %) of the
   best, the one adding the fewest parameters first (:func:`rank`);
 - **missing**: the first candidate if it is significant and its refit reaches ``normalised
-  <= ADEQUATE`` (1.5), the measurements its net's own error excuses left out
-  (:func:`adequate`);
+  <= ADEQUATE`` (1.5) on the measurements its net can judge (:func:`adequate`); when what
+  it leaves elsewhere keeps its overall error above, the conclusion's first sentence says so;
 - a set-up error fitted again with the missing effect back within :data:`~fenicsx_drape.
   diagnosis.setup_fit.DISTINCT_SD` sd of its stated value is **withdrawn**: the effect, not
   the set-up, was missing (:func:`setup_as_reported`);
@@ -34,7 +41,13 @@ from fenicsx_drape.diagnosis.setup_fit import DISTINCT_SD
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds import Comparison
-    from fenicsx_drape.diagnosis.results import Candidate, DataCheck, Effects, SetupResult
+    from fenicsx_drape.diagnosis.results import (
+        Candidate,
+        DataCheck,
+        Effects,
+        Entry,
+        SetupResult,
+    )
 
 EVIDENCE_THRESHOLD = 1.2  # significant: evidence at least this (fixed for every bundle)
 ADEQUATE = 1.5  # a model within this many times the noise floor explains the data
@@ -48,9 +61,9 @@ SIGNIFICANCE_RULE = (f"significant when evidence (baseline held-out normalised e
 RANKING_RULE = (f"by heldout_normalised; among candidates within {100 * PARSIMONY:g} % of "
                 "the best, the one adding the fewest parameters first")
 MISSING_RULE = (f"the first candidate if significant and its refit reaches "
-                f"normalised <= {ADEQUATE} (on the measurements whose residual "
-                "its net does not explain or is within its net's own error, "
-                "resolution_after)")
+                f"normalised <= {ADEQUATE} on the measurements its net can judge (those "
+                f"whose residual is not within the net's own error: residual > {ADEQUATE} × "
+                "√(noise² + discretisation_error²), resolution_after)")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,14 +90,17 @@ def evidence(baseline: Sequence[Comparison], candidate: Sequence[Comparison],
 
     Tests of other kinds (coupons, for a forming effect) are predicted alike by both and
     would only dilute the ratio; with none of them, all tests count. The measurements whose
-    residual the net explains (``resolved``) are no evidence: with nothing else, the evidence
-    is 1.
+    residual is within the net's own error (``resolved``) are no evidence, unless the
+    candidate predicts them at the noise (``ADEQUATE``): a model on this net then follows
+    the data to within their noise, and the net's error is not in the way. With nothing
+    left, the evidence is 1.
     """
     from fenicsx_drape.effects import describe_effect
 
     kinds = {k for name in effects for k in describe_effect(name).test_kinds}
     pick = [i for i, c in enumerate(baseline) if c.kind in kinds] or range(len(baseline))
-    pick = [i for i in pick if baseline[i].id not in resolved]
+    pick = [i for i in pick if baseline[i].id not in resolved
+            or candidate[i].normalised <= ADEQUATE]
     if not pick:
         return 1.0
     after = normalised_error([candidate[i] for i in pick])
@@ -103,24 +119,29 @@ def rank(candidates: Sequence[Candidate]) -> list[Candidate]:
     return ranked
 
 
+def judged(compared: Sequence[Comparison], checked: Sequence[Entry] | None
+           ) -> list[Comparison]:
+    """The comparisons of the measurements the net can judge (module doc).
+
+    ``checked``: the model's resolution entries (None or empty: nothing checked, all count).
+    """
+    unjudged = {e["measurement"] for e in checked or () if e["explains"]}
+    return [c for c in compared if c.id not in unjudged]
+
+
 def adequate(candidate: Candidate) -> bool:
-    """Whether a candidate's refit reaches the noise floor, its net's own error excused.
+    """Whether a candidate's refit reaches the noise floor on what its net can judge.
 
     ``normalised <= ADEQUATE`` on every test; else the measurements it still misses were
-    checked for resolution as the baseline's were (``resolution_after``), and it is adequate
-    when those its net does not excuse are within ``ADEQUATE``. A measurement is excused when
-    the net explains it (the baseline's rule), or when what the candidate leaves beyond the
-    noise is within its net's own error e_Δ (``within_net_error``): the candidate's
-    parameters were refitted on that net, so the finer net need not come nearer, and no net
-    this coarse can tell that residual from the truth.
+    checked against its net (``resolution_after``: the candidate formed on half the cell),
+    and those whose leftover is within the net's own error are left out (:func:`judged`):
+    it is adequate when the rest are within ``ADEQUATE`` (or none is left).
     """
     if candidate.error_after["normalised"] <= ADEQUATE:
         return True
-    checked = candidate.resolution_after
-    if not checked:  # not checked (no formed part), or nothing it misses to check
+    if not candidate.resolution_after:  # not checked (no formed part), or nothing to check
         return False
-    excused = {e["measurement"] for e in checked if e["explains"] or e["within_net_error"]}
-    rest = [c for c in candidate.after if c.id not in excused]
+    rest = judged(candidate.after, candidate.resolution_after)
     return not rest or normalised_error(rest) <= ADEQUATE
 
 

@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -164,8 +163,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     report = format_report(bundle, checked, base, held, resolution, effects, decision, groups,
                            measures_stage(base, decision.ranked),
                            seconds=time.perf_counter() - start)
-    say(report["conclusion"])
-    return report
+    return report  # its conclusion is the summary's (printed once, by the command)
 
 
 # --------------------------------------------------------------------------------------------
@@ -451,25 +449,21 @@ def setup_with_effect_stage(stage: SetupResult | None, best: Candidate | None, b
 
 
 def net_check_stage(best: Candidate | None, say: Progress) -> Candidate | None:
-    """Is what a significant best candidate leaves beyond the noise its net's own error?
+    """Can the net judge what a significant best candidate leaves beyond the noise?
 
     When its refit stays above ``ADEQUATE`` on a formed part, the measurements it still
-    misses are checked for resolution as the baseline's were (the candidate formed on half
-    the cell); each entry says whether what it leaves beyond the noise is within the net's
-    own error e_Δ (``within_net_error``). Returns the candidate with ``resolution_after``
-    (itself when it needs no check).
+    misses are checked against its net as the baseline's were (the candidate formed on half
+    the cell, :func:`~fenicsx_drape.diagnosis.resolution.check_resolution`): each entry's
+    ``explains`` says whether what it leaves is within the net's own error (the one rule of
+    :mod:`~fenicsx_drape.diagnosis.resolution`). Returns the candidate with
+    ``resolution_after`` (itself when it needs no check).
     """
     if (best is None or not best.significant or best.error_after["normalised"] <= ADEQUATE
             or not any(is_formed(t) for t in best.tests)):
         return best
-    say(f"candidate {best.effect}: is what it leaves the net's?")
+    say(f"candidate {best.effect}: can its net judge what it leaves?")
     checked = check_resolution(best.tests, best.model, best.after, ADEQUATE, say)
-    entries = []
-    for e in checked:
-        error = e.get("discretisation_error")
-        entries.append({**e, "within_net_error": bool(error is not None and math.sqrt(
-            max(0.0, e["residual"] ** 2 - e["noise"] ** 2)) <= error)})
-    return dataclasses.replace(best, resolution_after=tuple(entries))
+    return dataclasses.replace(best, resolution_after=tuple(checked))
 
 
 def measures_stage(base: Baseline, ranked: Sequence[Candidate]) -> dict[str, Any]:

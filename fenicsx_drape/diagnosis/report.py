@@ -45,6 +45,7 @@ from fenicsx_drape.diagnosis.words import (
     groups_sentence,
     noise_notes,
     pattern_of,
+    unjudged,
 )
 
 if TYPE_CHECKING:
@@ -62,7 +63,7 @@ if TYPE_CHECKING:
     from fenicsx_drape.measurements.bundle import Bundle, Test
     from fenicsx_drape.model import Model
 
-CONTRACT = 3  # version of the diagnosis contract the report follows
+CONTRACT = 4  # the measurement spec's version (docs/measurements.md), which the report follows
 
 
 class Report(dict):
@@ -121,10 +122,15 @@ def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: H
         candidates.append(candidate_record(c, explain(c, pattern, normalised_error(compared),
                                                       heldout.normalised)))
         models[c.effect], comparisons[c.effect] = c.model, list(c.after)
-    words = setup_sentence(stage) + resolution_sentence(resolution.entries) + (
-        groups_conclusion(groups, missing) or (
-            conclusion(missing, decision.best, compared, pattern, base.optimiser, coupons,
-                       resolution.explained) + groups_sentence(groups)))
+    # The physics first: its first sentence says how good the best model is; then the
+    # set-up error named, the measurements the net cannot judge, the coupon groups.
+    fitted = stage.setup_error if stage is not None else None
+    words = " ".join(w.strip() for w in (
+        groups_conclusion(groups, missing)
+        or conclusion(missing, decision.best, compared, pattern, base.optimiser, coupons,
+                      resolution.entries, setup_fitted=fitted),
+        setup_sentence(stage), resolution_sentence(unjudged(resolution.entries, missing)),
+        "" if groups_conclusion(groups, missing) else groups_sentence(groups)) if w.strip())
     if missing and missing.setup_refitted:
         j = missing.setup_refitted
         words += (f" With {missing.effect} added, {j.parameter} is fitted "
@@ -200,15 +206,34 @@ def plot_candidates(report: dict[str, Any], path: str | Path) -> Path:
     ax.set_xscale("log")
     ax.set_yticks(y, [r[0] for r in rows], fontsize=8)
     ax.set_xlabel("normalised error (RMSE / noise)")
-    ax.set_title(f"missing effect: {report['missing_effect']}")
+    ax.set_title(found_text(report), fontsize=9)
     ax.legend(fontsize=7, loc="lower right")
     return save_figure(fig, path)
 
 
+def found_text(report: dict[str, Any]) -> str:
+    """What the run found, in a few words (the candidates picture's title)."""
+    suspects = [f"{e['test']}/{e['measurement']}" for e in report.get("data_check", ())
+                if e["suspect"]]
+    if suspects:
+        return f"check the data: {', '.join(suspects)}"
+    found = []
+    if report.get("setup_error"):
+        found.append(f"set-up error {report['setup_error']}")
+    if report["missing_effect"]:
+        found.append(f"missing effect {report['missing_effect']}")
+    return "found: " + " and ".join(found) if found else "found: no set-up error, no effect"
+
+
 def summary(report: dict[str, Any]) -> str:
-    """The report as text: baseline, ranked candidates, untestable effects, conclusion."""
+    """The report as text: baseline, ranked candidates, untestable effects, conclusion.
+
+    The conclusion is printed once: first when data are suspect, else last.
+    """
     base = report["baseline"]
-    lines = [f"baseline ({', '.join(base['effects']) or 'no effects'}): normalised "
+    suspect = any(e["suspect"] for e in report.get("data_check", ()))
+    lines = [report["conclusion"]] if suspect else []
+    lines += [f"baseline ({', '.join(base['effects']) or 'no effects'}): normalised "
              f"{base['error']['normalised']:.3g}, held-out {base['heldout_normalised']:.3g} "
              f"(noise floor 1; from {report['noise_floor']['source']})"]
     if base.get("optimiser", {}).get("statement"):
@@ -236,7 +261,8 @@ def summary(report: dict[str, Any]) -> str:
         lines.append(f"outlier left out: {o['file']}:{o['line']} ({o['id']}), residual "
                      f"{o['residual']:.3g} × noise")
     lines.append(f"missing_effect: {report['missing_effect']}")
-    lines.append(report["conclusion"])
+    if not suspect:
+        lines.append(report["conclusion"])
     return "\n".join(lines)
 
 

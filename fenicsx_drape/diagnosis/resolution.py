@@ -2,23 +2,29 @@
 
 A model on a coarse net differs from the same model on a fine one, and a lab's measurement is
 not made on the model's net (spec version 4, "resolution before physics"). Before an effect
-is named, :func:`check_resolution` forms the fitted baseline again on a net of half the cell
+is named, :func:`check_resolution` forms the fitted model again on a net of half the cell
 and estimates, per forming measurement, the discretisation error of the net it ran on:
 
     e_Δ ≈ 2 · RMS(v_Δ − v_Δ/2)
 
 (Richardson's estimate for a first-order scheme: the shear of the truss is one angle per
-cell, its positions bilinear in the cells, so the error falls at least as Δ); the finer net
-keeps e_Δ/2 ≈ RMS(v_Δ − v_Δ/2) of it. The residual is **explained** by the net when refining
-brings the model nearer the measurement (the residual on the finer net is the smaller) and
-what the finer net still leaves beyond the noise, √max(0, RMSE_Δ/2² − σ²), is within the
-error that net still has, e_Δ/2: a net fine enough would remove it, and adding physics is not
-what it asks for. A residual that stays as the net is refined (a missing effect larger than
-the net's error) is not explained. The net that would resolve it is the cell ``Δ / 2^k`` at
-which the error, falling as Δ, drops below the noise (``suggested_cell_mm``).
+cell, its positions bilinear in the cells, so the error falls at least as Δ).
 
-Only measurements the baseline misses (normalised error above ``adequate``) are checked:
-the others have nothing to explain.
+**One rule for what the net can tell** (:func:`within_net`): a residual R (noise σ) is
+within the net's own error when, that error weighed as noise, the measurement is at the
+noise floor: R ≤ ``adequate`` · √(σ² + e_Δ²) — the net's error comparable to the residual or
+larger. Its ``explains`` is then true and no physics is concluded from that measurement,
+for or against: no effect is named on it, and no missing physics is declared from it. The
+same rule judges what a candidate leaves (``resolution_after``). Whether the residual *is*
+the net's error is a further question, which only the finer net answers: it is so when that
+net comes nearer the data and leaves no more than its own remaining error, e_Δ/2
+(:func:`shown`); a residual the finer net does not shrink (data made on this very net, or a
+lab's own method at the net's scale) is one the net cannot judge, not the net's error. The
+net that would decide is the cell ``Δ / 2^k`` at which the error, falling as Δ, drops below
+the noise (``suggested_cell_mm``): ``drape diagnose --confirm-cell-mm`` takes it.
+
+Only measurements the model misses (normalised error above ``adequate``) are checked: the
+others have nothing to explain.
 """
 
 from __future__ import annotations
@@ -93,12 +99,35 @@ def check_resolution(tests: Sequence[Test], model: Model, comparisons: Sequence[
             left = float(np.sqrt(np.nanmean((values - coarse) ** 2)))  # e_Δ/2
             error = REFINE**ORDER / (REFINE**ORDER - 1) * left  # e_Δ
             fine_residual = float(np.sqrt(np.nanmean((values - measured) ** 2)))
-            beyond = math.sqrt(max(0.0, fine_residual**2 - c.noise**2))
             out.append({**entry, "discretisation_error": error, "fine_cell_mm": fine,
                         "fine_residual": fine_residual,
-                        "explains": bool(fine_residual < c.rmse and beyond <= left),
+                        "explains": within_net(c.rmse, c.noise, error, adequate),
                         "suggested_cell_mm": suggested_cell(cell, error, c.noise)})
     return out
+
+
+def within_net(residual: float, noise: float, error: float | None, adequate: float) -> bool:
+    """Whether a residual is within the net's own error (module doc): the net cannot judge it.
+
+    ``residual <= adequate · √(noise² + error²)``: with the net's error ``error`` weighed as
+    noise, the measurement is at the noise floor. False when the error is unknown.
+    """
+    if error is None or not math.isfinite(error):
+        return False
+    return bool(residual <= adequate * math.hypot(noise, error))
+
+
+def shown(entry: dict[str, Any]) -> bool:
+    """Whether the finer net shows the residual to be the net's own error (module doc).
+
+    It comes nearer the data, and what it leaves beyond the noise is within the error it
+    still has (e_Δ/2 of a first-order net halved).
+    """
+    error, fine = entry.get("discretisation_error"), entry.get("fine_residual")
+    if error is None or fine is None:
+        return False
+    beyond = math.sqrt(max(0.0, fine**2 - entry["noise"] ** 2))
+    return bool(fine < entry["residual"] and beyond <= error / REFINE**ORDER)
 
 
 def suggested_cell(cell_mm: float, error: float, noise: float) -> float:
@@ -119,34 +148,51 @@ def explained(entries: Sequence[dict[str, Any]]) -> set[str]:
 
 
 def sentence(entries: Sequence[dict[str, Any]]) -> str:
-    """The conclusion's words on the measurements the net explains ("" when none)."""
+    """The conclusion's words on the measurements the net cannot judge ("" when none)."""
     hits = [e for e in entries if e["explains"]]
     if not hits:
         return ""
-    parts = [f"{e['measurement']} (residual {e['residual']:.3g} {e['unit']}, the "
-             f"{e['cell_mm']:g} mm net's own error {e['discretisation_error']:.3g} {e['unit']})"
-             for e in hits]
+    cells = sorted({e["cell_mm"] for e in hits})
+    net = " and ".join(f"{c:g}" for c in cells)
     advice = finer_net(hits)
-    return (f"Resolution: the model's net explains the residual of {', '.join(parts)}; no "
-            f"effect is named on that evidence. {advice[0].upper()}{advice[1:]}. ")
+    return (f"Resolution: the {net} mm net cannot judge {', '.join(map(judged_text, hits))}: "
+            f"no physics is concluded from {'it' if len(hits) == 1 else 'them'}. "
+            f"{advice[0].upper()}{advice[1:]}. ")
+
+
+def judged_text(e: dict[str, Any]) -> str:
+    """One measurement the net cannot judge: its residual, the net's error, the finer net."""
+    u = e["unit"]
+    fine = e.get("fine_residual")
+    if shown(e):
+        tail = (f"; the {e['fine_cell_mm']:g} mm net comes nearer, {fine:.3g} {u}: the "
+                "net's own error")
+    elif fine is not None and fine >= e["residual"]:
+        tail = (f"; the {e['fine_cell_mm']:g} mm net is farther from the data, {fine:.3g} "
+                f"{u}: not shown to be the net's error")
+    else:
+        tail = ""
+    return (f"{e['measurement']} (residual {e['residual']:.3g} {u}, noise {e['noise']:.2g} "
+            f"{u}; the net's own error there {e['discretisation_error']:.3g} {u}{tail})")
 
 
 def finer_net(entries: Sequence[dict[str, Any]]) -> str:
-    """Which net to compare on again, with its cost, and what it would still leave.
+    """Which net would decide, with its cost and how to ask for it, and what it would leave.
 
     The finest ``suggested_cell_mm`` of the entries and its nodes against the net they ran
-    on; when even that cell (:data:`MAX_HALVINGS` halvings) leaves an estimated error above
-    the noise, the words say so, with the measurement, rather than promise it resolves it.
+    on; ``--confirm-cell-mm`` takes it. When even that cell (:data:`MAX_HALVINGS` halvings)
+    leaves an estimated error above the noise, the words say so, with the measurement,
+    rather than promise it decides.
     """
     cell = min(e["suggested_cell_mm"] for e in entries)
     nodes = (max(e["cell_mm"] for e in entries) / cell) ** 2
     cost = f"about {nodes:.0f} times the nodes" if nodes >= 1.5 else "the same net"
     left = [(e, e["discretisation_error"] * (cell / e["cell_mm"]) ** ORDER) for e in entries]
     left = [(e, v) for e, v in left if v > e["noise"]]
+    ask = f"--confirm-cell-mm {cell:g}, {cost}"
     if not left:
-        return f"compare again on {cell:g} mm cells (--forming-cell-mm {cell:g}, {cost}) " \
-               "to resolve it"
+        return f"a {cell:g} mm net would decide ({ask})"
     still = ", ".join(f"{v:.2g} {e['unit']} on {e['measurement']} (noise {e['noise']:.2g} "
                       f"{e['unit']})" for e, v in left)
-    return (f"compare again on finer cells (--forming-cell-mm): by the net's first-order "
-            f"estimate, even {cell:g} mm cells ({cost}) would still leave {still}")
+    return (f"a finer net would decide: by the net's first-order estimate, even {cell:g} mm "
+            f"cells ({ask}) would still leave {still}")

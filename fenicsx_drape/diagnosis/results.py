@@ -135,6 +135,9 @@ class SetupResult:
     parameters: tuple[str, ...] = ()  # the parameters it was asked to try
     found_with_effect: str | None = None  # the effect it needed in to name its error
     withdrawn: str | None = None  # the error withdrawn: the effect, not the set-up, missing
+    # the noise it judged with, where widened by the net's own error: ``measurements`` (the
+    # net's error of each), ``normalised`` (the stated set-up's error on it); None: as stated
+    widened: Entry | None = None
 
 
 @dataclasses.dataclass(frozen=True)

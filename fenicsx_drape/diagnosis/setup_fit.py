@@ -50,7 +50,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -109,6 +109,7 @@ class SetupFit:
     values: dict[str, np.ndarray]  # the simulated values at p, by test id
     stated_normalised: float  # the stated set-up's error on the model the parameter needs
     folds_formed: int  # folds predicted by a run (not linearised)
+    heldout_rmse: Mapping[str, float] = dataclasses.field(default_factory=dict)  # by test id
 
 
 @dataclasses.dataclass(frozen=True)
@@ -292,9 +293,10 @@ def fit_candidate(runs: SetupRuns, test0: Test, below: float, say: Progress
     if min(costs) > (1.0 - GAIN_BELOW) * float(r0 @ r0):
         stopped = nothing_to_gain(runs, start, r0, scanned, axes, say)
         if stopped is not None:
+            compared = runs.compare(base_values)
             return SetupFit(stopped.p, start, stopped.sd_internal, stopped.sd_fit,
-                            runs.compare(base_values), base_ho, 1.0, change, base_values,
-                            base_ho, 0)
+                            compared, base_ho, 1.0, change, base_values, base_ho, 0,
+                            {c.id: c.rmse for c in compared})
     p = start.copy()
     for i in range(k):  # the best of each axis (the offsets' axes act nearly apart)
         best = min([(float(r0 @ r0), 0.0)] + [(c, v) for c, (j, v) in zip(costs, axes)
@@ -354,10 +356,11 @@ def fit_candidate(runs: SetupRuns, test0: Test, below: float, say: Progress
         for t in runs.tests:
             held = runs.by_value(t, ~masks[b][t.id])
             predicted[t.id][held] = chosen[t.id][held]
-    heldout = normalised_error(runs.compare(predicted))
+    held = runs.compare(predicted)
+    heldout = normalised_error(held)
     evidence = base_ho / heldout if heldout > 0 else math.inf
     return SetupFit(p, start, sd, sd_fit, after, heldout, evidence, change, fitted_values,
-                    base_ho, len(far))
+                    base_ho, len(far), {c.id: c.rmse for c in held})
 
 
 def distinct(c: SetupFit) -> bool:

@@ -28,8 +28,12 @@ tell them apart: when both are tried, ``mu`` is not formed again but reported fr
 force's fit (μ · F'/F, the same errors and evidence, ``tied_to`` and ``confounded_with``).
 
 Before the candidates, the stated set-up's own residual is checked against its net
-(:mod:`~fenicsx_drape.diagnosis.resolution`): a measurement the net explains still counts,
-its noise widened by the net's own error (:func:`widened`).
+(:mod:`~fenicsx_drape.diagnosis.resolution`): a measurement whose residual the finer net
+shows to be the net's own error (:func:`~fenicsx_drape.diagnosis.resolution.shown`) still
+counts, its noise widened by that error (:func:`widened`). The stage
+judges its candidates (evidence, sd, significance) on that widened noise; the errors it
+reports are on the stated noise, one scale with every other model of the report, and what it
+judged with is kept beside them (``widened``: :func:`restated`).
 """
 
 from __future__ import annotations
@@ -47,7 +51,7 @@ from fenicsx_drape.diagnosis.decision import Rules
 from fenicsx_drape.diagnosis.folds import NODE_SCHEME
 from fenicsx_drape.diagnosis.kinds import is_formed, kind_of, row_sd
 from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
-from fenicsx_drape.diagnosis.resolution import check_resolution, explained
+from fenicsx_drape.diagnosis.resolution import check_resolution, shown
 from fenicsx_drape.diagnosis.results import SetupBest, SetupResult
 from fenicsx_drape.diagnosis.setup_fit import (
     DISTINCT_SD,
@@ -90,11 +94,12 @@ MODELS_DIFFER = 2.0
 
 
 def setup_candidate(name: str, tests: Sequence[Test], test0: Test, model: Model,
-                    base_ho: float, rules: Rules, say: Progress
+                    base_ho: float, rules: Rules, say: Progress, widened_noise: bool = False
                     ) -> tuple[dict[str, Any], SetupFit | None]:
     """One set-up candidate: its report entry and its fit, or (its untestable entry, None).
 
-    ``base_ho`` is the stated set-up's held-out error (its evidence's numerator).
+    ``base_ho`` is the stated set-up's held-out error (its evidence's numerator);
+    ``widened_noise``: the tests' noise is widened by the net's own error (said so).
     """
     reason = why_not(name, tests)
     if reason is not None:
@@ -132,7 +137,8 @@ def setup_candidate(name: str, tests: Sequence[Test], test0: Test, model: Model,
     say(f"  fitted {show(name, c.p, test0, model)} ± {value_text(entry['sd'])} "
         f"(fit alone ± {value_text(entry['sd_fit'])}), normalised "
         f"{entry['error_after']['normalised']:.3g}, held-out "
-        f"{c.heldout_normalised:.3g}, evidence {c.evidence:.3g}; "
+        f"{c.heldout_normalised:.3g}{' (the widened noise)' if widened_noise else ''}, "
+        f"evidence {c.evidence:.3g}; "
         f"{runs.formed} forming runs ({c.folds_formed} for the folds)")
     return entry, c
 
@@ -179,6 +185,8 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
     tied = "mu" in names and "holder_force_N" in names[:names.index("mu")]
     own = [n for n in names if not (n == "mu" and tied)]
     resolution = None
+    stated_noise = {c.id: c.noise for c in base_cmp}  # each test's noise as stated
+    net_error: dict[str, float] = {}  # the net's own error, where it widens the noise
     if rules.adequate is not None:
         # Resolution before the set-up, too: a measurement whose residual at the stated
         # set-up is the net's own error is no evidence of a set-up error. Its verdict weighs
@@ -187,19 +195,28 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
             functools.partial(check_resolution, tests, model, base_cmp, rules.adequate),
             *(functools.partial(first_runs, name, tests, test0, model) for name in own)], say)
         resolution = tuple(checked)
-        resolved = explained(resolution)
+        # Widened where the finer net shows the residual to be the net's own error (it comes
+        # nearer the data, within its own error): a residual the net's error could hide but
+        # a finer net does not shrink (data of this very net) is left to the set-up's own
+        # evidence: a blank 10 mm off is 20 × the noise and within a 20 mm net's error.
+        resolved = {e["measurement"] for e in resolution if shown(e)}
         if resolved:
             # They still count: a set-up that moves the part far from them must pay for it.
             # Their noise is widened by the net's own error (what the net cannot resolve).
-            say(f"  set-up stage: the net explains the residual of {', '.join(sorted(resolved))}"
-                "; their noise is widened by the net's own error")
-            error = {e["measurement"]: e["discretisation_error"] for e in resolution
-                     if e["explains"]}
-            tests = [widened(t, error[t.id]) if t.id in error else t for t in tests]
+            say(f"  set-up stage: the finer net shows the residual of "
+                f"{', '.join(sorted(resolved))} to be the net's own error; their noise is "
+                "widened by it")
+            net_error = {e["measurement"]: e["discretisation_error"] for e in resolution
+                         if shown(e)}
+            tests = [widened(t, net_error[t.id]) if t.id in net_error else t for t in tests]
             test0 = tests[0]
             base_cmp = stated_comparisons(tests, model)
     base_ho = normalised_error(base_cmp)  # nothing is fitted: held-out = the error
-    say(f"set-up as stated: normalised error {base_ho:.3g} on {len(tests)} forming test(s)")
+    stated_error = restated_error(error_record(base_cmp), stated_noise)
+    say(f"set-up as stated: normalised error {stated_error['normalised']:.3g} on "
+        f"{len(tests)} forming test(s)" + (
+            f" ({base_ho:.3g} with the noise of {', '.join(sorted(net_error))} widened by "
+            "the net's own error, as the set-up stage judges)" if net_error else ""))
     rule = (f"significant when evidence (stated held-out / candidate held-out, on "
             f"the forming tests) and evidence_on_model (the same with the stated "
             f"set-up on the model the candidate needs) are >= {rules.evidence} "
@@ -209,7 +226,8 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
             f"near-ties ({100 * rules.parsimony:g} %) to fewer parameters, then to the "
             f"order {', '.join(SETUP_PARAMETERS)}")
     outcomes = dict(zip(own, together([functools.partial(
-        setup_candidate, name, tests, test0, model, base_ho, rules) for name in own], say)))
+        setup_candidate, name, tests, test0, model, base_ho, rules,
+        widened_noise=bool(net_error)) for name in own], say)))
     tried: list[tuple[dict[str, Any], SetupFit]] = []
     untestable: list[dict[str, Any]] = []
     for name in names:
@@ -250,11 +268,36 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
     if tried and tried[0][0]["significant"]:
         entry, c = tried[0]
         best = SetupBest(entry["parameter"], tuple(float(v) for v in c.p))
+    widening = None
+    if net_error:
+        widening = {"measurements": {k: net_error[k] for k in sorted(net_error)},
+                    "normalised": base_ho}
+        tried = [(restated(e, c, stated_noise), c) for e, c in tried]
     return nothing(entries=tuple(e for e, _ in tried),
                    setup_error=best.parameter if best else None,
-                   untestable=tuple(untestable), stated_error=error_record(base_cmp),
-                   stated_heldout_normalised=base_ho, scheme=NODE_SCHEME, rule=rule,
-                   resolution=resolution, model_note=note, best=best)
+                   untestable=tuple(untestable), stated_error=stated_error,
+                   stated_heldout_normalised=stated_error["normalised"], scheme=NODE_SCHEME,
+                   rule=rule, resolution=resolution, model_note=note, best=best,
+                   widened=widening)
+
+
+def restated_error(record: dict[str, Any], noise: dict[str, float]) -> dict[str, Any]:
+    """An error record's ``normalised`` on the given noise of each test (its ``per_test``)."""
+    ratios = [record["per_test"][k] / noise[k] for k in record["per_test"]]
+    return {**record, "normalised": float(np.sqrt(np.mean(np.square(ratios))))}
+
+
+def restated(entry: dict[str, Any], c: SetupFit, noise: dict[str, float]) -> dict[str, Any]:
+    """A candidate's entry with its errors on the stated noise (one scale in the report).
+
+    What the stage judged with, on the noise widened by the net's own error, is kept as
+    ``widened`` (``normalised``, ``heldout_normalised``); ``evidence`` is its ratio.
+    """
+    held = restated_error({"per_test": dict(c.heldout_rmse)}, noise)["normalised"]
+    return {**entry, "error_after": restated_error(entry["error_after"], noise),
+            "heldout_normalised": held,
+            "widened": {"normalised": entry["error_after"]["normalised"],
+                        "heldout_normalised": entry["heldout_normalised"]}}
 
 
 def model_note(tried: list, stated_ho: float) -> str | None:

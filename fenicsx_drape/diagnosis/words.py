@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from fenicsx_drape.diagnosis.comparison import locate, normalised_error, trends
 from fenicsx_drape.diagnosis.decision import ADEQUATE, EVIDENCE_THRESHOLD, UNTESTABLE_BELOW
-from fenicsx_drape.diagnosis.resolution import finer_net
+from fenicsx_drape.diagnosis.resolution import finer_net, judged_text
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -146,50 +146,103 @@ def groups_sentence(groups: dict[str, Any] | None) -> str:
 
 def conclusion(missing: Candidate | None, best: Candidate | None, base: Sequence[Comparison],
                pattern: str, optimiser: dict[str, Any] | None = None, coupons=None,
-               resolved: frozenset[str] = frozenset()) -> str:
-    """The conclusion on the physics: the missing effect, none, or why none was found."""
+               resolution: Sequence[dict[str, Any]] = (), setup_fitted: str | None = None
+               ) -> str:
+    """The conclusion on the physics; its first sentence says how good the best model is.
+
+    The missing effect (at the noise, or how far above it and why), none, or why none was
+    found. ``resolution``: the baseline's net checked (its entries); a measurement whose
+    residual is within the net's own error is one the net cannot judge, and no physics is
+    concluded from it (:func:`~fenicsx_drape.diagnosis.decision.judged`).
+    ``setup_fitted``: the set-up parameter named and fitted (the model is at it).
+    """
+    from fenicsx_drape.diagnosis.decision import judged
+
     normalised = normalised_error(base)
-    rest = [c for c in base if c.id not in resolved]
-    if resolved and not missing and (not rest or normalised_error(rest) <= ADEQUATE):
-        return ("No effect is named: the residual the model leaves is its net's own "
-                "discretisation error (resolution).")
-    noise = ""
-    floored = [k for k, v in (coupons.noise.items() if coupons is not None else ())
-               if v["source"] == "relative_floor"]
-    if floored:
-        noise = (f" Noise: the model-free estimates of {', '.join(floored)} are implausibly "
-                 "small for the curves (smoothed or digitised), so their errors are measured "
-                 "against 2 % of each test's peak force; declare the noise (force_sd_N or "
-                 "force_sd_rel in bundle.toml, [noise] in MODEL.toml) to judge against the "
-                 "real one.")
+    noise = _noise_words(coupons)
     if missing:
-        nets = [e for e in (missing.resolution_after or ())
-                if e["explains"] or e["within_net_error"]]
-        rest = (f" What it leaves on {', '.join(e['measurement'] for e in nets)} is its "
-                f"{nets[0]['cell_mm']:g} mm net's own error (resolution_after): "
-                f"{finer_net(nets)}." if nets else "")
-        return (f"Missing effect: {missing.effect} ({missing.summary.rstrip('.')}); adding "
-                f"it brings the normalised error from {normalised:.3g} to "
-                f"{missing.error_after['normalised']:.3g}.{rest}")
+        return _missing_words(missing, normalised, setup_fitted)
+    model = f"with {setup_fitted} fitted, the model" if setup_fitted else "the model"
     if normalised <= ADEQUATE:
-        return (f"No effect is missing: the model is at {normalised:.3g} × the noise "
+        return (f"No effect is missing: {model} is at {normalised:.3g} × the noise "
                 f"(adequate at ≤ {ADEQUATE}).{noise}")
+    unjudged = [e for e in resolution if e["explains"]]
+    rest = judged(base, resolution)
+    rest_norm = normalised_error(rest) if rest else None
+    if unjudged and (rest_norm is None or rest_norm <= ADEQUATE):
+        cells = " and ".join(f"{c:g}" for c in sorted({e["cell_mm"] for e in unjudged}))
+        on_rest = (f"; on the rest it is at {rest_norm:.3g}" if rest_norm is not None else "")
+        return (f"No missing physics is concluded: {model} is at {normalised:.3g} × the noise, and "
+                f"what it misses is within the {cells} mm net's own discretisation error on "
+                f"{', '.join(e['measurement'] for e in unjudged)}, which that net cannot "
+                f"judge{on_rest}.{noise}")
+    over = (f" ({rest_norm:.3g} on the measurements its net can judge)"
+            if unjudged and rest_norm is not None else "")
     if best and best.significant:
-        return (f"No single candidate brings the error ({normalised:.3g} × the noise) to the "
-                f"noise floor: the best, {best.effect}, is a real gain (evidence "
-                f"{best.evidence:.3g}) but reaches only "
-                f"{best.error_after['normalised']:.3g} × noise. More than one effect may be "
-                f"missing: add it and diagnose again.")
+        return (f"No single candidate brings the error to the noise floor: the best, "
+                f"{best.effect}, is a real gain (evidence {best.evidence:.3g}) but brings it "
+                f"only from {normalised:.3g} to {best.error_after['normalised']:.3g} × the "
+                f"noise{over}. More than one effect may be missing: add it and diagnose again.")
     closest = (f" The closest candidate, {best.effect}, reaches "
                f"{best.error_after['normalised']:.3g} × noise (evidence "
                f"{best.evidence:.3g}).") if best else ""
     if optimiser is not None and optimiser.get("at_best") is False:
-        return (f"None of the candidates explains the residual ({normalised:.3g} × the noise): "
-                f"{pattern}. But {optimiser['statement']}: the residual may be the optimiser's, "
-                f"not missing physics; give better starting values in MODEL.toml and diagnose "
-                f"again.{closest}{noise}")
+        return (f"None of the candidates explains the residual: {model} stays at "
+                f"{normalised:.3g} × the noise{over}: {pattern}. But {optimiser['statement']}: "
+                f"the residual may be the optimiser's, not missing physics; give better "
+                f"starting values in MODEL.toml and diagnose again.{closest}{noise}")
     how = (f" How the baseline is known to be at its best: {optimiser['statement']}."
            if optimiser is not None and optimiser.get("at_best") else "")
-    return (f"None of the candidates explains the residual ({normalised:.3g} × the noise): "
-            f"{pattern}. The missing physics is not in the catalogue; write it as a user law "
-            f"(plugins in MODEL.toml) and diagnose again.{closest}{how}{noise}")
+    return (f"None of the candidates explains the residual: {model} stays at "
+            f"{normalised:.3g} × the noise{over}: {pattern}. The missing physics is not in "
+            f"the catalogue; write it as a user law (plugins in MODEL.toml) and diagnose "
+            f"again.{closest}{how}{noise}")
+
+
+def unjudged(entries: Sequence[dict[str, Any]], missing: Candidate | None
+             ) -> list[dict[str, Any]]:
+    """The resolution entries no physics is concluded from.
+
+    Those within the net's own error, less those the named effect predicts at the noise (its
+    evidence: the net judges them).
+    """
+    at_noise = {c.id for c in (missing.after if missing else ()) if c.normalised <= ADEQUATE}
+    return [e for e in entries if e["explains"] and e["measurement"] not in at_noise]
+
+
+def _missing_words(missing: Candidate, normalised: float, setup_fitted: str | None) -> str:
+    """The named effect: the error it brings, at the noise or how far above it and why."""
+    from fenicsx_drape.diagnosis.decision import judged
+
+    after = missing.error_after["normalised"]
+    at = f" ({setup_fitted} fitted)" if setup_fitted else ""
+    head = (f"Missing effect: {missing.effect} ({missing.summary.rstrip('.')}): adding it{at} "
+            f"brings the normalised error from {normalised:.3g} to {after:.3g} × the noise")
+    checked = missing.resolution_after or ()
+    nets = [e for e in checked if e["explains"]]
+    if after <= ADEQUATE:
+        return f"{head}, at the noise (adequate at ≤ {ADEQUATE})."
+    if not nets:
+        return f"{head}, {after / ADEQUATE:.3g} × above the adequate {ADEQUATE}."
+    rest = judged(missing.after, checked)
+    on_rest = (f"; on the rest, which it can judge, it is at {normalised_error(rest):.3g}"
+               if rest else "")
+    cells = " and ".join(f"{c:g}" for c in sorted({e["cell_mm"] for e in nets}))
+    return (f"{head}, still above it: what it leaves on "
+            f"{', '.join(e['measurement'] for e in nets)} is within its {cells} mm net's own "
+            f"discretisation error, which that net cannot judge{on_rest}. On "
+            + "; on ".join(judged_text(e) for e in nets)
+            + f": {finer_net(nets)}.")
+
+
+def _noise_words(coupons) -> str:
+    """The coupons' implausibly small noise estimates, in words ("" when none)."""
+    floored = [k for k, v in (coupons.noise.items() if coupons is not None else ())
+               if v["source"] == "relative_floor"]
+    if not floored:
+        return ""
+    return (f" Noise: the model-free estimates of {', '.join(floored)} are implausibly "
+            "small for the curves (smoothed or digitised), so their errors are measured "
+            "against 2 % of each test's peak force; declare the noise (force_sd_N or "
+            "force_sd_rel in bundle.toml, [noise] in MODEL.toml) to judge against the "
+            "real one.")

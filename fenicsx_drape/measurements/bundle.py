@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from fenicsx_drape.errors import DrapeInputError, InputFileError, likely_typo
+from fenicsx_drape.errors import DrapeInputError, InputFileError, likely_typo, old_name
 from fenicsx_drape.limits import check_file_size
 from fenicsx_drape.measurements import lab
 from fenicsx_drape.measurements.tables import ragged_hint, read_rows
@@ -85,6 +85,10 @@ PAIR_KEYS = ("blank_offset_mm", "tool_offset_mm")
 # The set-up a forming test may state, on a hemisphere test as on a test naming its case (the
 # case format's set-up overrides: a turned ply, a blank or punch placed off-centre).
 SETUP_OVERRIDE_KEYS = ("ply_angle_deg", *PAIR_KEYS)
+
+# Earlier names of a forming test's conditions, read as today's with a note (one release):
+# the holder's friction coefficient is ``mu`` everywhere (the spec's set-up candidate).
+OLD_CONDITIONS = {"friction_coefficient": "mu"}
 
 # A reader of forming cases (the forming layer's ``case_for_test``, passed to
 # :func:`load_bundle`): ``read_case(case_path, keys) -> (case, used)`` reads and checks the
@@ -579,6 +583,10 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
         raw_conditions = {}
     for key, value in raw_conditions.items():
         at = where("conditions", index, key)
+        if kind == "forming" and key in OLD_CONDITIONS and OLD_CONDITIONS[key] not in (
+                raw_conditions):
+            key = old_name(f"{fname}:{at}: {label}: condition", key, OLD_CONDITIONS[key],
+                           stacklevel=5)
         if msg := _unit_problem(key):
             problems.add(fname, at, f"{label}: {msg}")
         elif not (_is_number(value) and math.isfinite(value)):

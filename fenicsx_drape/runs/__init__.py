@@ -21,9 +21,10 @@ independent calls (a diagnosis's candidates) so that their runs are formed in co
 (:mod:`~fenicsx_drape.runs.scheduler`).
 
 The runs' state -- the runs in memory, the disk store, the executor, the cells of
-:func:`resolution`, the spare jobs of :func:`spare` -- lives in a :class:`Runs` the caller
-owns (:mod:`~fenicsx_drape.runs.runner`). The command line makes one from ``--workers``,
-``--cache``, ``DRAPE_WORKERS`` and ``DRAPE_CACHE`` and makes it current for the command::
+:func:`resolution`, the spare jobs of :func:`spare`, the values derived from the runs
+(:func:`memo`) -- lives in a :class:`Runs` the caller owns (:mod:`~fenicsx_drape.runs.runner`).
+The command line makes one from ``--workers``, ``--cache``, ``DRAPE_WORKERS`` and
+``DRAPE_CACHE`` and makes it current for the command::
 
     with Runs(workers=2, cache="runs-cache"):
         report = diagnose(bundle, model)
@@ -46,7 +47,7 @@ from contextlib import AbstractContextManager
 from typing import TYPE_CHECKING, Any
 
 from fenicsx_drape.runs.keys import USER_OPTIONS, describe, key_of, solver_options
-from fenicsx_drape.runs.runner import MEMORY_SIZE, Deferred, Runs, current
+from fenicsx_drape.runs.runner import MEMORY_SIZE, Deferred, Memo, Runs, current
 from fenicsx_drape.runs.store import CACHE_ENV, RunStore, default_folder
 from fenicsx_drape.runs.workers import WORKERS_ENV, capped, cores, default_workers
 
@@ -61,9 +62,10 @@ if TYPE_CHECKING:
 
 __all__ = [
     "CACHE_ENV", "FULL_CELL_MM", "MEMORY_SIZE", "SCREEN_CELL_MM", "USER_OPTIONS", "WORKERS_ENV",
-    "Deferred", "RunStore", "Runs", "cached", "capped", "cell_override", "cores", "current",
-    "default_folder", "default_workers", "describe", "execution", "execution_record",
-    "executor", "form_many", "key_of", "resolution", "runs_at_once", "runs_of",
+    "Deferred", "Memo", "RunStore", "Runs", "cached", "capped", "cell_override", "cores",
+    "current", "default_folder", "default_workers", "describe", "execution",
+    "execution_record", "executor", "form_many", "key_of", "memo", "resolution",
+    "runs_at_once", "runs_of",
     "solver_options", "spare", "stopped_at", "together", "tool_forces",
 ]
 
@@ -80,6 +82,11 @@ def __getattr__(name: str):
 
         return case_key
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def memo(name: str, size: int = 64) -> Memo:
+    """The current :class:`Runs`' table ``name`` (:meth:`Runs.memo`)."""
+    return current().memo(name, size)
 
 
 def execution(workers: int | None = None, cache: str | os.PathLike | None = None, *,

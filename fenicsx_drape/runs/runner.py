@@ -93,6 +93,7 @@ class Runs:
         self._rebuilt = 0  # the store's rebuilds seen
         self.counts = dict.fromkeys(COUNTED, 0)
         self._kept: dict[tuple, ex.Run] = {}  # the runs in memory, the oldest first
+        self._memos: dict[str, Memo] = {}  # values derived from runs and tests (:meth:`memo`)
         self._pool: ex.LocalPool | None = None
         self._mpi_pool: Executor | None = None
         self._cell: contextvars.ContextVar[float | None] = contextvars.ContextVar(
@@ -101,6 +102,7 @@ class Runs:
             f"spare {id(self)}", default=None)
         self._task = threading.local()  # in a call of together(): its group and place
         self._tokens: list[contextvars.Token] = []
+        self._memo_lock = threading.Lock()
         self._own_cell = cell_mm is not None
         if cell_mm is not None:
             self._cell.set(_checked_cell(cell_mm))
@@ -308,8 +310,21 @@ class Runs:
         return len(self._kept)
 
     def forget(self) -> None:
-        """Forget the runs in memory (the disk store keeps its own): as a new command."""
+        """Forget the runs in memory and their memos (the disk store keeps its own)."""
         self._kept.clear()
+        self._memos.clear()
+
+    def memo(self, name: str, size: int = 64) -> Memo:
+        """The table ``name`` of values derived from this object's runs and their tests.
+
+        What is costly to derive again within a command (a formed sheet's triangulation, a
+        lab measurement matched to it, a case's built tools) is kept here, not in a module:
+        it lives as long as the command's runs, and a new command starts without it.
+        """
+        with self._memo_lock:
+            if name not in self._memos:
+                self._memos[name] = Memo(size)
+            return self._memos[name]
 
     # -- inside -----------------------------------------------------------------------------
 
@@ -403,6 +418,41 @@ class Runs:
         if len(self._kept) >= self.memory:
             del self._kept[next(iter(self._kept))]
         self._kept[key] = run
+
+
+class Memo:
+    """A table of at most ``size`` entries, the oldest dropped first; safe across threads."""
+
+    def __init__(self, size: int):
+        self.size = size
+        self._items: dict[Any, Any] = {}
+        self._lock = threading.Lock()
+
+    def get(self, key: Any, default: Any = None) -> Any:
+        """The value kept under ``key``, else ``default``."""
+        return self._items.get(key, default)
+
+    def put(self, key: Any, value: Any) -> Any:
+        """Keep ``value`` under ``key`` (dropping the oldest entry when full); return it."""
+        with self._lock:
+            self._items.pop(key, None)
+            while len(self._items) >= self.size:
+                del self._items[next(iter(self._items))]
+            self._items[key] = value
+        return value
+
+    def newest_first(self) -> list[tuple[Any, Any]]:
+        """The entries, the latest kept first."""
+        with self._lock:
+            return list(reversed(self._items.items()))
+
+    def clear(self) -> None:
+        """Drop every entry."""
+        with self._lock:
+            self._items.clear()
+
+    def __len__(self) -> int:
+        return len(self._items)
 
 
 def _checked_cell(cell_mm: float) -> float:

@@ -65,7 +65,7 @@ import numpy as np
 
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.forming.case import FormingCase, case_file, case_for_test, with_overrides
-from fenicsx_drape.runs import Deferred, cell_override, spare
+from fenicsx_drape.runs import Deferred, cell_override, memo, spare
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds.base import Kind
@@ -98,9 +98,6 @@ def names_case(test: Test) -> bool:
     return test.case is not None or test.forming_case is not None
 
 
-_read_cases: dict[tuple, FormingCase] = {}
-
-
 def forming_case_of(test: Test) -> FormingCase:
     """The case a test forms, with the test's keys applied.
 
@@ -119,10 +116,11 @@ def forming_case_of(test: Test) -> FormingCase:
         raise DrapeInputError(f"test {test.id!r}: forming geometry {test.geometry!r} cannot be "
                               "simulated (known: hemisphere; or name the forming case with "
                               "case = \"case.toml\")")
+    # Read once per command: a file edited between two commands is read again.
+    cases = memo("forming.cases", 64)
     key = (str(path), tuple(sorted((k, str(v)) for k, v in keys.items())))
-    if key not in _read_cases:
-        _read_cases[key] = case_for_test(path, keys)[0]
-    return _read_cases[key]
+    hit = cases.get(key)
+    return hit if hit is not None else cases.put(key, case_for_test(path, keys)[0])
 
 
 @functools.lru_cache(maxsize=64)

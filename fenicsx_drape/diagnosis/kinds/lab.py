@@ -48,7 +48,7 @@ from fenicsx_drape.diagnosis.kinds.forming import (
 from fenicsx_drape.diagnosis.kinds.part import CASE_REGION_NAMES, region_of_points
 from fenicsx_drape.errors import DrapeInputError
 from fenicsx_drape.measurements.lab import SD_COLUMN, measurement_of
-from fenicsx_drape.runs import form_many
+from fenicsx_drape.runs import form_many, memo
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds.base import Comparison
@@ -79,18 +79,14 @@ def _along(t: np.ndarray, y: np.ndarray) -> float:
     return noise_from_second_differences(t[keep], y[keep])
 
 
-_meshes: dict[int, tuple[Any, Any]] = {}
-
-
 def sheet_mesh(grid: FormedGrid) -> SheetMesh:
-    """The whole blank's triangulation of a formed sheet (cached with the sheet)."""
+    """The whole blank's triangulation of a formed sheet (kept with the command's runs)."""
     from fenicsx_drape.forming.running.measure import SheetMesh
 
-    hit = _meshes.get(id(grid))
-    if hit is None or hit[0] is not grid:
-        if len(_meshes) > 64:
-            _meshes.pop(next(iter(_meshes)))
-        hit = _meshes[id(grid)] = (grid, SheetMesh.of(grid))
+    meshes = memo("lab.sheet_mesh", 64)
+    hit = meshes.get(id(grid))
+    if hit is None or hit[0] is not grid:  # the sheet itself kept: its id is not reused
+        hit = meshes.put(id(grid), (grid, SheetMesh.of(grid)))
     return hit[1]
 
 
@@ -184,9 +180,6 @@ def _anchor(test: Test) -> np.ndarray | None:
     return None
 
 
-_matches: dict[tuple, dict[str, Any]] = {}
-
-
 def _digest(test: Test) -> str:
     """What a lab test's match depends on besides the run: its rows, frame and flags."""
     import hashlib
@@ -221,8 +214,9 @@ def match(kind: LabKind, test: Test, grid: FormedGrid, model: Model | None = Non
     Kept by the test's content and the sheet.
     """
     grid = grid.ply(test.ply)
+    matches = memo("lab.match", 256)
     key = (test.id, _digest(test), id(grid))
-    hit = _matches.get(key)
+    hit = matches.get(key)
     if hit is not None and hit.grid is grid:
         return hit
     mesh = sheet_mesh(grid)
@@ -241,15 +235,12 @@ def match(kind: LabKind, test: Test, grid: FormedGrid, model: Model | None = Non
         read, values=np.asarray(read.values, float), unmatched=np.asarray(read.unmatched, bool),
         grid=grid, registration=None if registration is None else {
             k: v for k, v in registration.items() if k not in ("R", "centre", "t")})
-    if len(_matches) > 256:
-        _matches.pop(next(iter(_matches)))
-    _matches[key] = out
-    return out
+    return matches.put(key, out)
 
 
 def matched(test: Test, comparison: Comparison) -> Match | None:
     """The match whose model values a comparison holds, if still kept (:func:`match`)."""
-    for (test_id, _, _), hit in reversed(list(_matches.items())):
+    for (test_id, _, _), hit in memo("lab.match", 256).newest_first():
         if test_id == test.id and np.array_equal(hit.values, comparison.simulated):
             return hit
     return None
@@ -306,9 +297,6 @@ def formed_abscissa(test: Test) -> tuple[str, np.ndarray]:
     if "z_mm" in test.columns:
         return "z_mm", test.columns["z_mm"]
     return "row", np.arange(test.n_rows, dtype=float)
-
-
-_regions: dict[tuple, list[Region]] = {}
 
 
 # --------------------------------------------------------------------------------------------
@@ -416,12 +404,9 @@ class LabKind:
 
     def regions(self, test: Test) -> list[Region]:
         """The kind's named regions of the rows (a mask over its values), kept by content."""
-        key = (test.id, _digest(test))
-        if key not in _regions:
-            if len(_regions) > 64:
-                _regions.pop(next(iter(_regions)))
-            _regions[key] = self.named_regions(test)
-        return _regions[key]
+        regions, key = memo("lab.regions", 64), (test.id, _digest(test))
+        hit = regions.get(key)
+        return hit if hit is not None else regions.put(key, self.named_regions(test))
 
     def metrics(self, test: Test, simulated: np.ndarray, model: Model | None = None
                 ) -> dict[str, Any]:

@@ -20,6 +20,7 @@ import numpy as np
 
 from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
 from fenicsx_drape.forming.case import case_key
+from fenicsx_drape.runs import memo
 
 if TYPE_CHECKING:
     from fenicsx_drape.forming.case import FormingCase
@@ -32,17 +33,13 @@ CASE_REGION_NAMES = ("punch top", "walls along the tow axes", "walls on the bias
 CONTACT_MM = 1.0  # a node within this (plus three times the noise) of a surface touches it
 WALL_DEG = 30.0  # a surface steeper than this to the plane normal to the travel is a wall
 CONTACT_ROLES = ("punch", "die", "surface")
-_built_tools: dict[str, dict[str, Any]] = {}
-
-
 def _tools_of(case: FormingCase) -> dict[str, Any]:
-    """The built tools of a case (cached by the case's content: meshing costs seconds)."""
+    """The built tools of a case (kept by the case's content: meshing costs seconds)."""
     from fenicsx_drape.forming.tools.build import build_tools
 
-    key = case_key(case)
-    if key not in _built_tools:
-        _built_tools[key] = build_tools(case)
-    return _built_tools[key]
+    tools, key = memo("part.tools", 16), case_key(case)
+    hit = tools.get(key)
+    return hit if hit is not None else tools.put(key, build_tools(case))
 
 
 def travel_axis(case: FormingCase) -> np.ndarray:

@@ -20,14 +20,19 @@ import itertools
 import math
 import os
 import tomllib
-import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fenicsx_drape.errors import DrapeInputError, InputFileError, ParameterError, did_you_mean
+from fenicsx_drape.errors import (
+    DrapeInputError,
+    InputFileError,
+    ParameterError,
+    did_you_mean,
+    old_name,
+)
 from fenicsx_drape.fe.grid import polygon_area
 from fenicsx_drape.forming.case.overrides import (
     OVERRIDES,
@@ -41,7 +46,9 @@ from fenicsx_drape.forming.case.size import builtin_stack_fit, check_run_size
 from fenicsx_drape.forming.case.spec import (
     BUILTIN,
     GEOMETRY_SUFFIXES,
+    HOLDER_KEYS,
     INTERPLY_KEYS,
+    OLD_HOLDER_KEYS,
     OUTLINE_SUFFIXES,
     ROLES,
     SHEET_SIDES,
@@ -227,11 +234,9 @@ def load_case(path: str | os.PathLike, **overrides: Any) -> FormingCase:
             except DrapeInputError as err:
                 at = f"[[ply]] {k}" if case.plies else "[blank]"
                 raise InputFileError([f"{fname}: {at}: {err}"]) from None
-    errors, warns = builtin_stack_fit(case, stated)  # the tools as overridden (a gap, no die)
+    errors = builtin_stack_fit(case, stated)  # the tools as overridden (a gap, no die)
     if errors:
         raise InputFileError([f"{fname}: [[ply]]: {e}" for e in errors])
-    for text in warns:
-        warnings.warn(f"{fname}: [[ply]]: {text}", stacklevel=2)
     try:
         check_tool_sizes(case, warn=False)  # sizes before memory: refused at once
         check_run_size(case)  # and the run's length
@@ -317,11 +322,19 @@ def _read_holder(r: _Reader, raw: Mapping, tools: list[ToolSpec]) -> HolderSpec 
     """The ``[holder]`` table, its tool among the case's tools with role holder."""
     if (h := r.table(raw, "holder", "[holder]")) is None:
         return None
-    r.unknown(h, ("tool", "force_N", "mu", "force_share"), "[holder]")
+    h = dict(h)
+    for old, new in OLD_HOLDER_KEYS.items():
+        if old in h and new in h:
+            h.pop(old)
+            r.add("[holder]", f"'{old}' and '{new}' name one value: give '{new}' only")
+        elif old in h:
+            h[old_name(f"{r.fname}: [holder]", old, new, stacklevel=4)] = h.pop(old)
+    r.unknown(h, HOLDER_KEYS, "[holder]")
     tool = r.string(h, "tool", "[holder]", required=True, default="")
-    force = r.number(h, "force_N", "[holder]", nonnegative=True, required=True, default=0.0)
+    force = r.number(h, "holder_force_N", "[holder]", nonnegative=True, required=True,
+                     default=0.0)
     mu = r.number(h, "mu", "[holder]", nonnegative=True)
-    share = r.string(h, "force_share", "[holder]", choices=FORCE_SHARES,
+    share = r.string(h, "holder_force_share", "[holder]", choices=FORCE_SHARES,
                      default="symmetric_part")
     names = {t.name: t for t in tools}
     if tool and tool not in names:

@@ -140,6 +140,13 @@ INTERPLY_KEYS = (*(f.name for f in fields_of(InterplyLaw, "parameter")), "interp
 """The keys of ``[interply]``: the inter-ply law's parameters and its effect switch."""
 
 
+HOLDER_KEYS = ("tool", "holder_force_N", "mu", "holder_force_share")
+"""The keys of ``[holder]``: each the name the value has everywhere (a test's key, an override,
+``drape form``'s option, the set-up candidate)."""
+OLD_HOLDER_KEYS = {"force_N": "holder_force_N", "force_share": "holder_force_share"}
+"""Earlier names of ``[holder]`` keys, read as today's with a note (for one release)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class HolderSpec:
     """The blank holder: the tool whose surface clamps, the force and eq. 1's reading."""
@@ -296,11 +303,11 @@ def _case_problems(case: FormingCase) -> list[str]:
             out.append(f"holder: tool {h.tool!r} has role {case.tool(h.tool).role!r}, not "
                        "'holder'")
         if not (_finite(h.force_N) and h.force_N >= 0):
-            out.append(f"holder: force_N = {h.force_N!r} must be >= 0")
+            out.append(f"holder: holder_force_N = {h.force_N!r} must be >= 0")
         if h.mu is not None and not (_finite(h.mu) and h.mu >= 0):
             out.append(f"holder: mu = {h.mu!r} must be >= 0")
         if h.force_share not in FORCE_SHARES:
-            out.append(f"holder: force_share = {h.force_share!r} is not one of "
+            out.append(f"holder: holder_force_share = {h.force_share!r} is not one of "
                        f"{', '.join(FORCE_SHARES)}")
     for name in holders:
         if case.holder is None or case.holder.tool != name:

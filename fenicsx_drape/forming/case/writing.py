@@ -68,7 +68,8 @@ def case_dict(case: FormingCase, relative_to: str | os.PathLike | None = None) -
     out: dict[str, Any] = {"case": c, "blank": blank}
     if case.holder is not None:
         h = case.holder
-        out["holder"] = {"tool": h.tool, "force_N": h.force_N, "force_share": h.force_share}
+        out["holder"] = {"tool": h.tool, "holder_force_N": h.force_N,
+                         "holder_force_share": h.force_share}
         if h.mu is not None:
             out["holder"]["mu"] = h.mu
     tools = []

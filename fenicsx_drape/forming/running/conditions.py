@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from fenicsx_drape.forming.case.spec import OLD_HOLDER_KEYS
+
 PAPER_CONDITIONS = ("the paper's tools, 240 mm sheet and model (Table 2), 10 mm cells, "
                     "133 N, 40 s, one ply at 0°")
 """The conditions of section 4's numbers, as :func:`paper_comparison` says them."""
@@ -53,8 +55,9 @@ def paper_differences(summary: Mapping, model=None) -> list[str]:
     if cell is None or abs(float(cell) - paper["blank"]["cell_mm"]) > 1e-9:
         out.append(f"cell {_fmt(cell)} mm")
     holder, ref_holder = case.get("holder") or {}, paper["holder"]
-    if holder.get("force_N") != ref_holder["force_N"]:
-        out.append(f"holder force {_fmt(holder.get('force_N'))} N")
+    holder = {OLD_HOLDER_KEYS.get(k, k): v for k, v in holder.items()}  # an earlier summary
+    if holder.get("holder_force_N") != ref_holder["holder_force_N"]:
+        out.append(f"holder_force_N {_fmt(holder.get('holder_force_N'))}")
     if run.get("duration_s") != ref["duration_s"]:
         out.append(f"{_fmt(run.get('duration_s'))} s")
     if len(case.get("ply", [])) > 1:
@@ -64,9 +67,9 @@ def paper_differences(summary: Mapping, model=None) -> list[str]:
                         ("centre_mm", "blank centre {} mm"), ("outline", "outline {}")):
         if blank.get(key) != ref_blank.get(key):
             out.append(phrase.format(_fmt(blank.get(key))))
-    for key in ("force_share", "mu", "tool"):
+    for key in ("holder_force_share", "mu", "tool"):
         if holder.get(key) != ref_holder.get(key):
-            out.append(f"holder {key} {_fmt(holder.get(key))}")
+            out.append(f"{'holder tool' if key == 'tool' else key} {_fmt(holder.get(key))}")
     tools = {t["name"]: t for t in case.get("tool", [])}
     for ref_tool in paper["tool"]:
         tool = tools.pop(ref_tool["name"], None)

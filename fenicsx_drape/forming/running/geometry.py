@@ -13,10 +13,9 @@ blank and the built tools before any step and names the tool and the distance:
   the blank's nodes;
 - *a punch that never reaches the die* (a warning: a test stopped short is one): at the end
   of the motion, the die's surface is still more than a sheet cell from the punch;
-- *a stack that cannot fit between punch and die*: the plies' mid-planes span more than the
-  gap the tools leave at the end of the motion (refused, naming the plies and the gap); a
-  stack thicker than the gap is warned (the die squeezes it)
-  (:func:`~fenicsx_drape.forming.case.size.stack_fit`). Every ply's nodes, at its height,
+- *a stack that does not fit between punch and die*: thicker than the gap the tools leave at
+  the end of the motion (refused, naming the plies and the gap;
+  :func:`~fenicsx_drape.forming.case.size.stack_fit`). Every ply's nodes, at its height,
   are checked for the wrong side of a tool.
 
 The distances are exact for meshed tools (closest points on the triangles) and closed form
@@ -59,7 +58,7 @@ def geometry_problems(case, tools: dict, nodes: np.ndarray) -> tuple[list[str], 
     x = np.asarray(nodes, dtype=float).reshape(-1, 3)
     contact = [t for t in case.tools if t.role in ("punch", "die", "surface")]
     if len(case.plies) > 1:
-        errors, warns = builtin_stack_fit(case)
+        errors = builtin_stack_fit(case)
         heights = _ply_heights(case)
         for spec in contact:  # the other plies lie over the first: the top one first
             def depth(k, spec=spec):
@@ -125,12 +124,11 @@ def geometry_problems(case, tools: dict, nodes: np.ndarray) -> tuple[list[str], 
                              f"at the end of the motion they are still {gap:.3g} mm apart "
                              f"(more than the sheet's cell {case.blank.cell_mm:g} mm)")
             elif len(case.plies) > 1:
-                from fenicsx_drape.forming.case.size import stack_fit
+                from fenicsx_drape.forming.case.size import MESHED_GAP_TOLERANCE, stack_fit
 
-                e, w = stack_fit([p.thickness_mm for p in case.plies], gap,
-                                 f"the punch {punch.name!r} and the die {die.name!r}")
-                errors += e
-                warns += w
+                errors += stack_fit([p.thickness_mm for p in case.plies], gap,
+                                    f"the punch {punch.name!r} and the die {die.name!r}",
+                                    MESHED_GAP_TOLERANCE)
     return errors, warns
 
 

@@ -273,8 +273,9 @@ def case_bundle(run: FormingRun, friction: float, grid_mm: float | None = None,
 
     The test's keys (``duration_s``, ``holder_force_N``, ``travel_mm``, ``grid_mm``) repeat
     the case's values; ``case_file`` is relative to the bundle folder (write the case there
-    with :func:`~fenicsx_drape.forming.case.writing.write_case`). μ is the condition
-    ``friction_coefficient``. ``grid_mm`` None: :func:`default_grid_mm` of the net's cell.
+    with :func:`~fenicsx_drape.forming.case.writing.write_case`). The holder's μ the part was
+    formed with is the test's condition ``mu`` (a record: a condition changes nothing in the
+    case the test names). ``grid_mm`` None: :func:`default_grid_mm` of the net's cell.
     """
     case = run.case
     grid_mm = grid_mm or default_grid_mm(run.grid.cell_mm)
@@ -287,7 +288,7 @@ def case_bundle(run: FormingRun, friction: float, grid_mm: float | None = None,
     force = f"-{case.holder.force_N:g}N" if case.holder is not None else ""
     test_id = f"{case.name}{force}-{case.duration_s:g}s"
     test = Test(id=test_id, kind="forming", file=f"{case.name}_grid.csv", columns=columns,
-                forming=setup, conditions={"friction_coefficient": friction},
+                forming=setup, conditions={"mu": friction},
                 case=case_file)
     return Bundle(name=name or f"simulated-{test_id}", tests=(test,),
                   material="simulated by fenicsx_drape")

@@ -70,7 +70,7 @@ def part_force_N(force_N: float, planes: int, force_share: str) -> float:
     return force_N / 2.0**planes if force_share == "symmetric_part" else force_N
 
 
-def check_force_share(force_share: str, where: str = "holder force_share") -> None:
+def check_force_share(force_share: str, where: str = "[holder] holder_force_share") -> None:
     """Raise a :class:`ParameterError` unless ``force_share`` is a known reading of eq. 1."""
     if force_share not in FORCE_SHARES:
         raise ParameterError(f"{where} = {force_share!r}: choose \"symmetric_part\" (a symmetric "
@@ -100,8 +100,9 @@ class BlankHolder:
         law: the friction bar's law (role ``"friction"``; force in N against slip in mm),
             e.g. ``model.laws()["friction"]``; its conditions ``holder_force_N`` and
             ``holder_nodes`` are set here, node by node and step by step.
-        force_N: the holding force on the whole part (N; the case's ``[holder] force_N``); the
-            modelled part carries :attr:`part_force_N` of it, as ``force_share`` says.
+        force_N: the holding force on the whole part (N; the case's ``[holder]
+            holder_force_N``); the modelled part carries :attr:`part_force_N` of it, as
+            ``force_share`` says.
         clamp_stiffness_N_per_mm: penalty stiffness ``k`` holding the nodes on the surface.
         surface: the clamping surface: ``gap(x, t)``, ``covers(x, t)`` and optionally
             ``displacement(x, t0, t1)`` (a tool of role holder).

@@ -1,0 +1,231 @@
+"""What the diagnosis names, from small stage results fed to its rules and words.
+
+One rule for what a net can tell (``diagnosis.resolution.within_net``): a residual R of noise
+σ is within the net's own discretisation error e when R ≤ 1.5 √(σ² + e²), and then no
+physics is concluded from it — no effect named on it, no "not in the catalogue". The cases
+are those of lab bundles the diagnosis got wrong: a lab's finite-difference shear on a cup
+(R 1.37°, σ 0.5°, e 11.1°: within), the README's lab bundle's shear lines (R 10.6°, σ 1°,
+e 5.57°: not within, so the net judges them), a candidate whose refit stops short on data
+made on its very net (the finer net farther from the data, e small: its leftover counts).
+No forming run here: the stages' results are made by hand.
+"""
+
+import numpy as np
+import pytest
+
+from fenicsx_drape.diagnosis.decision import (
+    ADEQUATE,
+    adequate,
+    decide,
+    evidence,
+    judged,
+)
+from fenicsx_drape.diagnosis.kinds import Comparison
+from fenicsx_drape.diagnosis.report import found_text, summary
+from fenicsx_drape.diagnosis.resolution import shown, within_net
+from fenicsx_drape.diagnosis.results import Candidate, DataCheck, Effects, SetupResult
+from fenicsx_drape.diagnosis.setup_words import setup_fields, setup_sentence, setup_summary
+from fenicsx_drape.diagnosis.words import conclusion
+from fenicsx_drape.measurements.bundle import Bundle
+from fenicsx_drape.model import default_model
+
+
+def comparison(test_id: str, rmse: float, noise: float, unit: str = "deg",
+               n: int = 40) -> Comparison:
+    """A forming measurement whose residual has exactly this RMS (alternating signs)."""
+    residual = rmse * np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    return Comparison(test_id, "forming", unit, residual, np.zeros(n), noise, "key", (), {})
+
+
+def entry(test_id: str, residual: float, noise: float, error: float, fine: float,
+          unit: str = "deg", cell: float = 20.0) -> dict:
+    """A resolution entry as check_resolution makes it (explains by the one rule)."""
+    return {"measurement": test_id, "cell_mm": cell, "residual": residual, "noise": noise,
+            "unit": unit, "discretisation_error": error, "fine_cell_mm": cell / 2,
+            "fine_residual": fine, "explains": within_net(residual, noise, error, ADEQUATE),
+            "suggested_cell_mm": 1.25}
+
+
+def candidate(effect: str, after: list[Comparison], *, significant: bool = True,
+              evidence_: float = 2.0, resolution_after=None) -> Candidate:
+    from fenicsx_drape.diagnosis.comparison import error_record
+
+    return Candidate(
+        effect=effect, effects=(effect,), acts_on="contact", summary=f"{effect} summary.",
+        parameters={}, error_after=error_record(after), heldout_normalised=1.0,
+        evidence=evidence_, significant=significant, sensitivity=3.0, where_after=(),
+        setup_refitted=None, model=default_model(), after=tuple(after), tests=(),
+        n_parameters=1, resolution_after=resolution_after)
+
+
+NO_DATA_CHECK = DataCheck((), frozenset(), Bundle(name="b", tests=()))
+
+
+def test_the_one_rule_against_the_issue_numbers():
+    # The cup's finite-difference shear: the net's error is eight times the residual.
+    assert within_net(1.37, 0.5, 11.1, ADEQUATE)
+    # The lab bundle's shear lines: twice the net's error, beyond the widened noise.
+    assert not within_net(10.6, 1.0, 5.57, ADEQUATE)
+    # Unknown error (the finer net failed): the measurement counts.
+    assert not within_net(1.0, 0.1, None, ADEQUATE)
+    # The rule is the adequacy bound with the net's error weighed as noise: at the boundary.
+    assert within_net(1.5 * np.hypot(1.0, 2.0), 1.0, 2.0, ADEQUATE)
+    assert not within_net(1.5 * np.hypot(1.0, 2.0) * 1.001, 1.0, 2.0, ADEQUATE)
+    # Shown to be the net's own error only when the finer net comes nearer, within e/2.
+    assert shown(entry("m", 2.0, 0.15, 4.03, 0.34, "mm"))
+    assert not shown(entry("cup/shear_points", 1.37, 0.5, 11.1, 5.27))
+
+
+def test_a_net_whose_error_dwarfs_the_residual_concludes_no_physics():
+    """The cup: nothing missing, 2 × the noise from a lab's finite differences."""
+    shear = comparison("cup/shear_points", 1.37, 0.5)
+    edge = comparison("cup/outline", 0.3, 0.3, "mm")
+    checked = [entry("cup/shear_points", 1.37, 0.5, 11.1, 5.27)]
+    closest = candidate("tool_friction", [comparison("cup/shear_points", 1.3, 0.5), edge],
+                        significant=False, evidence_=1.05)
+    words = conclusion(None, closest, [shear, edge], "pattern", resolution=checked)
+    assert words.startswith("No missing physics is concluded: the model is at 2.06 × the noise")
+    assert "user law" not in words and "not in the catalogue" not in words
+    assert "net's own discretisation error on cup/shear_points" in words
+    # What the net can judge: the edge alone, at the noise.
+    assert [c.id for c in judged([shear, edge], checked)] == ["cup/outline"]
+    # No effect is named on it, even a candidate with evidence on the baseline's numbers.
+    assert evidence([shear, edge], closest.after, ["tool_friction"],
+                    frozenset({"cup/shear_points"})) == pytest.approx(1.0)
+
+
+def test_a_residual_the_net_can_judge_still_asks_for_a_user_law():
+    shear = comparison("part/shear_points", 10.6, 1.0)
+    checked = [entry("part/shear_points", 10.6, 1.0, 5.57, 13.0)]
+    closest = candidate("tool_friction", [comparison("part/shear_points", 10.5, 1.0)],
+                        significant=False, evidence_=1.0)
+    words = conclusion(None, closest, [shear], "pattern", resolution=checked)
+    assert words.startswith("None of the candidates explains the residual: the model stays "
+                            "at 10.6 × the noise")
+    assert "write it as a user law" in words
+
+
+def test_a_named_effect_above_the_noise_says_so_first():
+    """The README's lab bundle: tow buckling named at 12.6 × the noise overall."""
+    base = [comparison("part/outline", 7.75, 0.3, "mm"),
+            comparison("part/shear_points", 10.6, 1.0)]
+    after = [comparison("part/outline", 6.58, 0.3, "mm"),
+             comparison("part/shear_points", 2.85, 1.0)]
+    left = (entry("part/outline", 6.58, 0.3, 14.0, 1.04, "mm"),
+            entry("part/shear_points", 2.85, 1.0, 3.69, 2.30))
+    best = candidate("tow_buckling", after, resolution_after=left)
+    assert all(e["explains"] for e in left) and adequate(best)
+    decision = decide(Effects((best,), ()), best, None, NO_DATA_CHECK)
+    assert decision.missing is best and decision.named is best
+    words = conclusion(best, best, base, "pattern")
+    first = words.split(". ")[0]
+    assert first.startswith("Missing effect: tow_buckling (tow_buckling summary): adding it "
+                            "brings the normalised error from")
+    assert "× the noise, still above it" in first
+    assert "--confirm-cell-mm" in words
+    # Suspect data: the same decision names nothing.
+    suspect = DataCheck(({"test": "part", "measurement": "file", "suspect": True,
+                          "why": "x and z swapped"},), frozenset({"part"}),
+                        Bundle(name="b", tests=()))
+    assert decide(Effects((best,), ()), best, None, suspect).named is None
+
+
+def test_a_leftover_the_finer_net_does_not_shrink_is_no_excuse():
+    """Data made on the candidate's very net: its refit stops at 2.28 × and is not named."""
+    after = [comparison("dd/shear_points", 2.28, 1.0)]
+    # The finer net is farther from the data and the net's error is small beside it.
+    left = (entry("dd/shear_points", 2.28, 1.0, 0.6, 2.9),)
+    best = candidate("rate_dependence", after, resolution_after=left)
+    assert not left[0]["explains"] and not adequate(best)
+    decision = decide(Effects((best,), ()), best, None, NO_DATA_CHECK)
+    assert decision.missing is None
+    words = conclusion(None, best, [comparison("dd/shear_points", 2.83, 1.0)], "pattern")
+    assert words.startswith("No single candidate brings the error to the noise floor: the "
+                            "best, rate_dependence, is a real gain")
+    assert "net's own" not in words
+
+
+def test_evidence_counts_a_measurement_the_candidate_predicts_at_the_noise():
+    """A stack whose plies slid, on its very net: the net's error is as large as the residual,
+    but the candidate predicts the data at the noise on this net: the net judges them."""
+    base = [comparison("ply1", 3.83, 0.3, "mm"), comparison("ply2", 4.71, 0.3, "mm")]
+    after = [comparison("ply1", 0.28, 0.3, "mm"), comparison("ply2", 0.3, 0.3, "mm")]
+    resolved = frozenset({"ply1", "ply2"})
+    assert evidence(base, after, ["tool_friction"], resolved) > 10
+    short = [comparison("ply1", 2.0, 0.3, "mm"), comparison("ply2", 0.3, 0.3, "mm")]
+    assert evidence(base, short, ["tool_friction"], resolved) == pytest.approx(4.71 / 0.3)
+
+
+def stage(widened: bool) -> SetupResult:
+    nothing = Bundle(name="b", tests=())
+    entry_ = {"parameter": "ply_angle_deg", "stated": 45.0, "fitted": 40.3, "sd": 1.1,
+              "error_after": {"normalised": 3.1, "per_test": {"t": 0.9}}, "evidence": 2.5,
+              "heldout_normalised": 3.2, "significant": True}
+    if widened:
+        entry_["widened"] = {"normalised": 0.96, "heldout_normalised": 1.0}
+    return SetupResult(
+        entries=(entry_,), setup_error="ply_angle_deg",
+        stated_error={"normalised": 12.5, "per_test": {"t": 3.7}, "rmse_N": 3.7},
+        stated_heldout_normalised=12.5, untestable=(), scheme="s", rule="r", resolution=None,
+        model_note=None, best=None, bundle=nothing, stated_model=default_model(),
+        corrected=nothing,
+        widened={"measurements": {"t": 2.0}, "normalised": 1.64} if widened else None)
+
+
+def test_the_set_up_stage_gives_one_scale_and_says_the_widened_one_beside_it():
+    words = setup_sentence(stage(True))
+    assert words.startswith("Set-up error: ply_angle_deg fitted 40.3 ± 1.1 (stated 45), "
+                            "bringing the forming tests' normalised error from 12.5 to 3.1")
+    assert "noise of t widened by the net's own error (the set-up as stated 1.64 on it): 0.96"\
+        in words
+    fields = setup_fields(stage(True))
+    assert fields["setup_stated"]["error"]["normalised"] == 12.5
+    assert fields["setup_stated"]["widened"]["normalised"] == 1.64
+    lines = setup_summary(fields | {"setup_error": "ply_angle_deg"})
+    assert any("widened by the net's own error: as stated 1.64, ply_angle_deg 0.96" in line
+               for line in lines)
+    assert "widened" not in setup_sentence(stage(False))
+
+
+def test_the_conclusion_is_printed_once_and_the_picture_says_what_was_found():
+    report = {"baseline": {"effects": [], "error": {"normalised": 2.0},
+                           "heldout_normalised": 2.1},
+              "noise_floor": {"source": "key"}, "where": [], "candidates": [],
+              "untestable": [], "missing_effect": None, "setup_error": "blank_offset_mm",
+              "conclusion": "No effect is missing: with blank_offset_mm fitted, the model is at "
+                            "1.2 × the noise.", "data_check": []}
+    text = summary(report)
+    assert text.count("No effect is missing") == 1 and text.endswith("noise.")
+    assert found_text(report) == "found: set-up error blank_offset_mm"
+    assert found_text(dict(report, setup_error=None)) == "found: no set-up error, no effect"
+    suspect = dict(report, data_check=[{"test": "t", "measurement": "file", "suspect": True}],
+                   conclusion="Check the data: t/file: swapped.")
+    text = summary(suspect)
+    assert text.startswith("Check the data") and text.count("Check the data") == 1
+    assert found_text(suspect) == "check the data: t/file"
+
+
+def test_a_set_up_fitted_and_nothing_else_is_said_with_the_model_at_it():
+    base = [comparison("dd/outline", 0.29, 0.3, "mm")]
+    words = conclusion(None, None, base, "pattern", setup_fitted="blank_offset_mm")
+    assert words.startswith("No effect is missing: with blank_offset_mm fitted, the model is "
+                            "at 0.967 × the noise")
+    # The rest within the net's own error: no user law after a set-up that explains the part.
+    base = [comparison("dd/outline", 0.7, 0.3, "mm"), comparison("dd/shear_points", 0.9, 1.0)]
+    checked = [entry("dd/outline", 0.7, 0.3, 1.2, 1.5, "mm")]
+    words = conclusion(None, None, base, "pattern", resolution=checked,
+                       setup_fitted="blank_offset_mm")
+    assert words.startswith("No missing physics is concluded: with blank_offset_mm fitted")
+    assert "user law" not in words
+
+
+
+def test_a_measurement_the_named_effect_predicts_at_the_noise_is_not_called_unjudged():
+    from fenicsx_drape.diagnosis.words import unjudged
+
+    checked = [entry("ply1", 3.83, 0.3, 5.36, 3.40, "mm"), entry("ply2", 4.71, 0.3, 3.2, 4.5, "mm")]
+    assert all(e["explains"] for e in checked)
+    named = candidate("interply_friction", [comparison("ply1", 0.28, 0.3, "mm"),
+                                            comparison("ply2", 0.6, 0.3, "mm")])
+    assert [e["measurement"] for e in unjudged(checked, named)] == ["ply2"]
+    assert [e["measurement"] for e in unjudged(checked, None)] == ["ply1", "ply2"]
