@@ -8,9 +8,11 @@ diagnosis's refit of ``rate_dependence`` step by step with the model less that e
 baseline's fit, the candidate's starts and their costs, its refit, against the truth's own
 error on the same net.
 
-    ./drape exec python3 benchmarks/scenarios/rate_refit.py [--work DIR] [--full]
+    ./drape exec python3 benchmarks/scenarios/rate_refit.py [--work DIR] [--cache DIR] [--full]
 
-``--full`` also runs the README's command on the bundle (default options).
+Prints each step's normalised error, μ, η_o, E_v and forming runs (asked, and formed new),
+then the steps as docs/scenarios.md's table. ``--full`` also runs the README's command on
+the bundle (default options) and prints its runs and time.
 """
 
 from __future__ import annotations
@@ -41,75 +43,145 @@ def make(work: Path) -> Path:
     return folder
 
 
+SHOWN = ("mu", "eta_o", "E_v")  # the parameters the table shows
+
+
 def follow(folder: Path) -> dict:
-    """The diagnosis's own steps for the rate_dependence candidate, each with its numbers."""
+    """The diagnosis's own steps for the rate_dependence candidate, each with its numbers.
+
+    Each step's forming runs are counted (asked, and formed new: the runs of earlier steps
+    are remembered); the starts are judged in one vectorised call, as the diagnosis does.
+    """
+    import numpy as np
+
     from fenicsx_drape.calibration.coupons import declare_noise
     from fenicsx_drape.diagnosis import refits
     from fenicsx_drape.diagnosis.comparison import normalised_error, simulate
     from fenicsx_drape.diagnosis.decision import BASELINE_ITERATIONS
+    from fenicsx_drape.diagnosis.kinds.forming import XTOL
     from fenicsx_drape.diagnosis.pipeline import prepare_tests
-    from fenicsx_drape.forming.case.format import case_for_test
+    from fenicsx_drape.forming.case import case_for_test
     from fenicsx_drape.measurements.bundle import load_bundle
     from fenicsx_drape.model import default_model, load_model
+    from fenicsx_drape.runs import execution_record
 
     bundle = load_bundle(folder / "bundle", read_case=case_for_test)
     given = load_model(folder / "model.toml")
     data = prepare_tests(declare_noise(bundle, given.noise))
-    out: dict = {}
+    out: dict = {"steps": []}
 
-    def error(model, label: str) -> float:
-        compared = data.compare(simulate(data.tests, model))
-        e = normalised_error(compared)
-        shown = {k: round(float(model.parameters[k]), 4) for k in
-                 ("mu", "eta_o", "E_v", "s_o", "s_inf", "sigma_o", "E_p")
+    def counted() -> dict[str, int]:
+        return dict(execution_record()["runs"])
+
+    def row(model, label: str, since: dict[str, int] | None, error: float | None = None,
+            note: str = "") -> float:
+        if error is None:
+            compared = data.compare(simulate(data.tests, model))
+            error = normalised_error(compared)
+        shown = {k: float(model.parameters[k]) for k in SHOWN
                  if k in model.active_parameters()}
-        per = {c.id: round(c.rmse / c.noise, 3) for c in compared}
-        print(f"{label}: normalised {e:.3f} {per} at {shown}", flush=True)
-        out[label] = {"normalised": e, "per_test": per, "parameters": shown}
-        return e
+        now = counted()
+        runs = ({k: now[k] - since[k] for k in ("asked", "formed")} if since is not None
+                else None)
+        print(f"{label}: normalised {error:.3f} at "
+              f"{ {k: round(v, 4) for k, v in shown.items()} }"
+              + (f"; runs asked {runs['asked']}, formed {runs['formed']}" if runs else "")
+              + (f" ({note})" if note else ""), flush=True)
+        out["steps"].append({"step": label, "normalised": error, "parameters": shown,
+                             "runs": runs, "note": note})
+        return error
 
+    since = counted()
     truth = default_model()
-    error(truth, "the truth's model, as formed (mu 0.3)")
+    row(truth, "the truth's model, as formed", since)
+    since = counted()
     fitted_truth = refits.fit(data.bundle, truth, max_iterations=BASELINE_ITERATIONS,
-                           from_features=True)
-    error(fitted_truth, "the truth's model, its mu fitted as the baseline is")
+                              from_features=True)
+    target = row(fitted_truth, "the truth's model, μ fitted (as a baseline is)", since)
+    since = counted()
     base = refits.fit(data.bundle, given, max_iterations=BASELINE_ITERATIONS,
-                   from_features=True)
-    error(base, "baseline (less rate_dependence), fitted")
+                      from_features=True)
+    row(base, "baseline (less `rate_dependence`), μ fitted", since)
     start_model = base.with_effects("rate_dependence")
     names = refits.refit_parameters(start_model, "rate_dependence")
-    own = [n for n in names if n not in set(base.active_parameters())
-           and n in ("eta_o", "E_v")]
+    own = [n for n in names if n not in set(base.active_parameters()) and n in ("eta_o", "E_v")]
     print(f"refitted parameters: {names}; own: {own}", flush=True)
-    out["refit_parameters"] = list(names)
-    weak = {n: refits.WEAK * float(start_model.parameters[n]) for n in own}
-    error(start_model, "start 1: the effect at its default on the baseline's fit")
-    error(start_model.with_parameters(**weak), "start 2: the effect weak")
-    best = refits.best_start(data, start_model, own, names)
-    error(best, "the best start (chosen by refits.best_start)")
-    refit = refits.fit(data.bundle, best, parameters=names, max_iterations=refits.REFIT_ITERATIONS)
-    error(refit, "the refit (fit_bundle from the best start, parameters=names)")
-    kept = refits.no_worse(data, refit, best)
-    error(kept, "the candidate's refit as the diagnosis keeps it")
+    out["refit_parameters"], out["own"] = list(names), own
+
+    # The starts, each at the baseline's, the stated and the default μ, in one call.
+    since = counted()
+    found, moved = refits.starts(data, start_model, own, names, stated=given)
+    errors = np.sqrt(refits.costs(data, refits.vectorised(found, moved)))
+    chosen = int(np.nanargmin(errors))
+    at_base = [i for i, m in enumerate(found)
+               if abs(float(m.parameters["mu"]) - float(base.parameters["mu"])) < XTOL]
+    before = min(at_base, key=lambda i: errors[i])
+    for i, model in enumerate(found):  # the runs of all starts on the first's row
+        row(model, f"start {i + 1}", since if i == 0 else None, float(errors[i]),
+            "chosen" if i == chosen else "chosen before (judged at the baseline's μ only)"
+            if i == before else "")
+
+    # Before: the refit from the start judged at the baseline's μ, the friction only.
+    since = counted()
+    old = refits.no_worse(data, refits.fit(data.bundle, found[before], parameters=names,
+                                           max_iterations=refits.REFIT_ITERATIONS),
+                          found[before])
+    row(old, "before: its refit, μ only (the forming fit ignored η_o, E_v)", since)
+    # Now: the refit from the chosen start, the candidate's own parameters with μ.
+    since = counted()
+    refit = refits.no_worse(data, refits.fit(data.bundle, found[chosen], parameters=names,
+                                             own=own, max_iterations=refits.REFIT_ITERATIONS),
+                            found[chosen])
+    error = row(refit, "now: its refit, μ with η_o and E_v (their logarithms)", since)
+    out["target"], out["refit"] = target, error
+    print(f"the refit at {error / target:.3f} × the truth's own normalised error "
+          f"({error:.3f} against {target:.3f})", flush=True)
     return out
+
+
+def table(out: dict) -> str:
+    """The steps as a Markdown table (docs/scenarios.md's)."""
+    lines = ["| step | μ | η_o (N·s/tow) | E_v (N/tow) | normalised error | forming runs "
+             "(asked / formed) |", "| --- | --- | --- | --- | --- | --- |"]
+    for s in out["steps"]:
+        p = s["parameters"]
+        runs = f"{s['runs']['asked']} / {s['runs']['formed']}" if s["runs"] else ""
+        lines.append(f"| {s['step']} | {p.get('mu', float('nan')):.3g} | "
+                     + " | ".join(f"{p[k]:.3g}" if k in p else "—" for k in ("eta_o", "E_v"))
+                     + f" | {s['normalised']:.2f}{': ' + s['note'] if s['note'] else ''} | "
+                     f"{runs} |")
+    return "\n".join(lines)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, default=ROOT / "results" / "scenarios" / "study")
     parser.add_argument("--full", action="store_true")
+    parser.add_argument("--cache", type=Path, default=None,
+                        help="keep the runs in this folder (default: in memory, all formed)")
     args = parser.parse_args()
+    from fenicsx_drape.runs import Runs
+
     folder = make(args.work.resolve())
     record = json.loads((folder / "truth.json").read_text())
     print(f"bundle {folder / 'bundle'}: signal {record['signal']:.2f} × noise "
           f"({record['signal_per_measurement']})", flush=True)
-    (folder / "follow.json").write_text(json.dumps(follow(folder), indent=1))
+    with Runs(cache=args.cache):
+        out = follow(folder)
+    (folder / "follow.json").write_text(json.dumps(out, indent=1))
+    print(table(out), flush=True)
     if args.full:
         start = time.perf_counter()
         subprocess.run(["./drape", "diagnose", str(folder / "bundle"), "--model",
                         str(folder / "model.toml"), "--json", str(folder / "REPORT.json")],
                        cwd=ROOT, check=True)
-        print(f"README command: {time.perf_counter() - start:.0f} s")
+        seconds = time.perf_counter() - start
+        report = json.loads((folder / "REPORT.json").read_text())
+        best = next((c for c in report.get("candidates", [])
+                     if c.get("effect") == "rate_dependence"), {})
+        print(f"README command: {seconds:.0f} s; rate_dependence refitted to "
+              f"{best.get('error_after', {}).get('normalised')} × the noise, evidence "
+              f"{best.get('evidence')}; conclusion: {report.get('conclusion')}", flush=True)
 
 
 if __name__ == "__main__":

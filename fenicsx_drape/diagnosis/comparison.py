@@ -513,14 +513,14 @@ def conclusion(result: CompareResult) -> str:
 def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
                parameters: Sequence[str] | None = None, max_iterations: int = 200,
                from_features: bool = True, progress: Callable[[str], None] | None = None,
-               details: dict | None = None) -> Model:
+               details: dict | None = None, own: Sequence[str] = ()) -> Model:
     """Fit a model to a bundle that may mix test kinds: each kind's own ``fit`` in turn.
 
     The fits of the kinds present among the chosen tests run once each, in the order
     of :data:`~fenicsx_drape.diagnosis.kinds.KINDS`: the coupons fix the material
     (:func:`fenicsx_drape.calibration.fitting.fit`), then the forming tests fit the friction
     coefficients with the material held (:func:`~fenicsx_drape.diagnosis.kinds.forming.
-    fit_forming`).
+    fit_forming`), but for a candidate's ``own`` parameters that no coupon test fixes.
 
     Args:
         bundle: The measurements.
@@ -533,6 +533,7 @@ def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = No
         progress: Called with a line of text as the fits proceed.
         details: Filled by the kinds' fits with what they found (the coupons:
             ``details["coupons"]``, the :class:`~fenicsx_drape.calibration.fitting.FitResult`).
+        own: A candidate's own parameters, in its refit (the kinds' ``FitHook``).
 
     Returns:
         The fitted model.
@@ -544,7 +545,8 @@ def fit_bundle(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = No
             done.append(kind.fit)
             model = kind.fit(bundle, model, kind_of=find_kind, tests=tests,
                              parameters=parameters, max_iterations=max_iterations,
-                             from_features=from_features, progress=progress, details=details)
+                             from_features=from_features, progress=progress, details=details,
+                             own=tuple(own))
     return model
 
 

@@ -323,8 +323,8 @@ def effect_stage(name: str, model: Model, base: Baseline, held: HeldOut,
     base_active = set(baseline.active_parameters())
     own = [p for p in names if p not in base_active
            and any(p in describe_effect(a).parameters for a in added)]
-    start = best_start(data, start_model, own, names)
-    refit = no_worse(data, fit(data.bundle, start, parameters=names,
+    start = best_start(data, start_model, own, names, stated=model)
+    refit = no_worse(data, fit(data.bundle, start, parameters=names, own=own,
                                max_iterations=REFIT_ITERATIONS), start)
     after = data.compare(simulate(data.tests, refit))
     joint, data_c = None, data
@@ -337,7 +337,7 @@ def effect_stage(name: str, model: Model, base: Baseline, held: HeldOut,
             if again is None:
                 break
             joint = again
-            refit = no_worse(data_c, fit(data_c.bundle, refit, parameters=names,
+            refit = no_worse(data_c, fit(data_c.bundle, refit, parameters=names, own=own,
                                          max_iterations=REFIT_ITERATIONS), refit)
         after = data_c.compare(simulate(data_c.tests, refit))
         if normalised_error(after) > normalised_error(alone[1]):
@@ -436,7 +436,8 @@ def setup_with_effect_stage(stage: SetupResult | None, best: Candidate | None, b
                                        base.model.noise))
     names = refit_parameters(best.model, best.effects[-1])
     refit = no_worse(data, fit(data.bundle, best.model, parameters=names,
-                               max_iterations=REFIT_ITERATIONS), best.model)
+                               own=tuple(best.parameters), max_iterations=REFIT_ITERATIONS),
+                     best.model)
     after = tuple(data.compare(simulate(data.tests, refit)))
     say(f"  {best.effect} refitted at that set-up: normalised error "
         f"{normalised_error(after):.3g} (at the stated set-up "

@@ -3,8 +3,11 @@
 - :func:`fit` fits a model to a bundle (each kind's fit hook, :func:`~fenicsx_drape.
   diagnosis.compare.fit_bundle`);
 - :func:`candidate_names` are the effects to try, :func:`refit_parameters` what a
-  candidate's refit moves, :func:`best_start` the best of its starts (in one vectorised
-  evaluation), :func:`no_worse` keeps a refit that lost to its start from losing;
+  candidate's refit moves (its own parameters, which :func:`fit` hands as ``own``: on forming
+  tests that no coupon test fixes them, the forming fit moves them with the friction),
+  :func:`best_start` the best of its :func:`starts` (each at the baseline's, the stated and
+  the default friction, in one vectorised evaluation), :func:`no_worse` keeps a refit that
+  lost to its start from losing;
 - :func:`sensitivity` is how much an effect at its default strength changes the tests;
 - :func:`heldout` predicts every row by the fold that held it out (:mod:`~fenicsx_drape.
   diagnosis.folds`), the folds' runs together.
@@ -20,7 +23,8 @@ import numpy as np
 
 from fenicsx_drape.diagnosis.comparison import fit_bundle, simulate
 from fenicsx_drape.diagnosis.folds import FOLD_ITERATIONS
-from fenicsx_drape.diagnosis.kinds import kind_of
+from fenicsx_drape.diagnosis.kinds import is_formed, kind_of
+from fenicsx_drape.diagnosis.kinds.coupon import coupon_parameters, role_parameters
 from fenicsx_drape.runs import together
 
 if TYPE_CHECKING:
@@ -37,14 +41,16 @@ Progress = Callable[[str], None]
 
 def fit(bundle: Bundle, model: Model, *, tests: Sequence[str] | None = None,
         parameters: Sequence[str] | None = None, max_iterations: int,
-        from_features: bool = False, details: dict | None = None) -> Model:
+        from_features: bool = False, details: dict | None = None,
+        own: Sequence[str] = ()) -> Model:
     """``model`` fitted to ``bundle`` by each kind's fit, from its values unless ``from_features``.
 
-    See :func:`~fenicsx_drape.diagnosis.comparison.fit_bundle`.
+    ``own``: a candidate's own parameters, which the forming tests fit too where no coupon
+    test fixes them. See :func:`~fenicsx_drape.diagnosis.comparison.fit_bundle`.
     """
     return fit_bundle(bundle, model, tests=tests, parameters=parameters,
                       from_features=from_features, max_iterations=max_iterations,
-                      details=details)
+                      details=details, own=own)
 
 
 def heldout(data: Prepared, model: Model, say: Progress) -> dict[str, np.ndarray]:
@@ -81,31 +87,65 @@ def costs(data: Prepared, model: Model) -> np.ndarray:
     return total / len(data.tests)
 
 
-def best_start(data: Prepared, model: Model, own: Sequence[str], names: Sequence[str]) -> Model:
-    """The best of four starts for a candidate's refit, judged in one vectorised call.
+def starts(data: Prepared, model: Model, own: Sequence[str], names: Sequence[str],
+           stated: Model | None = None) -> tuple[list[Model], list[str]]:
+    """A candidate's starts for its refit, and the parameters in which they differ.
 
-    The starts: the candidate at its default strength on the baseline's fit; the candidate
-    weak, its own parameters that may vanish at 1 % of their defaults (for most effects
-    nearly the baseline, while the fit still feels them: exactly zero can leave it no
-    gradient, e.g. a Maxwell branch without spring); every refitted parameter at the
-    catalogue's documented value (Table 2: a baseline fitted without the effect can sit far
-    from it); the curve-feature guess of section 3.2.
+    The candidate at its default strength on the baseline's fit; the candidate weak, its own
+    parameters that may vanish at 1 % of their defaults (for most effects nearly the
+    baseline, while the fit still feels them: exactly zero can leave it no gradient, e.g. a
+    Maxwell branch without spring); every refitted parameter at the catalogue's documented
+    value (Table 2: a baseline fitted without the effect can sit far from it); the
+    curve-feature guess of section 3.2. On formed tests, each of them at the friction the
+    forming fit moves (:func:`~fenicsx_drape.diagnosis.kinds.forming.free_parameters`) as
+    the baseline fitted it, as ``stated`` (the model as given) and at the catalogue's
+    defaults: fitted without the effect, the baseline's friction may have moved to mimic it,
+    and at that friction the right material can look worse than a weak one. A start met
+    twice is kept once.
     """
     from fenicsx_drape.calibration.fitting import initial_guess
+    from fenicsx_drape.diagnosis.kinds.forming import XTOL, free_parameters
     from fenicsx_drape.model import parameter_info
 
     weak = {n: WEAK * float(model.parameters[n]) for n in own
             if parameter_info(n).bounds[0] == 0.0}
     documented = {n: parameter_info(n).default for n in names
                   if parameter_info(n).default is not None}
-    starts = [model, model.with_parameters(**weak), model.with_parameters(**documented)]
+    materials = [model, model.with_parameters(**weak), model.with_parameters(**documented)]
     try:
-        starts.append(initial_guess(model, data.tests, names))
+        materials.append(initial_guess(model, data.tests, names))
     except (ValueError, FloatingPointError, ArithmeticError):
         pass  # no feature guess for this law: the other starts remain
-    sets = model.with_parameters(**{n: np.array([float(m.parameters[n]) for m in starts])
-                                    for n in names})
-    return starts[int(np.nanargmin(costs(data, sets)))]
+    friction = [n for n in free_parameters(model, [t for t in data.tests if is_formed(t)])
+                if n not in names]
+    at = [{n: float(model.parameters[n]) for n in friction}]
+    given = stated.parameters if stated is not None else {}
+    for other in ({n: float(given.get(n, model.parameters[n])) for n in friction},
+                  {n: float(parameter_info(n).default) for n in friction}):
+        if friction and all(max(abs(other[n] - a[n]) for n in friction) > XTOL for a in at):
+            at.append(other)
+    moved = [*names, *friction]
+    found = {_key(m, moved): m for m in (s.with_parameters(**a) for a in at
+                                          for s in materials)}
+    return list(found.values()), moved
+
+
+def best_start(data: Prepared, model: Model, own: Sequence[str], names: Sequence[str],
+               stated: Model | None = None) -> Model:
+    """The best of a candidate's :func:`starts`, judged in one vectorised call."""
+    found, moved = starts(data, model, own, names, stated)
+    return found[int(np.nanargmin(costs(data, vectorised(found, moved))))]
+
+
+def vectorised(models: Sequence[Model], names: Sequence[str]) -> Model:
+    """One vectorised model of ``models``, which differ in ``names`` only."""
+    return models[0].with_parameters(**{n: np.array([float(m.parameters[n]) for m in models])
+                                        for n in names})
+
+
+def _key(model: Model, names: Sequence[str]) -> tuple[float, ...]:
+    """A start's values (twice the same start is judged once)."""
+    return tuple(float(model.parameters[n]) for n in names)
 
 
 def no_worse(data: Prepared, fitted: Model, start: Model) -> Model:
@@ -132,25 +172,11 @@ def candidate_names(model: Model) -> list[str]:
     return [name for name in (*EFFECTS, *users) if name not in model.effects]
 
 
-def role_parameters(model: Model, role: str) -> tuple[str, ...]:
-    """The active parameters of the law of ``role`` and of the effects acting on it."""
-    from fenicsx_drape.effects import describe_effect
-
-    laws = model.law_classes()
-    names = list(laws[role].active_parameters(model.effects)) if role in laws else []
-    for name in model.effects:
-        effect = describe_effect(name)
-        if effect.acts_on == role:
-            names += effect.parameters
-    active = model.active_parameters()
-    return tuple(n for n in dict.fromkeys(names) if n in active)
-
-
 def kind_parameters(model: Model, kind: str) -> tuple[str, ...] | None:
-    """The parameters that tests of ``kind`` identify (all active ones for other kinds)."""
+    """The parameters that tests of ``kind`` identify (None: all active ones, other kinds)."""
     from fenicsx_drape.calibration.coupons import BLOCK_ROLE
 
-    return role_parameters(model, BLOCK_ROLE[kind]) if kind in BLOCK_ROLE else None
+    return coupon_parameters(model, kind) if kind in BLOCK_ROLE else None
 
 
 def refit_parameters(model: Model, name: str) -> tuple[str, ...]:

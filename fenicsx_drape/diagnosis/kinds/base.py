@@ -38,7 +38,8 @@ class FitHook(Protocol):
     def __call__(self, bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
                  tests: Sequence[str] | None, parameters: Sequence[str] | None,
                  max_iterations: int, from_features: bool,
-                 progress: Callable[[str], None] | None, details: dict | None) -> Model:
+                 progress: Callable[[str], None] | None, details: dict | None,
+                 own: Sequence[str] = ()) -> Model:
         """Fit ``model`` to the tests of this kind in ``bundle`` (only ``tests`` if given).
 
         Args:
@@ -53,6 +54,9 @@ class FitHook(Protocol):
             progress: Called with a line of text as the fit proceeds.
             details: Filled with what the fit found, when it reports anything (the coupons:
                 ``details["coupons"]``, the fit's result).
+            own: A candidate's own parameters (in its refit): a kind whose tests are all
+                that can move them fits them too (the forming kinds, when no coupon test
+                fixes them).
         """
         ...
 

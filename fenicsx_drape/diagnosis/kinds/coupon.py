@@ -138,7 +138,7 @@ def fit_material(bundle: Bundle, model: Model, *, kind_of: Callable | None = Non
                  tests: Sequence[str] | None = None, parameters: Sequence[str] | None = None,
                  max_iterations: int = 200, from_features: bool = True,
                  progress: Callable[[str], None] | None = None,
-                 details: dict | None = None) -> Model:
+                 details: dict | None = None, own: Sequence[str] = ()) -> Model:
     """The coupons' fit (:class:`~fenicsx_drape.diagnosis.kinds.base.FitHook`): the material.
 
     The coupon tests fix the material (:func:`fenicsx_drape.calibration.fitting.fit`) when some
@@ -146,6 +146,7 @@ def fit_material(bundle: Bundle, model: Model, *, kind_of: Callable | None = Non
     (``kind_of`` is not needed). A fit from the features has the global
     stage; ``details["coupons"]`` receives the :class:`~fenicsx_drape.calibration.fitting.
     FitResult` (its starts, undetermined parameters, noise) when ``details`` is given.
+    ``own`` (a candidate's own parameters) is among ``parameters`` already.
     """
     from fenicsx_drape.calibration.coupons import COUPON_KINDS
     from fenicsx_drape.calibration.fitting import fit
@@ -159,6 +160,33 @@ def fit_material(bundle: Bundle, model: Model, *, kind_of: Callable | None = Non
     if details is not None:
         details["coupons"] = result
     return result.model
+
+
+def role_parameters(model: Model, role: str) -> tuple[str, ...]:
+    """The active parameters of the law of ``role`` and of the effects acting on it."""
+    from fenicsx_drape.effects import describe_effect
+
+    laws = model.law_classes()
+    names = list(laws[role].active_parameters(model.effects)) if role in laws else []
+    for name in model.effects:
+        effect = describe_effect(name)
+        if effect.acts_on == role:
+            names += effect.parameters
+    active = model.active_parameters()
+    return tuple(n for n in dict.fromkeys(names) if n in active)
+
+
+def coupon_parameters(model: Model, kind: str) -> tuple[str, ...]:
+    """The parameters coupon tests of ``kind`` fix: those of the law they load and its effects.
+
+    A kind that loads no one law (not in :data:`~fenicsx_drape.calibration.coupons.
+    BLOCK_ROLE`) fixes every active parameter.
+    """
+    from fenicsx_drape.calibration.coupons import BLOCK_ROLE
+
+    if kind not in BLOCK_ROLE:
+        return model.active_parameters()
+    return role_parameters(model, BLOCK_ROLE[kind])
 
 
 def plot_curves(comparisons: Mapping[str, Comparison], test: Test, path: Path,

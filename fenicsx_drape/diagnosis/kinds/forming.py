@@ -30,6 +30,15 @@ The holder's μ is fitted only where a test's holder does not fix it (a case's
 ``[holder] mu``), and the inter-ply μ and η_f only on a stack whose ``[interply]`` table does
 not give them (:func:`interply_free`).
 
+In a candidate's refit the fit also moves the candidate's **own** parameters (``own`` of the
+fit hook: η_o and E_v of ``rate_dependence``, ...; not a friction's regularisation slip,
+:data:`REGULARISATION`) that no coupon test of the fit fixes: on a bundle of forming tests
+only, nothing else can move them, and a refit held at its start's material is no measure of
+the candidate. They are fitted with the friction in their logarithms (forward differences of
+:data:`LOG_STEP`, steps of at most :data:`MAX_LOG_STEP`, within the parameters' bounds, at
+most :data:`MAX_MATERIAL_ITERATIONS` iterations, ending when one lowers the cost by less
+than :data:`MATERIAL_FTOL` of it): one more run per parameter, test and iteration.
+
 **Cost.** A forming run costs seconds (4 s for the 10 mm quarter), and a diagnosis makes
 a few dozen: only the friction coefficients are fitted (one or two parameters, Gauss-Newton
 in at most :data:`MAX_ITERATIONS` iterations), every run is cached, the runs of an iteration
@@ -81,10 +90,19 @@ FD_STEPS = {"eta_f_MPa_s_per_mm": 0.1}
 # And the fit starts from the best of η_f's model value and these multiples of it, formed in
 # its first batch (η_f spans a factor 20 between published films).
 STARTS = {"eta_f_MPa_s_per_mm": (0.5, 2.0, 4.0)}
+# Held in a candidate's refit: the slip over which a friction is regularised (sticking below
+# it), a numerical choice the forming tests do not decide (the coefficient acts alike).
+REGULARISATION = ("holder_slip_mm", "tool_slip_mm")
 XTOL = 0.002  # a Gauss-Newton step smaller than this (in μ) ends the fit
 MAX_ITERATIONS = 4  # Gauss-Newton iterations of a forming fit at most
 MAX_STEP = 0.3  # largest change of a friction coefficient in one iteration
 MU_BOUNDS = (0.0, 2.0)  # friction coefficients fitted within (prepreg on steel: 0.1-0.5)
+# A candidate's own material parameters, fitted with the friction in their logarithms:
+LOG_STEP = 0.05  # forward-difference step in the logarithm (5 %)
+LOG_XTOL = 0.02  # a step smaller than this in every logarithm (2 %, and XTOL in μ) ends the fit
+MAX_LOG_STEP = math.log(10.0)  # largest change in one iteration: a factor of 10
+MAX_MATERIAL_ITERATIONS = 6  # Gauss-Newton iterations at most when material is fitted
+MATERIAL_FTOL = 0.01  # with material: an iteration lowering the cost by less (share) ends it
 
 
 # --------------------------------------------------------------------------------------------
@@ -211,6 +229,19 @@ def forming_parameters(model: Model) -> tuple[str, ...]:
     return tuple(n for n in FORMING_PARAMETERS if n in active)
 
 
+def free_parameters(model: Model, tests: Sequence[Test]) -> tuple[str, ...]:
+    """The forming parameters a fit to the formed ``tests`` moves.
+
+    The holder's μ only where a test's holder does not fix it; the inter-ply μ and η_f only on
+    a stack whose ``[interply]`` table does not give them.
+    """
+    names = forming_parameters(model) if tests else ()
+    if not any(holder_mu_free(t) for t in tests):
+        names = tuple(n for n in names if n != "mu")
+    return tuple(n for n in names if n not in MODEL_INTERPLY
+                 or any(interply_free(t, n) for t in tests))
+
+
 def _residuals(tests: Sequence[Test], kinds: Sequence[Kind], model: Model,
                names: Sequence[str], sets: np.ndarray) -> np.ndarray:
     """Residuals in noise units, cost = Σ_tests (RMSE / noise)², one row per parameter set."""
@@ -225,8 +256,40 @@ def _residuals(tests: Sequence[Test], kinds: Sequence[Kind], model: Model,
     return np.concatenate(out, axis=1)
 
 
+def _transforms(names: Sequence[str], material: Sequence[str]):
+    """The fit's coordinates: friction over its :data:`SCALE`, material in logarithms.
+
+    Returns the values of a point (rows of coordinates), the forward-difference steps, the
+    largest step, the step that ends the fit and the bounds, each per coordinate.
+    """
+    from fenicsx_drape.model import parameter_info
+
+    is_log = np.array([n in material for n in names])
+    scale = np.array([1.0 if log else SCALE.get(n, 1.0) for n, log in zip(names, is_log)])
+    lo, hi = [], []
+    for n, log in zip(names, is_log):
+        a, b = parameter_info(n).bounds if log else MU_BOUNDS
+        if log:  # a parameter at 0 is not fitted (see fit_forming): its bounds in logarithms
+            a, b = (math.log(a) if a > 0 else -math.inf), (math.log(b) if b < math.inf
+                                                           else math.inf)
+        lo.append(a)
+        hi.append(b)
+    h = np.where(is_log, LOG_STEP, [FD_STEPS.get(n, FD_STEP) for n in names])
+    largest = np.where(is_log, MAX_LOG_STEP, MAX_STEP)
+    tol = np.where(is_log, LOG_XTOL, XTOL)
+
+    def values(x: np.ndarray) -> np.ndarray:
+        return np.where(is_log, np.exp(np.where(is_log, x, 0.0)), x * scale)
+
+    def coordinates(v: np.ndarray) -> np.ndarray:
+        return np.where(is_log, np.log(np.where(is_log, v, 1.0)), v / scale)
+
+    return values, coordinates, h, largest, tol, (np.array(lo), np.array(hi))
+
+
 def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
-                tests: Sequence[str] | None = None, max_iterations: int = MAX_ITERATIONS,
+                tests: Sequence[str] | None = None, material: Sequence[str] = (),
+                max_iterations: int = MAX_ITERATIONS,
                 progress: Callable[[str], None] | None = None) -> Model:
     """Fit the model's forming parameters to the forming tests of ``bundle`` (module doc).
 
@@ -236,7 +299,11 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
         kind_of: Each test's kind (:func:`~fenicsx_drape.diagnosis.kinds.kind_of`; None: no
             kind compares it).
         tests: Only these test ids; all forming tests when None.
-        max_iterations: Gauss-Newton iterations at most (capped at :data:`MAX_ITERATIONS`).
+        material: Material parameters fitted with the friction, in their logarithms (a
+            candidate's own parameters that no coupon test fixes); each costs one more run
+            per test and iteration.
+        max_iterations: Gauss-Newton iterations at most (capped at :data:`MAX_ITERATIONS`,
+            :data:`MAX_MATERIAL_ITERATIONS` with ``material``).
         progress: Called with a line of text per iteration.
 
     Returns:
@@ -248,30 +315,29 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
     chosen = [t for t in bundle.tests if (kind := kind_of(t)) is not None and kind.formed
               and (tests is None or t.id in tests)]
     kinds = [kind_of(t) for t in chosen]
-    names = forming_parameters(model)
-    if not any(holder_mu_free(t) for t in chosen):
-        names = tuple(n for n in names if n != "mu")
-    model = model.with_parameters(**given_interply(chosen, names))
-    names = tuple(n for n in names if n not in MODEL_INTERPLY
-                  or any(interply_free(t, n) for t in chosen))
+    model = model.with_parameters(**given_interply(chosen, forming_parameters(model)))
+    names = free_parameters(model, chosen)
+    active = model.active_parameters()
+    material = tuple(n for n in dict.fromkeys(material) if n in active and n not in names
+                     and float(model.parameters[n]) > 0.0)
+    names = (*names, *material)
     if not chosen or not names:
         return model
-    scale = np.array([SCALE.get(n, 1.0) for n in names])
-    p = np.array([float(model.parameters[n]) for n in names]) / scale
+    values, coordinates, step_h, largest, tol, (lo, hi) = _transforms(names, material)
+    p = coordinates(np.array([float(model.parameters[n]) for n in names]))
     k = len(names)
-    fd = np.array([FD_STEPS.get(n, FD_STEP) for n in names])
-    h = np.diag(fd)
+    h = np.diag(step_h)
+    cap = MAX_MATERIAL_ITERATIONS if material else MAX_ITERATIONS
+
+    def shown(x: np.ndarray) -> dict[str, float]:
+        return {n: float(f"{v:.4g}") for n, v in zip(names, values(x))}
 
     def residuals(*points: np.ndarray) -> np.ndarray:
-        return _residuals(chosen, kinds, model, names, np.vstack(points) * scale)
-
-    def values(q: np.ndarray) -> dict[str, float]:
-        return {n: round(float(v), 4 - round(math.log10(c)))
-                for n, v, c in zip(names, q * scale, scale)}
+        return _residuals(chosen, kinds, model, names, values(np.vstack(points)))
 
     def slopes(p: np.ndarray, r: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
         R = residuals(*(p + h)) if R is None else R
-        return (R - r).T / fd
+        return (R - r).T / step_h
 
     def evaluate(*points: np.ndarray) -> tuple[np.ndarray, list[np.ndarray | None]]:
         """The residuals at ``points`` and each one's Jacobian where its runs were at hand.
@@ -297,54 +363,74 @@ def fit_forming(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind 
                 Js.append(None)
         return R, Js
 
-    # The starts, judged in the first batch of runs: the model's values, the parameters'
-    # defaults (a warm start from a model without the right physics can sit far off) and
-    # η_f's scan (STARTS: its runs are not smooth enough for Gauss-Newton to cross its range).
-    default = np.clip([parameter_info(n).default for n in names] / scale, *MU_BOUNDS)
-    starts = [p] + ([default] if np.abs(default - p).max() > XTOL else [])
+    # The starts, judged in the first batch of runs: the model's values, the friction
+    # coefficients' defaults (a warm start from a model without the right physics can sit far
+    # off) and η_f's scan (STARTS: its runs are not smooth enough for Gauss-Newton to cross its
+    # range); the material stays at the model's values in each.
+    friction = np.array([n not in material for n in names])
+    default = np.clip(coordinates(np.array([
+        float(parameter_info(n).default) if f else float(model.parameters[n])
+        for n, f in zip(names, friction)])), lo, hi)
+    starts = [p] + ([default] if np.any(np.abs(default - p) > tol) else [])
     for i, n in enumerate(names):
-        for factor in STARTS.get(n, ()):
+        for factor in STARTS.get(n, ()) if friction[i] else ():
             starts.append(p.copy())
-            starts[-1][i] = np.clip(p[i] * factor, *MU_BOUNDS)
+            starts[-1][i] = np.clip(p[i] * factor, lo[i], hi[i])
     R, Js = evaluate(*starts)
     r, J = R[0], Js[0]
     best = int(np.argmin([q @ q for q in R]))
     if best:
         which = "the defaults " if starts[best] is default else ""
-        say(f"  forming fit: starting from {which}{values(starts[best])} "
+        say(f"  forming fit: starting from {which}{shown(starts[best])} "
             f"(cost {R[best] @ R[best]:.4g}, was {r @ r:.4g})")
         p, r, J = starts[best], R[best], Js[best]
-    for iteration in range(min(max_iterations, MAX_ITERATIONS)):
+    for iteration in range(min(max_iterations, cap)):
         J = slopes(p, r) if J is None else J
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
-        step /= max(1.0, float(np.abs(step).max()) / MAX_STEP)
+        step /= max(1.0, float(np.max(np.abs(step) / largest)))
         for attempt in range(2):  # the Gauss-Newton step, then half of it
-            trial = np.clip(p + step / 2**attempt, *MU_BOUNDS)
-            if np.abs(trial - p).max() < XTOL:
+            trial = np.clip(p + step / 2**attempt, lo, hi)
+            if np.all(np.abs(trial - p) < tol):
                 break
             (r_new,), (J_new,) = evaluate(trial)
-            say(f"  forming fit {iteration + 1}: {values(trial)}, "
+            say(f"  forming fit {iteration + 1}: {shown(trial)}, "
                 f"cost {r_new @ r_new:.4g} (was {r @ r:.4g})")
             if r_new @ r_new < r @ r:
                 break
         else:
             break
-        if np.abs(trial - p).max() < XTOL:
+        if np.all(np.abs(trial - p) < tol):
             break
+        gain = 1.0 - (r_new @ r_new) / (r @ r)
         p, r, J = trial, r_new, J_new
-    return model.with_parameters(**{n: float(v) for n, v in zip(names, p * scale)})
+        if material and gain < MATERIAL_FTOL:
+            break  # each iteration costs 1 + k runs a test: a step gaining little ends it
+    return model.with_parameters(**{n: float(v) for n, v in zip(names, values(p))})
 
 
 def fit_friction(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind | None],
                  tests: Sequence[str] | None = None, parameters: Sequence[str] | None = None,
                  max_iterations: int = MAX_ITERATIONS, from_features: bool = True,
-                 progress: Callable[[str], None] | None = None, details: dict | None = None
-                 ) -> Model:
+                 progress: Callable[[str], None] | None = None, details: dict | None = None,
+                 own: Sequence[str] = ()) -> Model:
     """The forming kinds' fit hook (:class:`~fenicsx_drape.diagnosis.kinds.base.FitHook`).
 
-    The forming parameters only (:func:`fit_forming`), the material held as the coupons (or
-    the model) left it: ``parameters``, ``from_features`` and ``details`` concern the
-    material.
+    The forming parameters (:func:`fit_forming`), the material held as the coupons (or the
+    model) left it, but for ``own``: a candidate's own parameters that no coupon test of the
+    fit fixes, fitted with the friction (on a bundle of forming tests only, the forming
+    tests are all that can move them), but for a friction's regularisation slip
+    (:data:`REGULARISATION`). ``from_features`` and ``details`` concern the material;
+    ``parameters``, when given, limits ``own``.
     """
+    from fenicsx_drape.diagnosis.kinds.coupon import coupon_parameters
+
+    fixed: set[str] = set()
+    for test in bundle.tests:
+        kind = kind_of(test)
+        if kind is not None and not kind.formed and (tests is None or test.id in tests):
+            fixed |= set(coupon_parameters(model, test.kind))
+    material = [n for n in own if n not in fixed and n not in REGULARISATION
+                and (parameters is None or n in parameters)]
     return fit_forming(bundle, model, kind_of=kind_of, tests=tests, progress=progress,
-                       max_iterations=max_iterations)
+                       max_iterations=max_iterations, material=material)
+
