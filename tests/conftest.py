@@ -48,7 +48,6 @@ HEAVY = ("tests/test_lab_user_path.py", "tests/test_demo_laminates.py",
          "tests/test_stack_diagnosis.py", "tests/test_forming_case_diagnosis.py",
          "tests/test_fe_newton.py", "tests/test_docs_truth.py", "tests/test_demos_diagnosis.py",
          "tests/test_forming_ply_angle.py", "tests/test_reference_reports.py",
-         "tests/test_candidate_refit.py",
          "tests/test_verdict.py")  # light, but it waits: not at the end, when nothing else runs
 
 

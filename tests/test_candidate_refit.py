@@ -34,7 +34,7 @@ def trials():
                                                                     tests=tuple(noisy))
 
 
-@pytest.mark.slow
+@pytest.mark.bench  # 80 CPU-s: make bench
 def test_forming_fit_moves_a_candidates_own_parameter_back_to_the_truth(trials):
     from fenicsx_drape.diagnosis.refits import fit
 
@@ -50,7 +50,7 @@ def test_forming_fit_moves_a_candidates_own_parameter_back_to_the_truth(trials):
     assert moved.parameters["mu"] == pytest.approx(truth.parameters["mu"], abs=0.02)
 
 
-@pytest.mark.slow
+@pytest.mark.bench  # 86 CPU-s: make bench
 def test_candidates_refit_reaches_the_truths_own_error(trials):
     """The diagnosis's steps for rate_dependence, from the model less it (μ fitted)."""
     from fenicsx_drape.calibration.coupons import declare_noise

@@ -122,7 +122,7 @@ def test_a_symmetric_layup_formed_whole_is_its_mirrored_quarter():
     assert max(centre_moves(runs[()])) < 0.1
 
 
-@pytest.mark.slow  # six forming runs of the whole stack
+@pytest.mark.bench  # six forming runs of the whole stack (32 CPU-s): make bench
 def test_the_stack_moves_smoothly_with_the_set_up(lab_case):
     """The holder's force and the blank's offset, each three values: the centre of every ply
     stays on the punch and each ply's mean in-plane displacement moves smoothly (the middle

@@ -200,9 +200,9 @@ def _case(name: str, *marks, xfail: str | None = None):
 @pytest.mark.skip_in_parallel
 @pytest.mark.parametrize("name", [
     _case("nothing", pytest.mark.slow),
-    _case("effect", pytest.mark.slow),
-    _case("setup", pytest.mark.slow),
-    _case("other part", pytest.mark.slow),
+    _case("effect", pytest.mark.bench),  # about a CPU-minute each: make bench
+    _case("setup", pytest.mark.bench),
+    _case("other part", pytest.mark.bench),
     _case("setup+effect", pytest.mark.bench,
           xfail="names neither the blank offset nor tow_buckling: 'write a user law' at 21 x "
                 "the noise, tow_buckling's refit at 18 x (evidence 1.19)"),

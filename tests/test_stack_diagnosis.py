@@ -90,7 +90,7 @@ def test_the_model_gives_the_inter_ply_values_the_case_leaves_out():
     assert forming_parameters(BONDED) == ("mu",)
 
 
-@pytest.mark.slow
+@pytest.mark.bench  # 60 CPU-s: make bench
 def test_the_forming_fit_fits_the_film_the_case_leaves_to_the_model(tmp_path):
     """Grids on both plies of a stack formed with η_f = 0.006 MPa·s/mm, the case giving μ_ply
     and the holder's μ but not η_f: the forming fit, from the model's 0.002, finds it."""
