@@ -13,6 +13,11 @@ from pathlib import Path
 
 import pytest
 
+# A stack under mpirun can hang (4 of 9 runs of this module on 2 ranks on two cores, in the
+# first test or in drape form's): run by `make bench-parallel`, not `make test`, until found
+# (docs/laminates-internals.md, MPI).
+pytestmark = pytest.mark.bench
+
 pytest.importorskip("dolfinx")
 from mpi4py import MPI
 
