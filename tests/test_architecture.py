@@ -56,6 +56,7 @@ LAYER_OF = (
     ("fenicsx_drape.trust", "base"),
     ("fenicsx_drape.limits", "base"),
     ("fenicsx_drape._moved", "base"),
+    ("fenicsx_drape._lazy", "base"),
     ("fenicsx_drape", "base"),
 )
 

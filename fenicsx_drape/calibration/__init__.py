@@ -25,8 +25,8 @@ The public API (:data:`__all__`)::
   tests (:func:`fit_interply`).
 """
 
-import importlib
 
+from fenicsx_drape._lazy import lazy_exports
 from fenicsx_drape._moved import keep_old_paths
 
 # The public names, each from its module, imported on first use.
@@ -51,17 +51,7 @@ _PUBLIC = {
     "write_fit": "fitting",
 }
 
-__all__ = sorted(_PUBLIC)
-
-
-def __getattr__(name: str):
-    if name in _PUBLIC:
-        return getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _PUBLIC)
 
 
 # Modules renamed so that no public function is hidden by a module of its name (CHANGELOG.md):

@@ -32,8 +32,8 @@ Its modules:
   (:mod:`~fenicsx_drape.diagnosis.run_store`).
 """
 
-import importlib
 
+from fenicsx_drape._lazy import lazy_exports
 from fenicsx_drape._moved import keep_old_paths
 
 # The public names, each from its module, imported on first use (the diagnosis's modules
@@ -59,17 +59,7 @@ _PUBLIC = {
     "write_lab_bundle": "lab_synthetic",
 }
 
-__all__ = sorted(_PUBLIC)
-
-
-def __getattr__(name: str):
-    if name in _PUBLIC:
-        return getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _PUBLIC)
 
 
 # Modules that moved (CHANGELOG.md): their old paths work for one release.

@@ -6,7 +6,7 @@
   mesh), cached, tabulated and plotted.
 """
 
-import importlib
+from fenicsx_drape._lazy import lazy_exports
 
 # Their public names, from the package (``from fenicsx_drape.forming import paper``;
 # ``paper.TARGETS``, ``paper.sweep``), each imported on first use.
@@ -55,14 +55,4 @@ _PUBLIC = {
     "write_rows": "studies",
 }
 
-__all__ = sorted(_PUBLIC)
-
-
-def __getattr__(name: str):
-    if name in _PUBLIC:
-        return getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _PUBLIC)

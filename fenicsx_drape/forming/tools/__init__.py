@@ -9,7 +9,7 @@
 - :mod:`~fenicsx_drape.forming.tools.build`: a case's tools built from its tables.
 """
 
-import importlib
+from fenicsx_drape._lazy import lazy_exports
 
 # The public names, from the package, each imported on first use.
 _PUBLIC = {
@@ -27,14 +27,4 @@ _PUBLIC = {
     "write_tool_meshes": "drawing",
 }
 
-__all__ = sorted(_PUBLIC)
-
-
-def __getattr__(name: str):
-    if name in _PUBLIC:
-        return getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _PUBLIC)
