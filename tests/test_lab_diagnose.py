@@ -70,7 +70,8 @@ def test_the_model_that_formed_it_stays_null(lab_bundle):
     from fenicsx_drape.diagnosis import diagnose
     from fenicsx_drape.model import default_model
 
-    # One candidate, as above; every kind alone on the default path: test_lab_user_path.py.
+    # One candidate, as above; every kind alone on the default path: test_lab_user_path.py
+    # (make bench).
     report = diagnose(lab_bundle, default_model(), candidates=["tool_friction"])
     assert report["missing_effect"] is None
     assert report["baseline"]["error"]["normalised"] < 1.5
