@@ -179,15 +179,11 @@ def role_parameters(model: Model, role: str) -> tuple[str, ...]:
 def coupon_parameters(model: Model, kind: str) -> tuple[str, ...]:
     """The parameters coupon tests of ``kind`` fix: those of the law they load and its effects.
 
-    Inter-ply friction tests fix the inter-ply law's (:func:`~fenicsx_drape.diagnosis.kinds.
-    interply_friction.interply_parameters`); a kind that loads no one law (not in
-    :data:`~fenicsx_drape.calibration.coupons.BLOCK_ROLE`) fixes every active parameter.
+    A kind that loads no one law (not in :data:`~fenicsx_drape.calibration.coupons.
+    BLOCK_ROLE`) fixes every active parameter.
     """
     from fenicsx_drape.calibration.coupons import BLOCK_ROLE
-    from fenicsx_drape.diagnosis.kinds.interply_friction import NAME, interply_parameters
 
-    if kind == NAME:
-        return interply_parameters(model)
     if kind not in BLOCK_ROLE:
         return model.active_parameters()
     return role_parameters(model, BLOCK_ROLE[kind])

@@ -107,8 +107,9 @@ def table_problems(test: Test) -> list[str]:
             continue
         bad = np.flatnonzero(~np.isfinite(np.asarray(values, dtype=float)))
         if bad.size:
-            out.append(f"{at}: row {bad[0] + 1}, column {name}: {values[bad[0]]!r} is not a "
-                       f"finite number ({bad.size} such row(s))")
+            value = float(values[bad[0]])
+            out.append(f"{at}: row {bad[0] + 1}, column {name}: {value!r} is not a finite "
+                       f"number ({bad.size} such row(s))")
     if out:
         return out
     back = np.flatnonzero(np.diff(test.time_s) <= 0)
