@@ -134,25 +134,34 @@ def test_the_cli_diagnoses_a_bundle_of_pull_outs(tmp_path):
     assert json.loads(out.read_text())["missing_effect"] == "interply_friction"
 
 
-@pytest.mark.parametrize(("header", "cell", "says"), [
-    ("time_s,displacement_mm,force_sd_N", None, "missing column(s) force_N"),
-    ("time_s,displacement_mm,force_N,force_sd_N", "nan", "column force_N: 'nan' is not a "
-                                                         "finite number"),
-])
-def test_a_malformed_table_is_refused_naming_its_file(tmp_path, capsys, header, cell, says):
+def _without_force(header, rows):
+    return header.replace("force_N,", ""), [r[:2] + r[3:] for r in rows]
+
+
+def _nan_force(header, rows):
+    rows[4][2] = "nan"  # row 5: line 6
+    return header, rows
+
+
+def _negative_pressure(header, rows):
+    return header + ",pressure_kPa", [[*r, "-5" if i == 6 else "50"]
+                                      for i, r in enumerate(rows)]
+
+
+@pytest.mark.parametrize(("change", "line", "says"), [
+    (_without_force, 1, "missing column(s) force_N"),
+    (_nan_force, 6, "column force_N: 'nan' is not a finite number"),
+    (_negative_pressure, 8, "column pressure_kPa: -5 kPa is negative"),
+], ids=["missing column", "NaN", "negative pressure"])
+def test_a_malformed_table_is_refused_naming_its_file(tmp_path, capsys, change, line, says):
+    """The file, its line and the column, when read and from the command line (exit 2)."""
     folder = write_bundle(tmp_path / "b")
     csv = folder / "ipf_50kPa_10.csv"
-    lines = csv.read_text().splitlines()
-    rows = [line.split(",") for line in lines[1:]]
-    if cell is None:  # the force column left out
-        lines = [header] + [",".join((r[0], r[1], r[3])) for r in rows]
-    else:  # row 5 (line 6) holds a NaN force
-        rows[4][2] = cell
-        lines = [header] + [",".join(r) for r in rows]
-    csv.write_text("\n".join(lines) + "\n")
+    header, *rows = csv.read_text().splitlines()
+    header, rows = change(header, [r.split(",") for r in rows])
+    csv.write_text("\n".join([header, *(",".join(r) for r in rows)]) + "\n")
     with pytest.raises(BundleError) as err:
         load_bundle(folder)
-    line = 1 if cell is None else 6
     assert f"{csv}:{line}:" in str(err.value) and says in str(err.value)
     (tmp_path / "m.toml").write_text('effects = ["interply_friction"]\n')
     assert main(["compare", str(folder), "--model", str(tmp_path / "m.toml"),
@@ -177,3 +186,27 @@ def test_the_kind_refuses_a_table_made_in_code(bundle):
     assert problem.startswith(f"{test.file}: test {test.id!r}: row 8, column time_s")
     with pytest.raises(DrapeInputError, match="row 4, column force_N"):
         INTERPLY_FRICTION.simulate(bad, SLIDING)
+
+
+def test_the_docs_commands_on_the_demo_bundle(tmp_path):
+    """docs/laminates.md's two commands on demos/bundles/pull-outs (its stated numbers)."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    folder = root / "demos" / "bundles" / "pull-outs"
+    assert main(["compare", str(folder), "--model",
+                 str(root / "demos" / "models" / "with_interply_friction.toml"),
+                 "--out", str(tmp_path / "cmp")]) == 0
+    compared = json.loads((tmp_path / "cmp" / "compare.json").read_text())
+    assert compared["error"]["normalised"] == pytest.approx(1.05, abs=0.005)
+    assert {n: compared["model"]["parameters"][n] for n in TRUE} == pytest.approx(
+        {"mu_ply": 0.2200, "eta_f_MPa_s_per_mm": 0.003002, "tau0_MPa": 0.004003}, rel=5e-4)
+    out = tmp_path / "report.json"
+    assert main(["diagnose", str(folder), "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["missing_effect"] == "interply_friction"
+    best = report["candidates"][0]
+    assert best["error_after"]["normalised"] == pytest.approx(1.05, abs=0.005)
+    assert best["heldout_normalised"] == pytest.approx(1.11, abs=0.005)
+    assert best["parameters"] == pytest.approx(
+        {"mu_ply": 0.2200, "eta_f_MPa_s_per_mm": 0.003002, "tau0_MPa": 0.004003}, rel=5e-4)
