@@ -143,14 +143,14 @@ def test_a_holder_force_is_read_from_the_force_curve_and_the_edge(tmp_path):
 
 
 def test_shear_read_off_a_finer_net_is_the_nets_not_physics(tmp_path):
-    """A sound lab estimate on a 5 mm net against the model's 20 mm cells (resolution).
+    """A sound lab estimate on a 10 mm net against the model's 20 mm cells (resolution).
 
     The truth on the case's own tools and 2 mm steps: what differs is the net alone.
     """
     pytest.importorskip("dolfinx")
     from fenicsx_drape.model import default_model
 
-    bundle = make_lab_bundle.make(tmp_path / "bundle", seed=9, cell_mm=5.0, step_mm=2.0,
+    bundle = make_lab_bundle.make(tmp_path / "bundle", seed=9, cell_mm=10.0, step_mm=2.0,
                                   stl=False, measurements=["shear_points"])
     report = run(tmp_path, bundle, default_model())
     assert report["missing_effect"] is None
