@@ -108,9 +108,8 @@ def test_each_kind_alone_from_the_model_that_formed_it_names_nothing(tmp_path, k
     steps), so the residual is the noise: 25 to 60 s a kind. Under ``make bench``, as is the
     lab's copy (STL tools, the truth on 10 mm cells and 1 mm steps; ``lab_copy``: 1 to 5 min a
     kind). ``make test`` runs every kind on the same default path: the shear lines alone in the
-    finer-net test below, the edge and the press force in the holder-force test, all four in
-    the README's command; and a lab bundle formed by the model it is judged with, all four
-    kinds, stays null (``test_lab_diagnose.py``).
+    finer-net test below, all four in the README's command; and a lab bundle formed by the
+    model it is judged with, all four kinds, stays null (``test_lab_diagnose.py``).
     """
     pytest.importorskip("dolfinx")
     from fenicsx_drape.model import default_model
@@ -123,23 +122,53 @@ def test_each_kind_alone_from_the_model_that_formed_it_names_nothing(tmp_path, k
     assert list(report["baseline"]["error"]["per_test"]) == [f"part/{kind}"]
 
 
+def holder_force_bundle(folder: Path) -> Path:
+    """The edge and the force curve of a part held with 300 N where its case says 100 N.
+
+    The truth on the case's own tools, 20 mm cells and 1 mm steps: the force is read off its
+    curve, not off the net's error (the 10 mm truth's force is 50 % off on 20 mm cells) nor
+    off the STL copy's (at 300 N the STL holder forms the edge 24 × its noise away from the
+    closed-form holder's, against 6 × at 100 N: measured, not yet explained).
+    """
+    return make_lab_bundle.make(folder, seed=5, holder_force_N=300.0, cell_mm=20.0, stl=False,
+                                measurements=["outline", "punch_force"])
+
+
+@pytest.mark.bench
 def test_a_holder_force_is_read_from_the_force_curve_and_the_edge(tmp_path):
+    """The default path (every set-up candidate, then every effect): the force, no effect.
+
+    Under ``make bench`` (about a minute); ``make test`` reads the force with the set-up
+    stage alone (below) and runs the edge and the force on the default path in the README's
+    command.
+    """
     pytest.importorskip("dolfinx")
     from fenicsx_drape.model import default_model
 
-    # The truth on the case's own tools, 20 mm cells and 1 mm steps: the force is read off
-    # its curve, not off the net's error (the 10 mm truth's force is 50 % off on 20 mm cells)
-    # nor off the STL copy's (at 300 N the STL holder forms the edge 24 × its noise away from
-    # the closed-form holder's, against 6 × at 100 N: measured, not yet explained).
-    bundle = make_lab_bundle.make(tmp_path / "bundle", seed=5, holder_force_N=300.0,
-                                  cell_mm=20.0, stl=False,
-                                  measurements=["outline", "punch_force"])
-    report = run(tmp_path, bundle, default_model())
+    report = run(tmp_path, holder_force_bundle(tmp_path / "bundle"), default_model())
     assert report["setup_error"] in ("holder_force_N", "mu")
     (entry,) = [s for s in report["setup"] if s["parameter"] == "holder_force_N"]
     assert entry["stated"] == 100.0
     assert abs(entry["fitted"] - 300.0) <= max(2.0 * entry["sd"], 30.0)
     assert report["missing_effect"] is None
+
+
+def test_the_set_up_stage_reads_a_holder_force_off_the_force_curve_and_the_edge(tmp_path):
+    """The set-up stage on the holder's force and friction (μ tied to the force, eq. 1)."""
+    pytest.importorskip("dolfinx")
+    from fenicsx_drape.diagnosis.decision import setup_rules
+    from fenicsx_drape.diagnosis.setup_stage import fit_setup
+    from fenicsx_drape.forming.case.format import case_for_test
+    from fenicsx_drape.measurements.bundle import load_bundle
+    from fenicsx_drape.model import default_model
+
+    bundle = load_bundle(holder_force_bundle(tmp_path / "bundle"), read_case=case_for_test)
+    stage = fit_setup(bundle, default_model(), setup_rules(),
+                      parameters=["holder_force_N", "mu"])
+    assert stage.setup_error in ("holder_force_N", "mu")
+    (entry,) = [s for s in stage.entries if s["parameter"] == "holder_force_N"]
+    assert entry["stated"] == 100.0
+    assert abs(entry["fitted"] - 300.0) <= max(2.0 * entry["sd"], 30.0)
 
 
 def test_shear_read_off_a_finer_net_is_the_nets_not_physics(tmp_path):
