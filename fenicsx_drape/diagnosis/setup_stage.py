@@ -26,8 +26,8 @@ node_folds`), and
    whatever the leftover of other measurements. The honest ``sd`` grows with what the fit
    leaves (its lack of fit), and the evidence on the noise widened by the net's own error
    weighs the measurements it improves against edges the net cannot resolve: a stack's ply
-   laid at 35° where the case says 45° was fitted 35.0 ± 4.0° (its fit alone ± 0.18°) with
-   evidence 1.195 on the widened noise and 1.28 on the stated one, and named nothing. A
+   laid at 35° where the case says 45° is fitted 35.0 ± 4.0° (its fit alone ± 0.18°) with
+   evidence 1.195 on the widened noise and 1.28 on the stated one, not significant. A
    candidate is **set apart** when all hold:
 
    - its value lies :data:`SET_APART_SD` (3) of its fit's own sd (``sd_fit``, the lack of fit
