@@ -224,7 +224,8 @@ def test_a_small_scenario_gets_the_right_answer(tmp_path, truths, name):
 
 
 def setup_stage_of(folder: Path, parameters: tuple[str, ...]):
-    """The diagnosis's set-up stage on a scenario's bundle, as ``drape diagnose`` reaches it."""
+    """The diagnosis's set-up stage on a scenario's bundle: its data checked and prepared as
+    ``drape diagnose`` does (the baseline's outlier rows are not looked for)."""
     from fenicsx_drape.calibration.coupons import declare_noise
     from fenicsx_drape.cli import load_bundle_reported
     from fenicsx_drape.diagnosis.decision import setup_rules
