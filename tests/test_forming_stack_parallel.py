@@ -27,7 +27,6 @@ from fenicsx_drape.forming.running.run import run_case
 from fenicsx_drape.materials.interply import InterplyLaw
 from fenicsx_drape.model import default_model
 
-
 CASE = Path(__file__).resolve().parents[1] / "meshes" / "hemisphere" / "stack_0_45.toml"
 COARSE = {"cell_mm": 30.0, "duration_s": 8.0}
 TOL = 1e-4  # mm, degrees, MPa

@@ -2,11 +2,12 @@
 
 A ply pulled 20 mm (2 cells) between a long ply held below and one held above: the pairs
 follow it (fe/plies.py), and each new partner adds blocks to the Jacobian's pattern on the
-ranks whose rows it touches, here at other steps on each rank. Taking a pattern into the
-Jacobian is collective, so every rank must do it when any pattern grew (a rank that did it
-alone waited in the matrix's assembly for ever). Without pressure the pull-out's force is
-exact (ten Thije & Akkerman 2009): F = 2 A (τ₀ + η_f v) with A the pulled ply's area, on any
-number of ranks, and the nodes are those of one process within what Newton leaves.
+ranks whose rows it touches: here those of the columns the pulled ply lies on, not the
+others. Taking a pattern into the Jacobian is collective, so every rank must do it when any
+pattern grew (a rank that did it alone waited in the matrix's assembly for ever). Without
+pressure the pull-out's force is exact (ten Thije & Akkerman 2009): F = 2 A (τ₀ + η_f v)
+with A the pulled ply's area, on any number of ranks, and the nodes are those of one process
+within what Newton leaves.
 """
 
 import pytest
@@ -56,7 +57,7 @@ def pull(comm):
 @pytest.mark.parallel
 def test_a_ply_pulled_over_cells_on_any_number_of_ranks():
     comm = MPI.COMM_WORLD
-    problem, contact, forces, versions, A = pull(comm)
+    _, contact, forces, versions, A = pull(comm)
     steady = forces[len(forces) // 5:]  # sliding steadily
     assert steady == pytest.approx(2 * A * (TAU0 + ETA * SPEED), rel=0.02)
     # Followed over cells: each partner point 2 cells on from the first (x = 0, 10, ... on
@@ -64,7 +65,7 @@ def test_a_ply_pulled_over_cells_on_any_number_of_ranks():
     first = (contact.cell + contact.q)[contact.interface == 0, 0]
     assert first == pytest.approx(np.tile([3.0, 4.0, 5.0, 6.0], 3), abs=1e-3)
     if comm.size > 1:
-        # The patterns grew at other steps on some rank than on another: the case that hung.
+        # The patterns grew on some rank and not on another: the case that hung.
         every = comm.allgather(versions)
         assert any(v != every[0] for v in every[1:])
         assert max(v[-1] for v in every) > 1
@@ -79,9 +80,8 @@ def test_a_ply_pulled_over_cells_as_on_one_process():
     one, _, forces_one, _, _ = pull(MPI.COMM_SELF)
     assert [s.iterations for s in problem.steps] == [s.iterations for s in one.steps]
     np.testing.assert_allclose(forces, forces_one, rtol=1e-6, atol=1e-9)
-    x = problem.positions()[: problem.num_owned]
-    tree_x = one.positions()
-    # Each owned node against the node of one process at the same reference place.
+    # Each owned node against the node of one process at the same reference place (mm).
     at = {tuple(np.round(p, 6)): i for i, p in enumerate(one.X)}
     mine = [at[tuple(np.round(p, 6))] for p in problem.X[: problem.num_owned]]
-    np.testing.assert_allclose(x, tree_x[mine], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(problem.positions()[: problem.num_owned],
+                               one.positions()[mine], rtol=0, atol=1e-6)
