@@ -151,12 +151,13 @@ EFFECTS: dict[str, Effect] = {
             "The plies of a stack slide against each other under τ = τ₀ + μ p + η_f v (tack, "
             "Coulomb regularised over a small slip, a viscous resin film; "
             "materials/interply.py), with the values of the case's [interply] table (fitted "
-            "from interply_friction tests by drape fit); μ and η_f that the table does not "
-            "give are the model's mu_ply and eta_f_MPa_s_per_mm, which a forming fit fits. "
-            "Without it adjacent plies are bonded: they move together. It acts only on a "
-            "stack of plies.",
-            "contact", ("mu_ply", "eta_f_MPa_s_per_mm"), (), ("forming",), (), False,
-            "beyond the paper"),
+            "from interply_friction tests by drape fit); μ, η_f and τ₀ that the table does "
+            "not give are the model's mu_ply, eta_f_MPa_s_per_mm and tau0_MPa, which "
+            "interply_friction tests fit (and a forming fit μ and η_f). Without it adjacent "
+            "plies are bonded: they move together, and a pull-out cannot slide. It acts on a "
+            "stack of plies and in inter-ply friction tests.",
+            "contact", ("mu_ply", "eta_f_MPa_s_per_mm", "tau0_MPa"), (),
+            ("forming", "interply_friction"), (), False, "beyond the paper"),
     )
 }
 
@@ -177,6 +178,9 @@ EXTRA_PARAMETERS: dict[str, ParameterInfo] = {
         ParameterInfo("eta_f_MPa_s_per_mm", "MPa·s/mm", (0.0, 100.0),
                       "inter-ply film viscosity over its thickness η_f = η/h "
                       "(0.0005-0.01 MPa·s/mm)", 0.002),
+        ParameterInfo("tau0_MPa", "MPa", (0.0, 10.0),
+                      "inter-ply tack τ₀ of τ = τ₀ + μp + η_f v: shear strength at zero "
+                      "pressure", 0.0),
     )
 }
 """Parameters of effects that act outside the material laws (contact, the unit cell)."""

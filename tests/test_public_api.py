@@ -39,7 +39,8 @@ PUBLIC = {
         "synthetic_case_test", "synthetic_forming_test", "write_case_bundle",
         "write_compare", "write_diagnosis", "write_lab_bundle"],
     "fenicsx_drape.diagnosis.kinds": [
-        "BIAS_EXTENSION", "Comparison", "FitHook", "FormedKind", "GRID", "KINDS", "Kind",
+        "BIAS_EXTENSION", "Comparison", "FitHook", "FormedKind", "GRID", "INTERPLY_FRICTION",
+        "KINDS", "Kind",
         "OUTLINE", "PICTURE_FRAME", "PUNCH_FORCE", "Region", "SHEAR_POINTS", "SURFACE",
         "TENSILE", "TEST_KINDS", "comparable", "find_kind", "is_formed", "kind_of", "row_sd"],
     "fenicsx_drape.errors": [

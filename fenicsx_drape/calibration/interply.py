@@ -46,11 +46,11 @@ def simulate_interply(test, law: InterplyLaw) -> np.ndarray:
     t, d = test.time_s, test.displacement_mm
     state = law.initial_state(1)
     force = np.zeros(len(t))
-    for k in range(len(t)):
-        step = dataclasses.replace(law, pressure_MPa=float(p[k]))
+    for k in range(len(t)):  # the law's traction at the row's pressure (one point, one axis)
         dt = float(t[k] - t[k - 1]) if k else 0.0
-        τ, _, state = step.update(np.array([d[k]]), dt, state)
-        force[k] = setup["interfaces"] * area * τ[0]
+        out = law.traction(np.array([[d[k]]]), p[k:k + 1], dt, state)
+        state = out.state
+        force[k] = setup["interfaces"] * area * out.tau[0, 0]
     return force
 
 
@@ -88,8 +88,21 @@ class InterplyFit:
         return toml_text({"interply": {**values, "slip_mm": float(self.law.slip_mm)}})
 
 
-def fit_interply(tests: Sequence, start: InterplyLaw | None = None) -> InterplyFit:
+def fit_interply(tests: Sequence, start: InterplyLaw | None = None, *,
+                 parameters: Sequence[str] | None = None,
+                 noise: Sequence[np.ndarray] | None = None,
+                 max_evaluations: int | None = None) -> InterplyFit:
     """Fit τ₀, μ and η_f to ``interply_friction`` tests (module docstring).
+
+    Args:
+        tests: The tests (other kinds are ignored).
+        start: The law to start from (its other values are kept); InterplyLaw's defaults
+            when None.
+        parameters: Only these of :data:`FITTED` (the others held at ``start``'s); all when
+            None.
+        noise: Each test's row sd (N), in the order of the interply_friction tests among
+            ``tests`` (``inf``: a row without weight); the module's noise when None.
+        max_evaluations: Cap on the least-squares' residual evaluations (its default: None).
 
     Raises:
         DrapeInputError: no interply_friction test among ``tests``.
@@ -108,14 +121,14 @@ def fit_interply(tests: Sequence, start: InterplyLaw | None = None) -> InterplyF
         held["tau0_MPa"] = "one pressure: tack and Coulomb friction are not told apart"
     if len(speeds) < 2:
         held["eta_f_MPa_s_per_mm"] = "one speed: the film term is not told from the rest"
-    names = [n for n in FITTED if n not in held]
+    names = [n for n in FITTED if n not in held and (parameters is None or n in parameters)]
     bounds = {f.name: f.metadata["bounds"] for f in fields_of(InterplyLaw, "parameter")}
     # Scales: the published orders of each parameter (materials/interply.py).
     scale = {"tau0_MPa": 0.01, "mu_ply": 0.1, "eta_f_MPa_s_per_mm": 0.001}
     x0 = np.array([max(getattr(start, n), 1e-3 * scale[n]) / scale[n] for n in names])
     lo = np.array([bounds[n][0] / scale[n] for n in names])
     hi = np.array([bounds[n][1] / scale[n] for n in names])
-    noise = [_noise(t) for t in tests]
+    noise = [_noise(t) for t in tests] if noise is None else [np.asarray(s) for s in noise]
 
     def law_at(x) -> InterplyLaw:
         return dataclasses.replace(start, **{n: float(v * scale[n]) for n, v in zip(names, x)})
@@ -125,9 +138,12 @@ def fit_interply(tests: Sequence, start: InterplyLaw | None = None) -> InterplyF
         return np.concatenate([(simulate_interply(t, law) - t.force_N) / s
                                for t, s in zip(tests, noise)])
 
-    solution = least_squares(residuals, np.clip(x0, lo, hi), bounds=(lo, hi), x_scale=1.0)
-    law = law_at(solution.x)
+    if names:
+        solution = least_squares(residuals, np.clip(x0, lo, hi), bounds=(lo, hi), x_scale=1.0,
+                                 max_nfev=max_evaluations)
+        law, r = law_at(solution.x), solution.fun
+    else:  # nothing the tests can move: the start, judged
+        law, r = start, residuals(np.array([]))
     rms = {t.id: float(np.sqrt(np.mean((simulate_interply(t, law) - t.force_N) ** 2)))
            for t in tests}
-    r = solution.fun
     return InterplyFit(law, rms, float(np.sqrt(np.mean(r**2))), held)

@@ -63,6 +63,10 @@ def summary(result) -> str:
         lines.append("(% is the mean error over the mean measured value; left blank where the "
                      "measured values are all 0, as an outline's distances to the edge)")
     for test_id, m in (result.metrics or {}).items():
+        if "sliding_shear_stress_MPa" in m:  # an inter-ply friction test
+            lines.append(f"{test_id}: sliding shear stress {m['sliding_shear_stress_MPa']:.4g} "
+                         f"MPa measured, {m['model_sliding_shear_stress_MPa']:.4g} MPa model")
+            continue
         if "mean_distance_mm" not in m:  # a lab measurement (spec version 3)
             lines.append(lab_line(test_id, m))
             continue

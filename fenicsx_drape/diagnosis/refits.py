@@ -175,7 +175,10 @@ def candidate_names(model: Model) -> list[str]:
 def kind_parameters(model: Model, kind: str) -> tuple[str, ...] | None:
     """The parameters that tests of ``kind`` identify (None: all active ones, other kinds)."""
     from fenicsx_drape.calibration.coupons import BLOCK_ROLE
+    from fenicsx_drape.diagnosis.kinds.interply_friction import NAME, interply_parameters
 
+    if kind == NAME:  # the inter-ply law's
+        return interply_parameters(model)
     return coupon_parameters(model, kind) if kind in BLOCK_ROLE else None
 
 

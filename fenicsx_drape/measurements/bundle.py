@@ -627,6 +627,8 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
             from fenicsx_drape.measurements.plausible import grid_table_check
 
             check = grid_table_check(setup, forming_case, fname, where("test", index, "grid_mm"))
+        elif kind == "interply_friction":
+            check = _pressure_check
         if not csv_path.is_file():
             problems.add(fname, where("test", index, "file"),
                          f"{label}: file = {file!r}: no such file {str(csv_path)!r} (the path "
@@ -661,9 +663,6 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
                                           "pressure_kPa") if k in setup}
         if angles is not None:
             interply["ply_angles_deg"] = [float(a) for a in angles]
-        if "pressure_kPa" in columns and (columns["pressure_kPa"] < 0).any():
-            problems.add(fname, line, f"{label}: a negative pressure_kPa in {file}")
-            return None
     test = Test(
         id=test_id, kind=kind, file=file, columns=columns, line=line,
         gauge_length_mm=setup.get("gauge_length_mm"), length_mm=setup.get("length_mm"),
@@ -676,6 +675,15 @@ def _load_test(folder, fname, raw, index, where, tows_per_mm, problems, unknown,
     )
     own = {k: setup[k] for k in NOISE_KEYS if k in setup}
     return declared_noise(test, own, f"{fname} [[test]] {test_id!r}") if own else test
+
+
+def _pressure_check(path, columns, lines):
+    """An inter-ply friction table's ``pressure_kPa`` column: a pressure is never negative."""
+    pressure = columns.get("pressure_kPa")
+    bad = np.flatnonzero(pressure < 0) if pressure is not None else []
+    if len(bad):
+        yield (str(path), lines[bad[0]], f"column pressure_kPa: {pressure[bad[0]]:g} kPa is "
+               f"negative (a pressure on the overlap is >= 0; {len(bad)} such row(s))")
 
 
 def _check_frame(setup, fname, where, index, label, problems) -> None:

@@ -26,12 +26,13 @@ USER_OPTIONS = ("snes_", "ksp_", "pc_", "mat_", "npc_", "sub_", "log_")
 def key_of(case, model: Model) -> tuple:
     """The identity of the run of ``(case, model)``: equal keys, the same run."""
     from fenicsx_drape.forming.case.format import case_key  # DOLFINx: only once a run is asked
+    from fenicsx_drape.forming.case.spec import MODEL_INTERPLY
 
     if "interply_friction" in model.effects and not case.stack:  # it acts on stacks only
         model = model.without_effects("interply_friction")
-    # The inter-ply law's μ and η_f act only with the effect and where [interply] leaves them
-    # to the model (FormingCase.interply_law).
-    unused = {name for name in ("mu_ply", "eta_f_MPa_s_per_mm")
+    # The inter-ply law's μ, η_f and τ₀ act only with the effect and where [interply] leaves
+    # them to the model (FormingCase.interply_law).
+    unused = {name for name in MODEL_INTERPLY
               if "interply_friction" not in model.effects or case.interply_given(name)}
     params = tuple(sorted((k, float(v)) for k, v in model.parameters.items() if k not in unused))
     plugins = tuple(file_digest(p) if Path(p).is_file() else f"missing {p}"

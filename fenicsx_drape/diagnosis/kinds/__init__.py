@@ -8,6 +8,8 @@ its picture and its data check. Each lives in its own module:
   :mod:`~fenicsx_drape.diagnosis.kinds.bias_extension`,
   :mod:`~fenicsx_drape.diagnosis.kinds.picture_frame` (what they share:
   :mod:`~fenicsx_drape.diagnosis.kinds.coupon`);
+- inter-ply friction tests (forces per row, the inter-ply law fitted):
+  :mod:`~fenicsx_drape.diagnosis.kinds.interply_friction`;
 - formed parts (the friction coefficients fitted): the drawn grid,
   :mod:`~fenicsx_drape.diagnosis.kinds.grid`, and what labs measure,
   :mod:`~fenicsx_drape.diagnosis.kinds.shear_points`,
@@ -18,7 +20,8 @@ its picture and its data check. Each lives in its own module:
   :mod:`~fenicsx_drape.diagnosis.kinds.checks`).
 
 :data:`KINDS` is the table, in the order the kinds' fits run (the coupons fix the material
-before the forming tests fit the friction coefficients with it held); nothing registers
+and the inter-ply friction tests the inter-ply law before the forming tests fit the friction
+coefficients with them held); nothing registers
 itself on import. Adding a kind is adding its module and its line here.
 """
 
@@ -29,6 +32,7 @@ from typing import TYPE_CHECKING
 from fenicsx_drape.diagnosis.kinds.base import Comparison, FitHook, FormedKind, Kind, Region
 from fenicsx_drape.diagnosis.kinds.bias_extension import BIAS_EXTENSION
 from fenicsx_drape.diagnosis.kinds.grid import GRID
+from fenicsx_drape.diagnosis.kinds.interply_friction import INTERPLY_FRICTION
 from fenicsx_drape.diagnosis.kinds.outline import OUTLINE
 from fenicsx_drape.diagnosis.kinds.picture_frame import PICTURE_FRAME
 from fenicsx_drape.diagnosis.kinds.punch_force import PUNCH_FORCE
@@ -42,6 +46,7 @@ if TYPE_CHECKING:
 __all__ = [
     "BIAS_EXTENSION",
     "GRID",
+    "INTERPLY_FRICTION",
     "KINDS",
     "OUTLINE",
     "PICTURE_FRAME",
@@ -62,14 +67,14 @@ __all__ = [
     "row_sd",
 ]
 
-KINDS: tuple[Kind, ...] = (TENSILE, BIAS_EXTENSION, PICTURE_FRAME,
+KINDS: tuple[Kind, ...] = (TENSILE, BIAS_EXTENSION, PICTURE_FRAME, INTERPLY_FRICTION,
                            GRID, SHEAR_POINTS, SURFACE, OUTLINE, PUNCH_FORCE)
 # The bundle's kinds of the tests the kinds compare ("tensile", ..., "forming").
 TEST_KINDS: tuple[str, ...] = tuple(dict.fromkeys(k.test_kind for k in KINDS))
 
 
 def find_kind(test: Test) -> Kind | None:
-    """The kind of ``test`` (None: no kind compares it, e.g. an inter-ply friction test)."""
+    """The kind of ``test`` (None: no kind compares it)."""
     return next((kind for kind in KINDS if kind.holds(test)), None)
 
 

@@ -423,12 +423,15 @@ def fit_friction(bundle: Bundle, model: Model, *, kind_of: Callable[[Test], Kind
     ``parameters``, when given, limits ``own``.
     """
     from fenicsx_drape.diagnosis.kinds.coupon import coupon_parameters
+    from fenicsx_drape.diagnosis.kinds.interply_friction import NAME, interply_parameters
 
     fixed: set[str] = set()
     for test in bundle.tests:
         kind = kind_of(test)
         if kind is not None and not kind.formed and (tests is None or test.id in tests):
-            fixed |= set(coupon_parameters(model, test.kind))
+            # a pull-out fixes the inter-ply law; a coupon the law it loads
+            fixed |= set(interply_parameters(model) if test.kind == NAME
+                         else coupon_parameters(model, test.kind))
     material = [n for n in own if n not in fixed and n not in REGULARISATION
                 and (parameters is None or n in parameters)]
     return fit_forming(bundle, model, kind_of=kind_of, tests=tests, progress=progress,

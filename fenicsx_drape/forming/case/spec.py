@@ -138,7 +138,7 @@ class PlySpec:
 
 INTERPLY_KEYS = (*(f.name for f in fields_of(InterplyLaw, "parameter")), "interply_friction")
 """The keys of ``[interply]``: the inter-ply law's parameters and its effect switch."""
-MODEL_INTERPLY = ("mu_ply", "eta_f_MPa_s_per_mm")
+MODEL_INTERPLY = ("mu_ply", "eta_f_MPa_s_per_mm", "tau0_MPa")
 """The inter-ply law's values a model gives (``interply_friction``'s parameters) where the
 case's ``[interply]`` table does not."""
 
@@ -220,8 +220,9 @@ class FormingCase:
 
         Whether the plies slide: the table's ``interply_friction`` when it says, else the
         effect ``interply_friction`` of ``model`` (spec version 4: without it the plies are
-        bonded), else they slide. μ and η_f the table does not give are the model's
-        (:data:`MODEL_INTERPLY`: the effect's parameters, which a forming fit fits).
+        bonded), else they slide. μ, η_f and τ₀ the table does not give are the model's
+        (:data:`MODEL_INTERPLY`: the effect's parameters, which inter-ply friction tests fit,
+        and a forming fit μ and η_f).
         """
         values = dict(self.interply)
         if "interply_friction" not in values and model is not None:
