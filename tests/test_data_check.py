@@ -92,7 +92,17 @@ def test_a_flat_frame_shifted_by_3_mm_is_named_with_the_shift(formed, tmp_path):
 
     entry = check(variant(formed, tmp_path / "b", shift))
     assert entry["suspect"] and entry["why"].startswith("every flat x looks shifted by 3 mm")
+    assert "lies 3 mm outside the blank" in entry["why"]
     assert "not a set-up the fit can size" in entry["why"]
+
+    # The other way, every flat position stays on the blank: a lab draws its grid where it
+    # meant the blank to lie, so the blank placed 3 mm off-centre reads so (a set-up error).
+    def back(c, rows):
+        rows[:, c["x0_mm"]] -= 3.0
+
+    offset = check(variant(formed, tmp_path / "o", back))
+    assert offset["suspect"] is False
+    assert offset["why"].startswith("chosen: a blank placed off-centre by about (3, 0) mm")
     # compare fills data_check (and exits 0: the numbers are plausible, just not this case's).
     assert main(["compare", str(tmp_path / "b"), "--out", str(tmp_path / "cmp"),
                  "--no-fit"]) == 0

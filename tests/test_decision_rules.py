@@ -229,3 +229,32 @@ def test_a_measurement_the_named_effect_predicts_at_the_noise_is_not_called_unju
                                             comparison("ply2", 0.6, 0.3, "mm")])
     assert [e["measurement"] for e in unjudged(checked, named)] == ["ply2"]
     assert [e["measurement"] for e in unjudged(checked, None)] == ["ply1", "ply2"]
+
+
+def test_a_set_up_named_as_set_apart_says_so_and_is_withdrawn_on_its_own_basis():
+    """A ply named as set apart (not significant): the sentence gives its fit's own sd and
+    the evidence on the stated noise; refitted with the missing effect it is withdrawn only
+    back within 3 of that sd (its honest sd, 4.0°, would withdraw it anywhere within 8°)."""
+    import dataclasses
+
+    from fenicsx_drape.diagnosis.decision import setup_as_reported
+    from fenicsx_drape.diagnosis.results import SetupRefit
+
+    base = stage(True)
+    apart = {**base.entries[0], "stated": 45.0, "fitted": 35.0, "sd": 4.03, "sd_fit": 0.184,
+             "evidence": 1.195, "evidence_stated": 1.28, "significant": False,
+             "set_apart": True}
+    named = dataclasses.replace(base, entries=(apart,))
+    words = setup_sentence(named)
+    assert words.startswith("Set-up error: ply_angle_deg fitted 35 ± 4.03 (stated 45)")
+    assert "set apart, whatever the leftover of other measurements: 35 ± 0.184 by its fit " \
+           "alone, evidence 1.28 on the stated noise" in words
+    assert "(set apart)" in "\n".join(setup_summary(setup_fields(named)))
+    assert "set apart" not in setup_sentence(base)  # a significant one: as before
+    after = [comparison("t", 0.3, 0.3, "mm")]
+    for with_effect, kept in ((40.0, True), (44.6, False)):
+        best = dataclasses.replace(candidate("tool_friction", after), setup_refitted=SetupRefit(
+            "ply_angle_deg", with_effect, 35.0, (with_effect - 45.0,)))
+        reported = setup_as_reported(named, best)
+        assert (reported.setup_error == "ply_angle_deg") is kept
+        assert reported.entries[0]["fitted_with_effect"] == with_effect

@@ -27,12 +27,6 @@ from fenicsx_drape.forming.running.run import run_case
 from fenicsx_drape.materials.interply import InterplyLaw
 from fenicsx_drape.model import default_model
 
-# A stack under mpirun can hang (4 of 9 runs of this module on 2 ranks on two cores, in the
-# first test or in drape form's): run by `make bench-parallel`, not `make test`, until found
-# (docs/laminates-internals.md, MPI).
-pytestmark = pytest.mark.bench
-
-
 CASE = Path(__file__).resolve().parents[1] / "meshes" / "hemisphere" / "stack_0_45.toml"
 COARSE = {"cell_mm": 30.0, "duration_s": 8.0}
 TOL = 1e-4  # mm, degrees, MPa

@@ -355,3 +355,56 @@ def test_a_set_up_error_and_a_missing_effect_are_both_named():
     assert friction["setup_refitted"]["parameter"] == "holder_force_N"
     assert friction["setup_refitted"]["fitted"] != friction["setup_refitted"]["fitted_alone"]
     assert "is fitted again" in report["conclusion"]
+
+
+def _fit(p, start, sd, sd_fit, **more) -> setup_fit.SetupFit:
+    """A set-up fit of given values (internal units); what the rule does not read is empty."""
+    return setup_fit.SetupFit(np.atleast_1d(np.asarray(p, float)),
+                              np.atleast_1d(np.asarray(start, float)),
+                              np.atleast_1d(np.asarray(sd, float)),
+                              np.atleast_1d(np.asarray(sd_fit, float)), [], 1.0,
+                              more.pop("evidence", 1.0), 1.0, {}, 1.0, 0, **more)
+
+
+def test_a_value_set_apart_by_its_own_fit_and_inside_its_range():
+    """set_apart: 3 sd_fit from the stated value and from each bound (setup_stage, 5.)."""
+    apart = setup_fit.set_apart
+    # The stack's ply laid at 35° for 45°: δθ −10 ± 4.03 (lack of fit in), ± 0.18 by its fit.
+    ply = _fit(-10.0, 0.0, 4.03, 0.184)
+    assert apart(ply, "ply_angle_deg/2") and not setup_fit.distinct(_fit(-10, 0, 5.1, 0.184))
+    # 3 sd_fit from the stated value is apart; under it is not.
+    assert apart(_fit(0.61, 0.0, 1.0, 0.2), "ply_angle_deg")
+    assert not apart(_fit(0.59, 0.0, 1.0, 0.2), "ply_angle_deg")
+    # The holding force taken to 5 N for 100 N stated by a missing tow buckling: the factor
+    # 0.05 ± 0.144 is the range's bound (0.05), 6.6 sd_fit from the stated 1.
+    lo = setup_parameters.BOUNDS["holder_force_N"][0]
+    force = _fit(lo, 1.0, 0.713, 0.144)
+    assert abs(force.p[0] - force.start[0]) > 3 * force.sd_fit[0]
+    assert not apart(force, "holder_force_N")
+    # Half the force, well inside the range, is apart; so is 2.4 × (the range ends at 20).
+    assert apart(_fit(0.5, 1.0, 0.3, 0.1), "holder_force_N")
+    assert not apart(_fit(19.8, 1.0, 0.3, 0.1), "holder_force_N")
+    # μ within 3 sd_fit of 0 (its lower bound): no value of its own.
+    assert not apart(_fit(0.02, 0.3, 0.1, 0.01), "mu")
+    assert apart(_fit(0.1, 0.3, 0.1, 0.01), "mu")
+    # An offset: apart on one axis is enough, inside the range on every axis.
+    assert apart(_fit([8.0, 0.1], [0.0, 0.0], [6.0, 6.0], [0.4, 0.5]), "blank_offset_mm")
+    assert not apart(_fit([59.5, 8.0], [0.0, 0.0], [6.0, 6.0], [0.4, 0.5]), "blank_offset_mm")
+    assert not apart(_fit(5.0, 0.0, np.inf, np.inf), "ply_angle_deg")
+
+
+def test_the_evidence_on_the_stated_noise():
+    """stated_evidence: each test's RMS over its stated noise, the worse of the two stated."""
+    noise = {"edge": 0.2, "shear": 1.0}
+    c = _fit(-10.0, 0.0, 4.0, 0.2, evidence=1.25, heldout_rmse={"edge": 5.0, "shear": 2.0},
+             stated_rmse={"edge": 8.0, "shear": 2.5})
+    held = np.sqrt(((5.0 / 0.2) ** 2 + 2.0**2) / 2)
+    on_model = np.sqrt(((8.0 / 0.2) ** 2 + 2.5**2) / 2)
+    stated = on_model * 0.9  # the case's own model a little nearer the data
+    got = setup_stage.stated_evidence(c, noise, stated, 1.19)
+    assert got == pytest.approx(stated / held, rel=1e-12)
+    assert setup_stage.stated_evidence(c, noise, 1.1 * on_model, 1.19) == pytest.approx(
+        on_model / held, rel=1e-12)
+    # The stage's noise as stated: its own evidence, the smaller of the two.
+    assert setup_stage.stated_evidence(c, None, None, 1.19) == 1.19
+    assert setup_stage.stated_evidence(c, None, None, 1.3) == 1.25

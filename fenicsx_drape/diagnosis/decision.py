@@ -18,9 +18,13 @@ The rules are the same for every bundle:
 - **missing**: the first candidate if it is significant and its refit reaches ``normalised
   <= ADEQUATE`` (1.5) on the measurements its net can judge (:func:`adequate`); when what
   it leaves elsewhere keeps its overall error above, the conclusion's first sentence says so;
+- a set-up parameter is named when the first of the set-up candidates is significant or
+  **set apart** (fitted away from its stated value with evidence, whatever the leftover of
+  other measurements: :mod:`~fenicsx_drape.diagnosis.setup_stage`, 5.);
 - a set-up error fitted again with the missing effect back within :data:`~fenicsx_drape.
-  diagnosis.setup_fit.DISTINCT_SD` sd of its stated value is **withdrawn**: the effect, not
-  the set-up, was missing (:func:`setup_as_reported`);
+  diagnosis.setup_fit.DISTINCT_SD` sd of its stated value (one named as set apart only:
+  within :data:`~fenicsx_drape.diagnosis.setup_fit.SET_APART_SD` of its fit's own sd) is
+  **withdrawn**: the effect, not the set-up, was missing (:func:`setup_as_reported`);
 - on data that cannot be of their case (the data check) no effect is **named**.
 
 :func:`decide` applies them; :class:`Rules` carries those the set-up stage shares.
@@ -37,7 +41,7 @@ import numpy as np
 
 from fenicsx_drape.diagnosis.comparison import normalised_error
 from fenicsx_drape.diagnosis.results import Decision
-from fenicsx_drape.diagnosis.setup_fit import DISTINCT_SD
+from fenicsx_drape.diagnosis.setup_fit import DISTINCT_SD, SET_APART_SD
 
 if TYPE_CHECKING:
     from fenicsx_drape.diagnosis.kinds import Comparison
@@ -153,14 +157,19 @@ def setup_as_reported(setup: SetupResult | None, missing: Candidate | None
     (a holding force that lowers a hidden friction's error); refitted with the effect, it
     goes back to the stated value. The set-up entry records its value with the effect
     (``fitted_with_effect``), and the set-up error is withdrawn when that value lies within
-    :data:`~fenicsx_drape.diagnosis.setup_fit.DISTINCT_SD` of its sd from the stated one.
+    :data:`~fenicsx_drape.diagnosis.setup_fit.DISTINCT_SD` of its sd from the stated one (an
+    error named as set apart only, within :data:`~fenicsx_drape.diagnosis.setup_fit.
+    SET_APART_SD` of its fit's own sd: the basis it was named on).
     """
     if not (missing and missing.setup_refitted and setup and setup.setup_error):
         return setup
     entry = {**setup.entries[0], "fitted_with_effect": missing.setup_refitted.fitted}
+    apart_only = entry.get("set_apart") and not entry["significant"]
     fitted, stated, sd = (np.atleast_1d(np.asarray(v, float)) for v in
-                          (entry["fitted_with_effect"], entry["stated"], entry["sd"]))
-    within = bool(np.all(np.abs(fitted - stated) <= DISTINCT_SD * sd))
+                          (entry["fitted_with_effect"], entry["stated"],
+                           entry["sd_fit" if apart_only else "sd"]))
+    within = bool(np.all(np.abs(fitted - stated)
+                         <= (SET_APART_SD if apart_only else DISTINCT_SD) * sd))
     return dataclasses.replace(setup, entries=(entry, *setup.entries[1:]),
                                setup_error=None if within else setup.setup_error,
                                withdrawn=entry["parameter"] if within else None)

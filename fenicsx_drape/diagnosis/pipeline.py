@@ -35,9 +35,11 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
    shear tests, each group is left out of the baseline's coupon fit in turn and predicted by
    the rest (:mod:`fenicsx_drape.calibration.agreement`).
 7. **The best candidate, looked at again** (:func:`setup_with_effect_stage`,
-   :func:`net_check_stage`): a significant best with no set-up error named: the set-up
-   stage again with it in (a missing effect can hide a set-up error); above the noise: is
-   what it leaves its net's own error?
+   :func:`setup_needed_stage`, :func:`net_check_stage`): a significant best with no set-up
+   error named: the set-up stage again with it in (a missing effect can hide a set-up
+   error); with one named: the best refitted at the stated set-up, and the set-up error
+   withdrawn when it adds no held-out evidence (an effect can stand behind a set-up error);
+   above the noise: is what it leaves its net's own error?
 8. **Decision** (:func:`~fenicsx_drape.diagnosis.decision.decide` → ``Decision``) and
    **report** (:func:`~fenicsx_drape.diagnosis.report.format_report`, which only formats).
 
@@ -150,7 +152,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     base = baseline_stage(data, model, say)
     parameters = SETUP_PARAMETERS if setup is None and candidates is None else setup
     stage = setup_stage(base.data.bundle, model, parameters, setup_rules(), say)
-    base = at_setup(base, stage, model, say)
+    stated, base = base, at_setup(base, stage, model, say)
     # The held-out error and the net's own error are independent: their runs together.
     held, resolution = together([functools.partial(heldout_stage, base),
                                  functools.partial(resolution_stage, base)], say)
@@ -158,6 +160,8 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     effects = effects_stage(names, model, base, held, stage, resolution, say)
     groups = groups_stage(base, say)
     stage, best = setup_with_effect_stage(stage, effects.best, base, say)
+    stage, best, base, held = setup_needed_stage(stage, best, stated, base, held, resolution,
+                                                 model, say)
     best = net_check_stage(best, say)
     decision = decide(effects, best, stage, checked)
     report = format_report(bundle, checked, base, held, resolution, effects, decision, groups,
@@ -446,6 +450,41 @@ def setup_with_effect_stage(stage: SetupResult | None, best: Candidate | None, b
         best, error_after=error_record(after), where_after=tuple(where(after)[:3]),
         after=after, tests=data.tests, model=refit,
         parameters={p: float(refit.parameters[p]) for p in best.parameters})
+
+
+def setup_needed_stage(stage: SetupResult | None, best: Candidate | None, stated: Baseline,
+                       base: Baseline, held: HeldOut, resolution: Resolution, model: Model,
+                       say: Progress
+                       ) -> tuple[SetupResult | None, Candidate | None, Baseline, HeldOut]:
+    """Is the set-up error still needed once the best effect is in?
+
+    An effect and a set-up parameter can act alike (a tool friction and a larger holding
+    force both hold the sheet back), so a set-up error fitted before physics may only stand
+    in for the effect, and refitting it with the effect can stay in the valley they share.
+    The best effect is refitted at the *stated* set-up, from the stated baseline, and judged
+    on the same held-out rows: when the set-up fitted with it predicts them less than
+    ``EVIDENCE_THRESHOLD`` times better, the set-up error is withdrawn (the effect, not the
+    set-up, was missing) and the effect at the stated set-up is the best. Returns the set-up,
+    the best candidate, the baseline and its held-out error, each new when withdrawn.
+    """
+    if (best is None or not best.significant or not stage or stage.setup_error is None
+            or stage.found_with_effect or stated is base):
+        return stage, best, base, held
+    say(f"candidate {best.effect} at the stated set-up: is {stage.setup_error} needed?")
+    held_stated = heldout_stage(stated, say)
+    alone = effect_stage(best.effects[-1], model, stated, held_stated, None, resolution, say)
+    if not isinstance(alone, Candidate) or not alone.significant:
+        return stage, best, base, held
+    gain = alone.heldout_normalised / max(best.heldout_normalised, 1e-300)
+    say(f"  held-out {alone.heldout_normalised:.3g} at the stated set-up, "
+        f"{best.heldout_normalised:.3g} with {stage.setup_error} fitted: evidence {gain:.3g}")
+    if gain >= EVIDENCE_THRESHOLD:
+        return stage, best, base, held
+    entry = {**stage.entries[0], "withdrawn_for": best.effect,
+             "evidence_with_effect": float(gain)}
+    stage = dataclasses.replace(stage, setup_error=None, withdrawn=stage.setup_error,
+                                entries=(entry, *stage.entries[1:]))
+    return stage, alone, stated, held_stated
 
 
 def net_check_stage(best: Candidate | None, say: Progress) -> Candidate | None:

@@ -131,6 +131,13 @@ def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: H
                       resolution.entries, setup_fitted=fitted),
         setup_sentence(stage), resolution_sentence(unjudged(resolution.entries, missing)),
         "" if groups_conclusion(groups, missing) else groups_sentence(groups)) if w.strip())
+    if stage and stage.withdrawn and stage.entries[0].get("withdrawn_for"):
+        e = stage.entries[0]
+        words += (f" {e['parameter']} fitted alone ({value_text(e['fitted'])}) is not needed "
+                  f"with {e['withdrawn_for']}: at the stated set-up it predicts the held-out "
+                  f"rows as well (evidence {e['evidence_with_effect']:.3g} for the set-up "
+                  "fitted with it): the effect, not the set-up, was missing (setup_error "
+                  "withdrawn).")
     if missing and missing.setup_refitted:
         j = missing.setup_refitted
         words += (f" With {missing.effect} added, {j.parameter} is fitted "

@@ -90,6 +90,9 @@ CONVERGED_SD = 0.25
 GAIN_BELOW = 0.1
 # A set-up error is named only when its fitted value lies this many sd from the stated one.
 DISTINCT_SD = 2.0
+# Or, whatever the leftover of other measurements, when it lies this many of its fit's own sd
+# from the stated value and from each bound of its range (:func:`set_apart`).
+SET_APART_SD = 3.0
 
 Progress = Callable[[str], None]
 
@@ -110,6 +113,8 @@ class SetupFit:
     stated_normalised: float  # the stated set-up's error on the model the parameter needs
     folds_formed: int  # folds predicted by a run (not linearised)
     heldout_rmse: Mapping[str, float] = dataclasses.field(default_factory=dict)  # by test id
+    # the stated set-up's RMS error on the model the parameter needs, by test id
+    stated_rmse: Mapping[str, float] = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -296,7 +301,7 @@ def fit_candidate(runs: SetupRuns, test0: Test, below: float, say: Progress
             compared = runs.compare(base_values)
             return SetupFit(stopped.p, start, stopped.sd_internal, stopped.sd_fit,
                             compared, base_ho, 1.0, change, base_values, base_ho, 0,
-                            {c.id: c.rmse for c in compared})
+                            {c.id: c.rmse for c in compared}, {c.id: c.rmse for c in compared})
     p = start.copy()
     for i in range(k):  # the best of each axis (the offsets' axes act nearly apart)
         best = min([(float(r0 @ r0), 0.0)] + [(c, v) for c, (j, v) in zip(costs, axes)
@@ -360,7 +365,8 @@ def fit_candidate(runs: SetupRuns, test0: Test, below: float, say: Progress
     heldout = normalised_error(held)
     evidence = base_ho / heldout if heldout > 0 else math.inf
     return SetupFit(p, start, sd, sd_fit, after, heldout, evidence, change, fitted_values,
-                    base_ho, len(far), {c.id: c.rmse for c in held})
+                    base_ho, len(far), {c.id: c.rmse for c in held},
+                    {c.id: c.rmse for c in runs.compare(base_values)})
 
 
 def distinct(c: SetupFit) -> bool:
@@ -371,6 +377,28 @@ def distinct(c: SetupFit) -> bool:
     by the force, 8 ± 59 N against 100 N stated) sizes nothing.
     """
     return bool(np.any(np.abs(c.p - c.start) > DISTINCT_SD * c.sd_internal))
+
+
+def set_apart(c: SetupFit, name: str) -> bool:
+    """Whether a fitted set-up lies :data:`SET_APART_SD` sd_fit from stated and bounds.
+
+    From the stated value on some axis, and from each bound of its range
+    (:data:`~fenicsx_drape.diagnosis.setup_parameters.BOUNDS`) on every axis.
+    The fit's own sd (``sd_fit``) leaves out the lack of fit, the leftover of the other
+    measurements (a net's own error on an edge, a missing effect elsewhere): a value set
+    apart by it is one the data fix. A fit that ends at, or within that many sd of, a bound
+    of its range (a holding force taken to 5 N of 100 N stated by a missing tow buckling,
+    5 ± 14 N) has no value of its own: it compensates for something the parameter does not
+    describe. The set-up stage asks evidence besides (:mod:`~fenicsx_drape.diagnosis.
+    setup_stage`).
+    """
+    lo, hi = BOUNDS[name]
+    room = SET_APART_SD * np.asarray(c.sd_fit, float)
+    if not np.all(np.isfinite(room)):
+        return False
+    p, start = np.asarray(c.p, float), np.asarray(c.start, float)
+    return bool(np.any(np.abs(p - start) >= room) and np.all(p - lo >= room)
+                and np.all(hi - p >= room))
 
 
 def nothing_to_gain(runs: SetupRuns, start: np.ndarray, r0: np.ndarray,

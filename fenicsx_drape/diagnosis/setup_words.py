@@ -53,10 +53,16 @@ def setup_sentence(stage: SetupResult | None) -> str:
     judged = widened_text(stage)
     judged = (f"; {judged}: {s['widened']['normalised']:.3g}" if judged and "widened" in s
               else "")
+    apart = ""
+    if s.get("set_apart") and not s["significant"]:
+        apart = (f"; set apart, whatever the leftover of other measurements: "
+                 f"{show(s['fitted'])} ± {show(s['sd_fit'])} by its fit alone, evidence "
+                 f"{s['evidence_stated']:.3g} on the stated noise")
     return (f"Set-up error: {s['parameter']} fitted {show(s['fitted'])} ± {show(s['sd'])} "
             f"(stated {show(s['stated'])}){also}, bringing the forming tests' normalised "
             f"error from {stage.stated_error['normalised']:.3g} to "
-            f"{s['error_after']['normalised']:.3g} (evidence {s['evidence']:.3g}{judged}). "
+            f"{s['error_after']['normalised']:.3g} (evidence {s['evidence']:.3g}{judged}"
+            f"{apart}). "
             + (f"It shows once {stage.found_with_effect} is in (alone, that effect's "
                "error hid it). " if stage.found_with_effect else
                "The physics candidates were tried with it fitted. "))
@@ -74,7 +80,9 @@ def setup_summary(report: dict[str, Any]) -> list[str]:
         fitted = f"{show(s['fitted'])} ± {show(s['sd'])}"
         lines.append(f"{s['parameter']:<20} {show(s['stated']):>12} {fitted:>18} "
                      f"{s['error_after']['normalised']:>7.3g} {s['heldout_normalised']:>9.3g} "
-                     f"{s['evidence']:>9.3g}  {'yes' if s['significant'] else 'no'}")
+                     f"{s['evidence']:>9.3g}  {'yes' if s['significant'] else 'no'}"
+                     + (" (set apart)" if s.get("set_apart") and not s["significant"]
+                        else ""))
     widened = report.get("setup_stated", {}).get("widened")
     if widened:
         lines.append(f"(errors on the stated noise; the stage judged with the noise of "

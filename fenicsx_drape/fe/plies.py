@@ -33,8 +33,10 @@ whole stack, by global node index, on every rank alike; a rank keeps the pairs t
 node it owns (a pair across two ranks is evaluated on both) and gathers every rank's owned
 positions at each evaluation, so its owned nodes get whole forces and it fills its own rows
 of the Jacobian (columns anywhere), with no force sent back. On one rank this is the plain
-path (no gathering). Following the plies (``follow``) stays on one rank: the re-made pairs
-would leave the ranks that hold their state.
+path (no gathering). Following the plies (``follow``), every rank re-makes every pair from
+the same gathered positions; the pattern, its own rows only, grows on the ranks those rows
+are on (``pattern_version`` counts it per rank), and the solver re-allocates the Jacobian
+on every rank when it grew on any.
 """
 
 from __future__ import annotations
@@ -445,7 +447,7 @@ class PlyContact:
         self.slip_mm = np.zeros((p, 3))
         self._n = n
         self._keys = np.zeros(0, dtype=np.int64)
-        self.pattern_version = 0  # grows by one when the pattern grows (pairs followed)
+        self.pattern_version = 0  # +1 when this rank's rows of the pattern grow
         self._trial = None
         self._dt_last = 0.0
         self._partner(self.X)

@@ -430,6 +430,17 @@ class TrussProblem:
         self._coupling_versions = [t.pattern_version for t in self._couplings]
         self._bending_in_A = None  # A's pattern changed: the bending's copy of it too
 
+    def _couplings_grew(self) -> bool:
+        """Whether a coupling term's pattern grew on any rank since the Jacobian took it.
+
+        A pattern holds the rank's own rows, so it grows on the ranks whose rows the re-made
+        pairs touch; taking it into the Jacobian assembles the matrix, which is collective,
+        so every rank decides alike (a rank that alone re-allocated waited in the assembly
+        while the others had gone on: the stack under mpirun hung).
+        """
+        grew = self._coupling_versions != [t.pattern_version for t in self._couplings]
+        return self.comm.allreduce(grew, op=MPI.LOR) if self.comm.size > 1 else grew
+
     def _add_couplings(self, A: PETSc.Mat) -> None:
         """Add the coupling terms' blocks, without the rows and columns of constrained dofs."""
         free = ~self.constrained[: self.num_owned]
@@ -614,8 +625,7 @@ class TrussProblem:
         self.state.limit_geometric_force(np.inf if local else self._geometric_limit_N)
         A = self._A
         with self._timed("jacobian"):
-            if self._couplings and self._coupling_versions != [
-                    t.pattern_version for t in self._couplings]:
+            if self._couplings and self._couplings_grew():
                 self._setup_couplings()  # the pairs followed the plies: a larger pattern
             A.zeroEntries()
             fem_petsc.assemble_matrix(A, self.jacobian_form, bcs=self.constraints.bcs)

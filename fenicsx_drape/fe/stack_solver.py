@@ -31,6 +31,7 @@ of ``SolverOptions(stack_solver="plies")``, not the default.
 
 from __future__ import annotations
 
+from mpi4py import MPI
 from petsc4py import PETSc
 
 import numpy as np
@@ -109,7 +110,10 @@ class PlyPreconditioner:
         _, P = pc.getOperators()
         self.P = P
         version = self.contact.map_version
-        if self._R is None or version != self._version:
+        # Made on every rank from the same gathered positions; R is made collectively, so
+        # every rank remakes it if any saw the map change.
+        changed = self._R is None or version != self._version
+        if self.problem.comm.allreduce(changed, op=MPI.LOR):
             self._R = self._prolongation()
             self._version = version
             self._Ac = None

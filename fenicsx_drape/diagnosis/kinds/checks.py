@@ -17,9 +17,8 @@ them before any fit) looks at its measurement against its case and says ``(suspe
   the case (x = 0 or y = 0) the tools hold the sheet's column of that plane: the grid's column
   nearest the plane in the formed positions has flat and formed coordinates that agree. When
   they differ by more than :data:`SHIFT_OF_GRID` of the grid's spacing (and 1 mm), the flat
-  (or formed) frame is shifted. A blank placed off-centre (a set-up error the set-up stage
-  sizes) breaks the plane, and its test has no plane to check: the ``why`` says which was
-  chosen.
+  frame is shifted or the blank was placed off-centre by as much (a lab draws its grid on the
+  blank where it meant the blank to lie): read as below.
 - *a shifted frame without a symmetry plane*: the punch's top holds the sheet where it
   first touches it, so the grid's points formed farthest from the flat plane (|z| within
   half a cell of the largest) keep their flat x and y (median difference ≈ 0: below
@@ -141,11 +140,30 @@ def _shift(test, case) -> tuple[bool, str] | None:
             continue  # the grid has no column on the plane
         s = float(np.median(flat[rows] - formed[rows]))
         if abs(s) > max(SHIFT_OF_GRID * spacing, SHIFT_TOLERANCE_MM):
-            return True, (f"every flat {plane} looks shifted by {s:.3g} mm: the grid's column "
-                          f"the tools hold on their plane {plane} = 0 has {plane}0 = {s:+.3g} "
-                          "mm (a blank placed off-centre, a set-up error, would keep flat and "
-                          f"formed {plane} equal there: not a set-up the fit can size)")
+            seen = (f"the grid's column the tools hold on their plane {plane} = 0 has "
+                    f"{plane}0 = {s:+.3g} mm")
+            return _frame_or_offset(grid[:, 2:4], case, f"every flat {plane} looks shifted "
+                                    f"by {s:.3g} mm", seen, np.where(np.arange(2) == k, -s, 0.0))
     return None
+
+
+def _frame_or_offset(flat, case, what: str, seen: str, b) -> tuple[bool, str]:
+    """A flat shift: the data's frame if a flat position lies off the blank, else an offset.
+
+    A grid drawn on the blank lies on it wherever the blank was placed, so a flat position
+    more than :data:`SHIFT_TOLERANCE_MM` outside the blank names the data; otherwise the blank
+    placed off-centre by ``b`` (which the set-up stage sizes) is chosen and said.
+    """
+    out = outside_polygon(flat, np.asarray(case.blank.polygon(), dtype=float))
+    if out.max() > SHIFT_TOLERANCE_MM:
+        k = int(np.argmax(out))
+        return True, (f"{what}: {seen}, and the flat position ({flat[k, 0]:.4g}, "
+                      f"{flat[k, 1]:.4g}) mm lies {out[k]:.3g} mm outside the blank (a grid "
+                      "drawn on the blank lies on it wherever the blank was placed: the data's "
+                      "frame, not a set-up the fit can size)")
+    return False, (f"chosen: a blank placed off-centre by about ({b[0]:.3g}, {b[1]:.3g}) "
+                   f"mm, a set-up error the set-up stage sizes (blank_offset_mm), not a "
+                   f"shifted frame: {seen}, and every flat position lies on the blank")
 
 
 def _top_shift(test, case, spacing: float) -> tuple[bool, str] | None:
@@ -160,20 +178,12 @@ def _top_shift(test, case, spacing: float) -> tuple[bool, str] | None:
     tol = max(SHIFT_OF_GRID * spacing, SHIFT_TOLERANCE_MM)
     if not np.abs(d).max() > tol:
         return None
-    out = outside_polygon(p[:, :2], np.asarray(case.blank.polygon(), dtype=float))
     what = " and ".join(f"{a} by {v:+.3g} mm" for a, v in zip("xy", d) if abs(v) > tol)
     seen = (f"the {int(top.sum())} grid point(s) at the punch's top (formed within half a "
             f"cell of the farthest) moved {b[0]:+.3g}, {b[1]:+.3g} mm in plane, where the "
             f"top holds the sheet (tolerance {tol:.3g} mm)")
-    if out.max() > SHIFT_TOLERANCE_MM:
-        k = int(np.argmax(out))
-        return True, (f"every flat position looks shifted ({what}): {seen}, and the flat "
-                      f"position ({p[k, 0]:.4g}, {p[k, 1]:.4g}) mm lies {out[k]:.3g} mm "
-                      "outside the blank (a grid drawn on the blank lies on it wherever the "
-                      "blank was placed: the data's frame, not a set-up)")
-    return False, (f"chosen: a blank placed off-centre by about ({b[0]:.3g}, {b[1]:.3g}) "
-                   f"mm, a set-up error the set-up stage sizes (blank_offset_mm), not a "
-                   f"shifted frame: {seen}, and every flat position lies on the blank")
+    return _frame_or_offset(p[:, :2], case, f"every flat position looks shifted ({what})",
+                            seen, b)
 
 
 def check_registered(test, case) -> tuple[bool, str] | None:
