@@ -45,6 +45,7 @@ def _numbers(faces):
 
 @pytest.mark.parallel
 @pytest.mark.compares_ranks
+@pytest.mark.slow  # 45 CPU-s a rank on 3 ranks: make test runs it on 2 (PARALLEL3=parallel: 3)
 def test_a_stack_forms_alike_on_any_number_of_ranks(reference):
     run = run_case(load_case(CASE, **COARSE), comm=MPI.COMM_WORLD)
     assert run.stopped is None and reference.stopped is None
