@@ -381,12 +381,11 @@ def test_a_value_set_apart_by_its_own_fit_and_inside_its_range():
     force = _fit(lo, 1.0, 0.713, 0.144)
     assert abs(force.p[0] - force.start[0]) > 3 * force.sd_fit[0]
     assert not apart(force, "holder_force_N")
-    # Half the force, well inside the range, is apart; so is 2.4 × (the range ends at 20).
-    assert apart(_fit(0.5, 1.0, 0.3, 0.1), "holder_force_N")
-    assert not apart(_fit(19.8, 1.0, 0.3, 0.1), "holder_force_N")
-    # μ within 3 sd_fit of 0 (its lower bound): no value of its own.
+    # The force and μ act as μF (eq. 1), which a missing restraint stands in for: never set
+    # apart, even well inside their range (named only when significant).
+    assert not apart(_fit(0.5, 1.0, 0.3, 0.1), "holder_force_N")
     assert not apart(_fit(0.02, 0.3, 0.1, 0.01), "mu")
-    assert apart(_fit(0.1, 0.3, 0.1, 0.01), "mu")
+    assert not apart(_fit(0.1, 0.3, 0.1, 0.01), "mu")
     # An offset: apart on one axis is enough, inside the range on every axis.
     assert apart(_fit([8.0, 0.1], [0.0, 0.0], [6.0, 6.0], [0.4, 0.5]), "blank_offset_mm")
     assert not apart(_fit([59.5, 8.0], [0.0, 0.0], [6.0, 6.0], [0.4, 0.5]), "blank_offset_mm")
