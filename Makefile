@@ -15,7 +15,7 @@ RESULTS :=
 # heaviest modules first (tests/conftest.py: HEAVY). XDIST= runs them in one process.
 XDIST := -n auto --dist loadfile --no-loadscope-reorder
 
-.PHONY: test test-serial test-parallel test-fast test-launcher bench lint demo docs
+.PHONY: test test-serial test-parallel test-fast test-launcher bench bench-parallel lint demo docs
 
 # The whole suite: on every core, the parallel tests again on 2 and 3 ranks, the launcher's
 # own tests on the host, the linter; then the verdict (non-zero exit when a part failed).
@@ -46,7 +46,8 @@ bench:
 
 # The parallel tests on 2 ranks, the quick ones again on 3 (an odd partition; 3 ranks on two
 # cores take twice as long, so the slow forming comparisons run on 2 only, and all of them with
-# PARALLEL3="parallel"). A part of these that selects no test is not a failure.
+# PARALLEL3="parallel"); those marked bench (a whole stack formed on 1 and N ranks, minutes
+# of CPU) run with `make bench-parallel`. A part of these that selects no test is not a failure.
 # A rank that waits for another yields its core: Open MPI otherwise spins, and on a machine
 # busy with other work the rank it waits for then gets less of the core.
 PARALLEL3 := parallel and not slow and not bench
@@ -57,6 +58,15 @@ test-parallel:
 	  python3 -m mpi4py -m pytest $(PYTEST_ARGS) -m "parallel and not bench" || rc=1; \
 	$(PART) --none-ok mpi-3 "$(RESULTS)" -- $(DRAPE) exec $(LIMIT) $(MPIRUN) -n 3 \
 	  python3 -m mpi4py -m pytest $(PYTEST_ARGS) -m "$(PARALLEL3)" || rc=1; \
+	exit $$rc
+
+# The stacks formed under mpirun on 2 and 3 ranks against one (tests/test_forming_stack_parallel.py).
+bench-parallel:
+	@rc=0; \
+	$(PART) --none-ok bench-mpi-2 "$(RESULTS)" -- $(DRAPE) exec $(LIMIT) $(MPIRUN) -n 2 \
+	  python3 -m mpi4py -m pytest $(PYTEST_ARGS) -m "parallel and bench" || rc=1; \
+	$(PART) --none-ok bench-mpi-3 "$(RESULTS)" -- $(DRAPE) exec $(LIMIT) $(MPIRUN) -n 3 \
+	  python3 -m mpi4py -m pytest $(PYTEST_ARGS) -m "parallel and bench" || rc=1; \
 	exit $$rc
 
 # The launcher's own test runs where the launcher does: on the host (in the image it cannot
