@@ -35,6 +35,7 @@ exclude_patterns = [
     "demos/study_*.py",
     "demos/make_demo_bundle.py",
     "demos/make_lab_bundle.py",
+    "demos/make_pull_out_bundle.py",
     "demos/user_laws",
     "demos/bundles",
     "demos/results",
