@@ -349,7 +349,8 @@ def ply_angle_of(test, case) -> float:
     return angle
 
 
-def check_shear_against_grid(points, grid, case) -> tuple[bool, str] | None:
+def check_shear_against_grid(points, grid, case, sd_points: float, sd_grid_mm: float
+                             ) -> tuple[bool, str] | None:
     """Shear points against the shear of their test's grid on the same ply (module docstring).
 
     Args:
@@ -357,15 +358,14 @@ def check_shear_against_grid(points, grid, case) -> tuple[bool, str] | None:
             ``x_mm, y_mm, z_mm`` positions).
         grid: The same forming test's grid of the same ply.
         case: Their forming case.
+        sd_points: The points' shear noise (degrees).
+        sd_grid_mm: The grid's position noise (mm).
 
     Returns:
         ``(True, why)`` when the points cannot be of the ply the grid measured, else None
         (also when the two cannot be set side by side: magnitudes only, too few points within
-        the grid's cells, a noise that cannot be told).
+        the grid's cells).
     """
-    from fenicsx_drape.diagnosis.kinds import find_kind
-    from fenicsx_drape.errors import DrapeInputError
-
     lab = points.lab
     table = columns_of(grid, ("i", "j", "x0_mm", "y0_mm", "x_mm", "y_mm", "z_mm"))
     shear = points.columns.get("shear_deg")
@@ -384,11 +384,7 @@ def check_shear_against_grid(points, grid, case) -> tuple[bool, str] | None:
         return None
     measured = np.asarray(shear, dtype=float)[inside]
     of_grid = cell_shear[distance[inside].argmin(axis=1)]
-    try:
-        sd_points = find_kind(points).noise(points)[0]
-        sd_grid = np.degrees(2.0 * find_kind(grid).noise(grid)[0] / spacing)
-    except DrapeInputError:
-        return None
+    sd_grid = np.degrees(2.0 * sd_grid_mm / spacing)
     apart = float(np.sqrt(np.mean((measured - of_grid) ** 2)))
     spread = float(np.std(measured))
     allowed = PATTERN_SDS * float(np.hypot(sd_points, sd_grid))
