@@ -363,14 +363,17 @@ def check_shear_against_grid(points, grid, case, sd_points: float, sd_grid_mm: f
 
     Returns:
         ``(True, why)`` when the points cannot be of the ply the grid measured, else None
-        (also when the two cannot be set side by side: magnitudes only, too few points within
-        the grid's cells).
+        (also when the two cannot be set side by side: magnitudes only, formed positions in
+        a registered frame, too few points within the grid's cells).
     """
     lab = points.lab
     table = columns_of(grid, ("i", "j", "x0_mm", "y0_mm", "x_mm", "y_mm", "z_mm"))
     shear = points.columns.get("shear_deg")
     if table is None or shear is None or lab.shear_magnitude:
         return None
+    if not lab.flat and any(getattr(t.lab, "frame", None) is not None and t.lab.frame.register
+                            for t in (points, grid) if t.lab is not None):
+        return None  # formed positions in a frame the comparison fits: not set side by side
     where = columns_of(points, ("x0_mm", "y0_mm") if lab.flat else ("x_mm", "y_mm", "z_mm"))
     if where is None:
         return None
