@@ -1,11 +1,12 @@
 """The data check alone on every scenario bundle of a seed: its alarms against the truths.
 
-    ./drape exec python3 benchmarks/scenarios/data_check_alarms.py results/scenarios/seed51
+    ./drape exec python3 benchmarks/data_check_alarms.py results/scenarios/seed51
 
-For each scenario folder (``sNN/bundle`` and ``sNN/truth.json``, as :mod:`run` leaves them) it
-runs :func:`~fenicsx_drape.diagnosis.data_check.data_check` — no fit, no forming run — and
-prints each measurement named suspect with its ``why``, then the counts: scenarios whose data
-are another part's (the truth class "other part") named or not, and false alarms (a suspect
+For each scenario folder (``sNN/bundle`` and ``sNN/truth.json``, as
+``benchmarks/scenarios/run.py`` leaves them) it runs
+:func:`~fenicsx_drape.diagnosis.data_check.data_check` — no fit, no forming run — and prints
+each measurement named suspect with its ``why``, then the counts: scenarios whose data are
+another part's (the truth class "other part") named or not, and false alarms (a suspect
 measurement in any other scenario).
 """
 
