@@ -63,7 +63,7 @@ import numpy as np
 #: A share of a measurement's points beyond the case that makes it another part's.
 OTHER_PART_SHARE = 0.1
 #: Positions inside a tool deeper than a cell: at least this many, and this share of those at
-#: the tool (none on the shipped scenarios' right bundles; the deepest 0.47 of a cell).
+#: the tool (none on the scenario benchmark's right bundles of seed 51: at most 0.47 cell).
 INSIDE_COUNT, INSIDE_SHARE = 3, 0.05
 #: A flat-formed difference on a symmetry plane beyond this share of the grid spacing.
 SHIFT_OF_GRID = 0.1
