@@ -350,7 +350,7 @@ def effect_stage(name: str, model: Model, base: Baseline, held: HeldOut,
     say(f"  normalised error {normalised_error(after):.3g}; held-out folds")
     heldout_cmp = data_c.compare(heldout(data_c, refit, say))
     held_after = normalised_error(heldout_cmp)
-    gain = evidence(held.compared, heldout_cmp, added, resolution.explained)
+    gain = evidence(held.compared, heldout_cmp, added, resolution.explained, refit=after)
     say(f"  held-out normalised error {held_after:.3g}, evidence {gain:.3g}")
     return Candidate(
         effect=label, effects=added, acts_on=effect.acts_on, summary=effect.summary,

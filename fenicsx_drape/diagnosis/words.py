@@ -204,8 +204,13 @@ def unjudged(entries: Sequence[dict[str, Any]], missing: Candidate | None
     """The resolution entries no physics is concluded from.
 
     Those within the net's own error, less those the named effect predicts at the noise (its
-    evidence: the net judges them).
+    evidence: the net judges them), and none when its refit reaches the noise on all its
+    tests together (:func:`~fenicsx_drape.diagnosis.decision.follows`).
     """
+    from fenicsx_drape.diagnosis.decision import follows
+
+    if missing and follows(missing.after):
+        return []
     at_noise = {c.id for c in (missing.after if missing else ()) if c.normalised <= ADEQUATE}
     return [e for e in entries if e["explains"] and e["measurement"] not in at_noise]
 
