@@ -8,7 +8,10 @@ The rules are the same for every bundle:
   neither an effect nor missing physics (:func:`judged`). One rule for the baseline's
   residual (``resolution``) and for what a candidate leaves (``resolution_after``); a
   measurement a candidate predicts at the noise on held-out rows is one its net does judge
-  (the data then follow a model on this net to within their noise);
+  (the data then follow a model on this net to within their noise), and so is every
+  measurement of a candidate whose refit reaches the noise on them together
+  (:func:`follows`: an effect that brings the model to the noise on the case's own net is
+  not withheld for that net's error);
 - **significant**: a candidate's ``evidence`` (baseline held-out / candidate held-out
   normalised error, on the tests of the kinds it acts on that the net can judge:
   :func:`evidence`) is at least :data:`EVIDENCE_THRESHOLD` (1.2: it predicts unseen data
