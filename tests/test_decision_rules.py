@@ -10,6 +10,8 @@ made on its very net (the finer net farther from the data, e small: its leftover
 No forming run here: the stages' results are made by hand.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -332,3 +334,32 @@ def test_no_set_up_is_looked_for_again_behind_an_effect_at_the_noise():
     # The baseline is not needed: nothing is formed (before, the stage ran again on it).
     assert setup_with_effect_stage(stated, at_noise, None, said.append) == (stated, at_noise)
     assert said == []
+
+
+def test_an_effect_the_finer_net_judges_is_named_and_said_so():
+    """A hidden holder friction on the octagon's grid, the truth on 10 mm cells (the scenario
+    benchmark's s14, its numbers as measured): the case's 20 mm net cannot judge the grid
+    (residual 1.99 mm, its own error 2.65 mm), and on it the truth itself stays near 3.6 ×
+    the noise; on the 10 mm net the baseline is at 8.81 and holder_friction at 1.04. The
+    finer net judges it: named, and the conclusion says on which net."""
+    from fenicsx_drape.diagnosis.words import unjudged
+
+    checked = [entry("t1", 1.99, 0.3, 2.65, 2.64, "mm")]
+    assert checked[0]["explains"]
+    base = [comparison("t1", 1.99, 0.3, "mm")]
+    refit = [comparison("t1", 3.79 * 0.3, 0.3, "mm")]
+    plain = candidate("holder_friction", refit, significant=False, evidence_=1.0)
+    assert not adequate(plain)
+    finer = {"cell_mm": 10.0, "measurements": ["t1"], "normalised": 1.04,
+             "baseline_normalised": 8.81, "evidence": 8.81 / 1.04}
+    judged_there = dataclasses.replace(plain, significant=True, finer_net=finer)
+    assert adequate(judged_there)
+    decision = decide(Effects((judged_there,), ()), judged_there, None, NO_DATA_CHECK)
+    assert decision.named is judged_there
+    assert unjudged(checked, judged_there) == []
+    words = conclusion(judged_there, judged_there, base, "pattern", resolution=checked)
+    assert words.startswith("Missing effect: holder_friction")
+    assert "On the 10 mm net the effect brings them from 8.81 to 1.04" in words
+    # Not at the noise on the finer net either: not adequate (nothing judges it).
+    short = dataclasses.replace(judged_there, finer_net={**finer, "normalised": 2.0})
+    assert not adequate(short)

@@ -158,10 +158,16 @@ def adequate(candidate: Candidate) -> bool:
     ``normalised <= ADEQUATE`` on every test; else the measurements it still misses were
     checked against its net (``resolution_after``: the candidate formed on half the cell),
     and those whose leftover is within the net's own error are left out (:func:`judged`):
-    it is adequate when the rest are within ``ADEQUATE`` (or none is left).
+    it is adequate when the rest are within ``ADEQUATE`` (or none is left). A candidate the
+    finer net judged (``finer_net``: on the measurements its own net cannot judge, at the
+    noise on half the cell) is adequate when the rest are within ``ADEQUATE``.
     """
     if candidate.error_after["normalised"] <= ADEQUATE:
         return True
+    finer = candidate.finer_net
+    if finer is not None and finer["normalised"] <= ADEQUATE:  # the finer net judged them
+        rest = [c for c in candidate.after if c.id not in finer["measurements"]]
+        return not rest or normalised_error(rest) <= ADEQUATE
     if not candidate.resolution_after:  # not checked (no formed part), or nothing to check
         return False
     rest = judged(candidate.after, candidate.resolution_after)

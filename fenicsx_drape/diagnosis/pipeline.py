@@ -76,6 +76,7 @@ from fenicsx_drape.diagnosis.decision import (
     BASELINE_ITERATIONS,
     EVIDENCE_THRESHOLD,
     UNTESTABLE_BELOW,
+    adequate,
     decide,
     evidence,
     rank,
@@ -110,7 +111,7 @@ from fenicsx_drape.diagnosis.setup_fit import refit_setup
 from fenicsx_drape.diagnosis.setup_parameters import SETUP_PARAMETERS, corrected, fitted_value
 from fenicsx_drape.diagnosis.setup_stage import setup_stage
 from fenicsx_drape.diagnosis.words import optimiser_record, untestable_reason
-from fenicsx_drape.errors import DrapeInputError
+from fenicsx_drape.errors import DrapeInputError, SolverError
 from fenicsx_drape.runs import FULL_CELL_MM, together
 
 if TYPE_CHECKING:
@@ -163,6 +164,7 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     stage, best, base, held = setup_needed_stage(stage, best, stated, base, held, resolution,
                                                  model, say)
     best = net_check_stage(best, say)
+    effects, best = finer_net_stage(effects, best, base, held, resolution, say)
     decision = decide(effects, best, stage, checked)
     report = format_report(bundle, checked, base, held, resolution, effects, decision, groups,
                            measures_stage(base, decision.ranked),
@@ -513,6 +515,71 @@ def net_check_stage(best: Candidate | None, say: Progress) -> Candidate | None:
     say(f"candidate {best.effect}: can its net judge what it leaves?")
     checked = check_resolution(best.tests, best.model, best.after, ADEQUATE, say)
     return dataclasses.replace(best, resolution_after=tuple(checked))
+
+
+def finer_net_stage(effects: Effects, best: Candidate | None, base: Baseline, held: HeldOut,
+                    resolution: Resolution, say: Progress
+                    ) -> tuple[Effects, Candidate | None]:
+    """The candidates on the finer net, where the case's net can judge none of what they gain.
+
+    When no candidate is named, the baseline's residual is within its net's own error on
+    every measurement, and a candidate predicts the held-out rows better on that net
+    (``EVIDENCE_THRESHOLD``) without reaching the noise there, the net that would decide is
+    asked: each such candidate, as refitted, is formed on the finer net the resolution stage
+    formed the baseline on (half the cell), and compared with the data there. One that
+    reaches the noise there (``ADEQUATE``) where the baseline on that net does not, by at
+    least ``EVIDENCE_THRESHOLD``, is judged by that net (``finer_net``), significant, and
+    ranked first: a model on the finer net follows the data to within their noise. Returns
+    the candidates and the best, new when one was judged so.
+    """
+    from fenicsx_drape.runs import resolution as cells
+
+    entries = {e["measurement"]: e for e in resolution.entries
+               if e["explains"] and e.get("fine_residual") is not None}
+    forming = [c.id for c in base.compared if is_formed_id(base, c.id)]
+    if (not entries or not forming or set(forming) - set(entries)
+            or (best is not None and best.significant and adequate(best))):
+        return effects, best
+    ranked = (best, *effects.ranked[1:]) if best is not None else effects.ranked
+    tried = [c for c in ranked if c.error_after["normalised"] > ADEQUATE
+             and held.normalised >= EVIDENCE_THRESHOLD * c.heldout_normalised]
+    if not tried:
+        return effects, best
+    base_fine = float(np.sqrt(np.mean([(e["fine_residual"] / e["noise"]) ** 2
+                                       for e in entries.values()])))
+    found = []
+    for c in tried:
+        tests = [t for t in c.tests if t.id in entries]
+        values: dict[str, np.ndarray] = {}
+        for fine in sorted({entries[t.id]["fine_cell_mm"] for t in tests}):
+            group = [t for t in tests if entries[t.id]["fine_cell_mm"] == fine]
+            say(f"candidate {c.effect} on {fine:g} mm cells (the finer net)")
+            try:
+                with cells(fine):
+                    values.update(simulate(group, c.model))
+            except (SolverError, DrapeInputError) as err:
+                say(f"  not formed: {err}")
+                break
+        else:
+            compared = compare_tests(tests, values, base.data.regions, base.data.noise)
+            normalised = normalised_error(compared)
+            say(f"  normalised error {normalised:.3g} there (the baseline {base_fine:.3g})")
+            found.append((normalised, c, fine))
+    passed = [(n, c, f) for n, c, f in found
+              if n <= ADEQUATE and base_fine >= EVIDENCE_THRESHOLD * n]
+    if not passed:
+        return effects, best
+    normalised, chosen, fine = min(passed, key=lambda x: (x[0], x[1].effect))
+    chosen = dataclasses.replace(chosen, significant=True, finer_net={
+        "cell_mm": fine, "measurements": sorted(entries), "normalised": normalised,
+        "baseline_normalised": base_fine, "evidence": base_fine / max(normalised, 1e-300)})
+    others = tuple(c for c in ranked if c.effect != chosen.effect)
+    return dataclasses.replace(effects, ranked=(chosen, *others)), chosen
+
+
+def is_formed_id(base: Baseline, test_id: str) -> bool:
+    """Whether the baseline's test ``test_id`` is a formed measurement."""
+    return any(is_formed(t) for t in base.data.tests if t.id == test_id)
 
 
 def measures_stage(base: Baseline, ranked: Sequence[Candidate]) -> dict[str, Any]:

@@ -90,6 +90,8 @@ def candidate_record(c: Candidate, explanation: str) -> dict[str, Any]:
         out["setup_refitted"] = c.setup_refitted.record()
     if c.resolution_after is not None:
         out["resolution_after"] = list(c.resolution_after)
+    if c.finer_net is not None:
+        out["finer_net"] = dict(c.finer_net)
     out["explanation"] = explanation
     return out
 

@@ -177,6 +177,10 @@ class Candidate:
     n_parameters: int  # the parameters it adds (ties go to the fewest)
     # what it leaves checked against its net (the best candidate, when it needs it)
     resolution_after: tuple[Entry, ...] | None = None
+    # the candidate and the baseline on the finer net, where the case's net judges none of
+    # its measurements (pipeline.finer_net_stage): cell_mm, measurements, normalised,
+    # baseline_normalised, evidence
+    finer_net: Entry | None = None
 
 
 @dataclasses.dataclass(frozen=True)

@@ -209,7 +209,7 @@ def unjudged(entries: Sequence[dict[str, Any]], missing: Candidate | None
     """
     from fenicsx_drape.diagnosis.decision import follows
 
-    if missing and follows(missing.after):
+    if missing and (follows(missing.after) or missing.finer_net is not None):
         return []
     at_noise = {c.id for c in (missing.after if missing else ()) if c.normalised <= ADEQUATE}
     return [e for e in entries if e["explains"] and e["measurement"] not in at_noise]
@@ -227,6 +227,13 @@ def _missing_words(missing: Candidate, normalised: float, setup_fitted: str | No
     nets = [e for e in checked if e["explains"]]
     if after <= ADEQUATE:
         return f"{head}, at the noise (adequate at ≤ {ADEQUATE})."
+    finer = missing.finer_net
+    if finer is not None:
+        return (f"{head}, still above it: the net it ran on cannot judge "
+                f"{', '.join(finer['measurements'])} (its own error there is as large as "
+                f"the residual). On the {finer['cell_mm']:g} mm net the effect brings them "
+                f"from {finer['baseline_normalised']:.3g} to {finer['normalised']:.3g} × the "
+                f"noise (evidence {finer['evidence']:.3g}): that net judges it.")
     if not nets:
         return f"{head}, {after / ADEQUATE:.3g} × above the adequate {ADEQUATE}."
     rest = judged(missing.after, checked)
