@@ -565,8 +565,8 @@ def finer_net_stage(effects: Effects, best: Candidate | None, base: Baseline, he
             normalised = normalised_error(compared)
             say(f"  normalised error {normalised:.3g} there (the baseline {base_fine:.3g})")
             found.append((normalised, c, fine))
-    passed = [(n, c, f) for n, c, f in found
-              if n <= ADEQUATE and base_fine >= EVIDENCE_THRESHOLD * n]
+    passed = [(n, c, f) for n, c, f in found if n <= ADEQUATE < base_fine
+              and base_fine >= EVIDENCE_THRESHOLD * n]
     if not passed:
         return effects, best
     normalised, chosen, fine = min(passed, key=lambda x: (x[0], x[1].effect))

@@ -78,6 +78,12 @@ def explain(c: Candidate, pattern: str, base_norm: float, base_ho: float) -> str
     what = addition(c)
     if c.significant and after <= ADEQUATE:
         return f"{pattern[:1].upper() + pattern[1:]}, and it vanishes when {what}: {gain}."
+    if c.significant and c.finer_net is not None:
+        f = c.finer_net
+        return (f"{pattern[:1].upper() + pattern[1:]}; it shrinks when {what}: {gain}, on a "
+                f"net that cannot judge it; on the {f['cell_mm']:g} mm net it brings the "
+                f"error from {f['baseline_normalised']:.3g} to {f['normalised']:.3g} × noise "
+                f"(evidence {f['evidence']:.3g} there).")
     if c.significant:
         remains = c.where_after[0] if c.where_after else None
         rest = (f"; what remains sits in {remains['test']} ({remains['says']})"
