@@ -39,7 +39,9 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
    error named: the set-up stage again with it in (a missing effect can hide a set-up
    error); with one named: the best refitted at the stated set-up, and the set-up error
    withdrawn when it adds no held-out evidence (an effect can stand behind a set-up error);
-   above the noise: is what it leaves its net's own error?
+   above the noise: is what it leaves its net's own error? Where the case's net can judge
+   none of the forming measurements, the candidates that gain on it are formed on the finer
+   net (:func:`finer_net_stage`).
 8. **Decision** (:func:`~fenicsx_drape.diagnosis.decision.decide` → ``Decision``) and
    **report** (:func:`~fenicsx_drape.diagnosis.report.format_report`, which only formats).
 
