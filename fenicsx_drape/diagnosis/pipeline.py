@@ -56,7 +56,7 @@ import dataclasses
 import functools
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -151,7 +151,9 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     data = prepare_tests(declare_noise(checked.bundle, model.noise))
     base = baseline_stage(data, model, say)
     parameters = SETUP_PARAMETERS if setup is None and candidates is None else setup
-    stage = setup_stage(base.data.bundle, model, parameters, setup_rules(), say)
+    # The set-up as stated is the baseline: the same fitted values, one error.
+    stage = setup_stage(base.data.bundle, model, parameters, setup_rules(), say,
+                        baseline=base.model)
     stated, base = base, at_setup(base, stage, model, say)
     # The held-out error and the net's own error are independent: their runs together.
     held, resolution = together([functools.partial(heldout_stage, base),
@@ -160,8 +162,9 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     effects = effects_stage(names, model, base, held, stage, resolution, say)
     groups = groups_stage(base, say)
     stage, best = setup_with_effect_stage(stage, effects.best, base, say)
-    stage, best, base, held = setup_needed_stage(stage, best, stated, base, held, resolution,
-                                                 model, say)
+    looked = setup_needed_stage(stage, best, stated, base, held, resolution, model, say,
+                                effects=effects)
+    stage, best, base, held, resolution, effects = looked
     best = net_check_stage(best, say)
     decision = decide(effects, best, stage, checked)
     report = format_report(bundle, checked, base, held, resolution, effects, decision, groups,
@@ -428,7 +431,8 @@ def setup_with_effect_stage(stage: SetupResult | None, best: Candidate | None, b
         return stage, best
     say(f"set-up stage again, with {best.effect} in")
     with_effect = stage.given_model.with_effects(*best.effects)
-    again = setup_stage(base.data.bundle, with_effect, stage.parameters, setup_rules(), say)
+    again = setup_stage(base.data.bundle, with_effect, stage.parameters, setup_rules(), say,
+                        fitted=stage.fitted, label=f"the model as given with {best.effect}")
     if again is None or again.setup_error is None:
         return stage, best
     again = dataclasses.replace(
@@ -452,39 +456,82 @@ def setup_with_effect_stage(stage: SetupResult | None, best: Candidate | None, b
         parameters={p: float(refit.parameters[p]) for p in best.parameters})
 
 
-def setup_needed_stage(stage: SetupResult | None, best: Candidate | None, stated: Baseline,
-                       base: Baseline, held: HeldOut, resolution: Resolution, model: Model,
-                       say: Progress
-                       ) -> tuple[SetupResult | None, Candidate | None, Baseline, HeldOut]:
-    """Is the set-up error still needed once the best effect is in?
+class Looked(NamedTuple):
+    """What :func:`setup_needed_stage` leaves: each value new when the set-up is withdrawn."""
 
-    An effect and a set-up parameter can act alike (a tool friction and a larger holding
-    force both hold the sheet back), so a set-up error fitted before physics may only stand
-    in for the effect, and refitting it with the effect can stay in the valley they share.
-    The best effect is refitted at the *stated* set-up, from the stated baseline, and judged
-    on the same held-out rows: when the set-up fitted with it predicts them less than
-    ``EVIDENCE_THRESHOLD`` times better, the set-up error is withdrawn (the effect, not the
-    set-up, was missing) and the effect at the stated set-up is the best. Returns the set-up,
-    the best candidate, the baseline and its held-out error, each new when withdrawn.
+    stage: SetupResult | None  # the set-up (its error withdrawn, or as it was)
+    best: Candidate | None  # the best candidate (at the stated set-up, when withdrawn)
+    base: Baseline  # the baseline the candidates are judged against
+    held: HeldOut  # its held-out error
+    resolution: Resolution | None  # its net's own error
+    effects: Effects | None  # the candidates, ranked
+
+
+# Set-up parameters that any missing restraint can stand in for (eq. 1: the holder acts
+# through μF only): with one of them named, every candidate effect is tried at the stated
+# set-up too, not only a significant best (:func:`setup_needed_stage`).
+RESTRAINTS = ("holder_force_N", "mu")
+
+
+def setup_needed_stage(stage: SetupResult | None, best: Candidate | None, stated: Baseline,
+                       base: Baseline, held: HeldOut, resolution: Resolution | None,
+                       model: Model, say: Progress, effects: Effects | None = None) -> Looked:
+    """Is the set-up error still needed once an effect is in?
+
+    An effect and a set-up parameter can act alike (a tool friction, or a viscosity that grows
+    with strain, and a larger holding force all hold the sheet back), so a set-up error
+    fitted before physics may only stand in for the effect, and refitting it with the effect
+    can stay in the valley they share (the effect then gains nothing there and is not named).
+    The effects are refitted at the *stated* set-up, from the stated baseline, and judged on
+    the same held-out rows: the significant best when there is one; with a holding force or
+    μ named (:data:`RESTRAINTS`) and no significant best, every ranked candidate (one the
+    set-up took the place of). When the best of them is significant against the stated
+    baseline and the set-up fitted (alone or with an effect) predicts the held-out rows less
+    than ``EVIDENCE_THRESHOLD`` times better, the set-up error is withdrawn (the effect, not
+    the set-up, was missing): the effects at the stated set-up are the ones ranked, judged
+    against the stated baseline and its net. Returns :class:`Looked`.
     """
-    if (best is None or not best.significant or not stage or stage.setup_error is None
-            or stage.found_with_effect or stated is base):
-        return stage, best, base, held
-    say(f"candidate {best.effect} at the stated set-up: is {stage.setup_error} needed?")
+    same = Looked(stage, best, base, held, resolution, effects)
+    if not stage or stage.setup_error is None or stage.found_with_effect or stated is base:
+        return same
+    significant = best is not None and best.significant
+    if significant:
+        names = [best.effects[-1]]
+    elif stage.setup_error in RESTRAINTS and effects is not None:
+        names = [c.effects[-1] for c in effects.ranked]
+    else:
+        names = []
+    if not names:
+        return same
+    say(f"{' and '.join(names)} at the stated set-up: is {stage.setup_error} needed?")
     held_stated = heldout_stage(stated, say)
-    alone = effect_stage(best.effects[-1], model, stated, held_stated, None, resolution, say)
-    if not isinstance(alone, Candidate) or not alone.significant:
-        return stage, best, base, held
-    gain = alone.heldout_normalised / max(best.heldout_normalised, 1e-300)
-    say(f"  held-out {alone.heldout_normalised:.3g} at the stated set-up, "
-        f"{best.heldout_normalised:.3g} with {stage.setup_error} fitted: evidence {gain:.3g}")
+    net = resolution
+    if stage.resolution is not None:  # the stated set-up's net: the stage checked it
+        net = Resolution(stage.resolution, frozenset(explained(stage.resolution)))
+    tried = together([functools.partial(effect_stage, name, model, stated, held_stated, None,
+                                        net) for name in names], say)
+    ranked = rank([c for c in tried if isinstance(c, Candidate)])
+    if not ranked or not ranked[0].significant:
+        return same
+    alone = ranked[0]
+    # What the set-up fitted predicts at best: with the best effect, or alone and with any.
+    fitted = (best.heldout_normalised if significant else
+              min([held.normalised, *(c.heldout_normalised for c in effects.ranked)]))
+    gain = alone.heldout_normalised / max(fitted, 1e-300)
+    say(f"  held-out {alone.heldout_normalised:.3g} with {alone.effect} at the stated set-up, "
+        f"{fitted:.3g} with {stage.setup_error} fitted: evidence {gain:.3g}")
     if gain >= EVIDENCE_THRESHOLD:
-        return stage, best, base, held
-    entry = {**stage.entries[0], "withdrawn_for": best.effect,
+        return same
+    entry = {**stage.entries[0], "withdrawn_for": alone.effect,
              "evidence_with_effect": float(gain)}
     stage = dataclasses.replace(stage, setup_error=None, withdrawn=stage.setup_error,
                                 entries=(entry, *stage.entries[1:]))
-    return stage, alone, stated, held_stated
+    if effects is not None and significant:  # the best replaced by itself at the stated set-up
+        effects = dataclasses.replace(effects, ranked=(alone, *effects.ranked[1:]))
+    elif effects is not None:  # every candidate tried at the stated set-up
+        untested = [u for u in tried if not isinstance(u, Candidate)]
+        effects = Effects(tuple(ranked), (*effects.untestable, *untested))
+    return Looked(stage, alone, stated, held_stated, net, effects)
 
 
 def net_check_stage(best: Candidate | None, say: Progress) -> Candidate | None:
