@@ -14,8 +14,9 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
    the forming tests) and compared with every test (:mod:`~fenicsx_drape.diagnosis.
    compare`); the rows beyond ``OUTLIER_SD`` robust sd are left out and it is refitted.
 3. **Set-up before physics** (:func:`~fenicsx_drape.diagnosis.setup_stage.setup_stage` →
-   ``SetupResult``): the set-up as stated against the set-up fitted; the best, when one is
-   significant, is applied and the baseline refitted at it (:func:`at_setup`).
+   ``SetupResult``): the set-up as stated (the baseline as fitted: one model, one error)
+   against the set-up fitted; the best, when one is significant, is applied and the
+   baseline refitted at it (:func:`at_setup`).
 4. **Held-out error and resolution** (:func:`heldout_stage` → ``HeldOut``,
    :func:`resolution_stage` → ``Resolution``): every row predicted by the fold that held it
    out; each forming measurement the baseline misses compared with the same model on half
@@ -37,7 +38,8 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
 7. **The best candidate, looked at again** (:func:`setup_with_effect_stage`,
    :func:`setup_needed_stage`, :func:`net_check_stage`): a significant best with no set-up
    error named: the set-up stage again with it in (a missing effect can hide a set-up
-   error); with one named: the best refitted at the stated set-up, and the set-up error
+   error); with one named: the best refitted at the stated set-up (every candidate, when
+   a holding force or μ was named and no effect is significant), and the set-up error
    withdrawn when it adds no held-out evidence (an effect can stand behind a set-up error);
    above the noise: is what it leaves its net's own error?
 8. **Decision** (:func:`~fenicsx_drape.diagnosis.decision.decide` → ``Decision``) and

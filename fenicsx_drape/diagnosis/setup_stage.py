@@ -4,8 +4,12 @@ When a formed part disagrees with the model, its set-up is the first suspect. Be
 physics effect is tried, :func:`setup_stage` fits each set-up parameter
 (:mod:`~fenicsx_drape.diagnosis.setup_parameters`: the ply's angle, the blank's offset, the
 holding force, the holder's μ, the punch's offset) to the forming tests of a bundle, as a
-candidate of its own. The model's material and friction stay as stated (as given, or as the
-coupons fitted them): the reference is the **stated set-up**, fitted to nothing.
+candidate of its own. The reference is the **stated set-up**: in a diagnosis, the baseline
+as fitted (its material as given or fitted to the coupons, the friction no case states
+fitted to the forming tests), so that the stated model has one error in a run, the
+baseline's, on one noise; the stage fits nothing more to it. A set-up parameter that fit
+takes up is untestable (:func:`taken_up`: the holding force and μ, where the baseline fits
+μ). Alone (:func:`fit_setup`), the model as given.
 
 Per candidate, the same definitions as an effect's (``diagnose``'s module doc): 1. the scan
 and whether it is testable, 2. the fit, 3. the held-out error
