@@ -128,10 +128,15 @@ def holder_force_bundle(folder: Path) -> Path:
     The truth on the case's own tools, 20 mm cells and 1 mm steps: the force is read off its
     curve, not off the net's error (the 10 mm truth's force is 50 % off on 20 mm cells) nor
     off the STL copy's (at 300 N the STL holder forms the edge 24 × its noise away from the
-    closed-form holder's, against 6 × at 100 N: measured, not yet explained).
+    closed-form holder's, against 6 × at 100 N: measured, not yet explained). The case states
+    the holder's μ (0.3, the truth's): where it does not, the diagnosis's baseline fits μ,
+    and the force, acting through μF only (eq. 1), is not a set-up candidate.
     """
-    return make_lab_bundle.make(folder, seed=5, holder_force_N=300.0, cell_mm=20.0, stl=False,
-                                measurements=["outline", "punch_force"])
+    out = make_lab_bundle.make(folder, seed=5, holder_force_N=300.0, cell_mm=20.0, stl=False,
+                               measurements=["outline", "punch_force"])
+    case = out / "case" / "case.toml"
+    case.write_text(case.read_text().replace("[holder]\n", "[holder]\nmu = 0.3\n", 1))
+    return out
 
 
 @pytest.mark.bench

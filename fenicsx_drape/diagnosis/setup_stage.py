@@ -42,8 +42,7 @@ node_folds`), and
    - ``evidence_stated`` (the stated set-up's held-out error / the candidate's, on the noise
      as stated, against the stated set-up on the case's own model and on the model the
      candidate needs) is ``>= EVIDENCE_THRESHOLD``: the data as measured, at their own noise,
-     are predicted better on held-out nodes (a holding force of 49 ± 44 N for 100 N beside a
-     missing tow buckling, 1.02, is not);
+     are predicted better on held-out nodes;
    - ``evidence`` and ``evidence_on_model`` are above 1: on the noise widened by the net's
      own error, where the finer net shows a residual to be that error, the gain does not
      come from those measurements alone (the measurements the net can judge improve too).
