@@ -253,9 +253,9 @@ def summary(report: dict[str, Any]) -> str:
     base = report["baseline"]
     suspect = any(e["suspect"] for e in report.get("data_check", ()))
     lines = [report["conclusion"]] if suspect else []
-    at = (f", {report['setup_error']} fitted" if report.get("setup_error") else
-          ", the set-up as stated" if report.get("setup_stated") else "")
-    lines += [f"baseline ({', '.join(base['effects']) or 'no effects'}{at}): normalised "
+    at = (f" with {report['setup_error']} fitted" if report.get("setup_error") else
+          " (the set-up as stated)" if report.get("setup_stated") else "")
+    lines += [f"baseline ({', '.join(base['effects']) or 'no effects'}){at}: normalised "
               f"{base['error']['normalised']:.3g}, held-out {base['heldout_normalised']:.3g} "
               f"(noise floor 1; from {report['noise_floor']['source']})"]
     if base.get("optimiser", {}).get("statement"):
