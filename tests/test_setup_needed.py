@@ -145,3 +145,41 @@ def test_a_placement_is_not_looked_at_again_for_effects_not_significant(stand_in
                               held=Held(1.0))
     assert stand_ins["tried"] == [] and looked.stage.setup_error == "ply_angle_deg"
     assert looked.base is at_setup
+
+
+def test_the_set_up_is_fitted_again_at_the_friction_refitted_with_it(monkeypatch):
+    """``pipeline.friction_round``: the baseline's μ, fitted with the set-up as stated, took up
+    part of a turned ply (0.33 for 0.3); refitted with the ply applied it moves, and the ply is
+    fitted again at it, once: the entry reports the new value and the first one."""
+    from fenicsx_drape.diagnosis.results import SetupBest
+    from fenicsx_drape.model import default_model
+
+    model = default_model()
+    stated_model, refitted = model.with_parameters(mu=0.333), model.with_parameters(mu=0.301)
+    asked = {}
+
+    def refit_setup(bundle, name, p, with_model, say):
+        asked["mu"] = float(with_model.parameters["mu"])
+        return [4.02]
+
+    monkeypatch.setattr(pipeline, "refit_setup", refit_setup)
+    monkeypatch.setattr(pipeline, "corrected", lambda bundle, name, p, m: ("corrected", p))
+    monkeypatch.setattr(pipeline, "fitted_value", lambda bundle, name, p, m: float(p[0]))
+    monkeypatch.setattr(pipeline, "at_setup", lambda base, st, m, say: ("at", st.corrected))
+    entry = {"parameter": "ply_angle_deg", "stated": 0.0, "fitted": 4.21, "sd": 1.43}
+    first = dataclasses.replace(stage(), entries=(entry,), setup_error="ply_angle_deg",
+                                best=SetupBest("ply_angle_deg", (4.21,)),
+                                stated_model=stated_model, fitted=("mu",))
+    stated, base = object(), dataclasses.make_dataclass("B", ["model"])(refitted)
+    again, new_base = pipeline.friction_round(first, stated, base, model, lambda line: None)
+    assert asked["mu"] == pytest.approx(0.301)  # at the friction refitted with the ply
+    assert again.best.p == (4.02,) and again.entries[0]["fitted"] == 4.02
+    assert again.entries[0]["fitted_at_stated_friction"] == 4.21
+    assert new_base == ("at", ("corrected", [4.02]))
+    # nothing moved (μ stated, or refitted to the same value): the set-up as it was
+    still = dataclasses.replace(first, stated_model=refitted)
+    assert pipeline.friction_round(still, stated, base, model, lambda line: None) == (still,
+                                                                                       base)
+    unfitted = dataclasses.replace(first, fitted=())
+    assert pipeline.friction_round(unfitted, stated, base, model, lambda line: None) == (
+        unfitted, base)
