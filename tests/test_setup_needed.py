@@ -149,37 +149,48 @@ def test_a_placement_is_not_looked_at_again_for_effects_not_significant(stand_in
 
 def test_the_set_up_is_fitted_again_at_the_friction_refitted_with_it(monkeypatch):
     """``pipeline.friction_round``: the baseline's μ, fitted with the set-up as stated, took up
-    part of a turned ply (0.33 for 0.3); refitted with the ply applied it moves, and the ply is
-    fitted again at it, once: the entry reports the new value and the first one."""
+    part of a turned ply (0.333 for 0.3). The ply is fitted again at the μ refitted with it
+    (when it moved) and at the model's given μ, and the one whose baseline comes nearest the
+    data is kept: the entry reports the new value and the first one."""
     from fenicsx_drape.diagnosis.results import SetupBest
     from fenicsx_drape.model import default_model
 
-    model = default_model()
-    stated_model, refitted = model.with_parameters(mu=0.333), model.with_parameters(mu=0.301)
-    asked = {}
+    model = default_model()  # μ given: 0.3
+    stage_model = model.with_parameters(mu=0.333)
+    asked = []
+    ply_at = {0.333: 4.21, 0.32: 4.1, 0.3: 4.0}  # the ply each μ fits
+    error_at = {4.21: 1.39, 4.1: 1.2, 4.0: 0.97}  # the baseline refitted at each ply
 
     def refit_setup(bundle, name, p, with_model, say):
-        asked["mu"] = float(with_model.parameters["mu"])
-        return [4.02]
+        mu = round(float(with_model.parameters["mu"]), 3)
+        asked.append(mu)
+        return [ply_at[mu]]
 
+    Base = dataclasses.make_dataclass("Base", ["model", "normalised"])
     monkeypatch.setattr(pipeline, "refit_setup", refit_setup)
-    monkeypatch.setattr(pipeline, "corrected", lambda bundle, name, p, m: ("corrected", p))
+    monkeypatch.setattr(pipeline, "corrected", lambda bundle, name, p, m: float(p[0]))
     monkeypatch.setattr(pipeline, "fitted_value", lambda bundle, name, p, m: float(p[0]))
-    monkeypatch.setattr(pipeline, "at_setup", lambda base, st, m, say: ("at", st.corrected))
+    monkeypatch.setattr(pipeline, "at_setup",
+                        lambda base, st, m, say: Base(None, error_at[st.corrected]))
     entry = {"parameter": "ply_angle_deg", "stated": 0.0, "fitted": 4.21, "sd": 1.43}
     first = dataclasses.replace(stage(), entries=(entry,), setup_error="ply_angle_deg",
                                 best=SetupBest("ply_angle_deg", (4.21,)),
-                                stated_model=stated_model, fitted=("mu",))
-    stated, base = object(), dataclasses.make_dataclass("B", ["model"])(refitted)
-    again, new_base = pipeline.friction_round(first, stated, base, model, lambda line: None)
-    assert asked["mu"] == pytest.approx(0.301)  # at the friction refitted with the ply
-    assert again.best.p == (4.02,) and again.entries[0]["fitted"] == 4.02
+                                stated_model=stage_model, fitted=("mu",))
+    stated, say = object(), lambda line: None
+    base = Base(model.with_parameters(mu=0.32), 1.39)  # μ moved with the ply applied
+    again, new_base = pipeline.friction_round(first, stated, base, model, say)
+    assert asked == [0.32, 0.3]  # the μ refitted with the ply, then the given one
+    assert again.best.p == (4.0,) and again.entries[0]["fitted"] == 4.0
     assert again.entries[0]["fitted_at_stated_friction"] == 4.21
-    assert new_base == ("at", ("corrected", [4.02]))
-    # nothing moved (μ stated, or refitted to the same value): the set-up as it was
-    still = dataclasses.replace(first, stated_model=refitted)
-    assert pipeline.friction_round(still, stated, base, model, lambda line: None) == (still,
-                                                                                       base)
+    assert new_base.normalised == 0.97
+    # μ refitted to the stage's own and the given one no nearer: the set-up as it was
+    error_at[4.0] = 1.5
+    asked.clear()
+    base = Base(stage_model, 1.39)
+    assert pipeline.friction_round(first, stated, base, model, say) == (first, base)
+    assert asked == [0.3]
+    # μ not fitted by the baseline (stated in the case): nothing to do, no runs
     unfitted = dataclasses.replace(first, fitted=())
-    assert pipeline.friction_round(unfitted, stated, base, model, lambda line: None) == (
-        unfitted, base)
+    asked.clear()
+    assert pipeline.friction_round(unfitted, stated, base, model, say) == (unfitted, base)
+    assert asked == []
