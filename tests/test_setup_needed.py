@@ -166,13 +166,14 @@ def test_the_set_up_is_fitted_again_at_the_friction_refitted_with_it(monkeypatch
         asked.append(mu)
         return [ply_at[mu]]
 
-    Base = dataclasses.make_dataclass("Base", ["model", "normalised"])
+    Base = dataclasses.make_dataclass("Base", ["model", "normalised", ("compared", tuple, ())])
     monkeypatch.setattr(pipeline, "refit_setup", refit_setup)
     monkeypatch.setattr(pipeline, "corrected", lambda bundle, name, p, m: float(p[0]))
     monkeypatch.setattr(pipeline, "fitted_value", lambda bundle, name, p, m: float(p[0]))
     monkeypatch.setattr(pipeline, "at_setup",
                         lambda base, st, m, say: Base(None, error_at[st.corrected]))
-    entry = {"parameter": "ply_angle_deg", "stated": 0.0, "fitted": 4.21, "sd": 1.43}
+    entry = {"parameter": "ply_angle_deg", "stated": 0.0, "fitted": 4.21, "sd": 1.43,
+             "error_after": {"normalised": 2.3, "per_test": {"t": 0.69}}}
     first = dataclasses.replace(stage(), entries=(entry,), setup_error="ply_angle_deg",
                                 best=SetupBest("ply_angle_deg", (4.21,)),
                                 stated_model=stage_model, fitted=("mu",))
@@ -182,6 +183,7 @@ def test_the_set_up_is_fitted_again_at_the_friction_refitted_with_it(monkeypatch
     assert asked == [0.32, 0.3]  # the μ refitted with the ply, then the given one
     assert again.best.p == (4.0,) and again.entries[0]["fitted"] == 4.0
     assert again.entries[0]["fitted_at_stated_friction"] == 4.21
+    assert again.entries[0]["error_after_at_stated_friction"] == 2.3
     assert new_base.normalised == 0.97
     # μ refitted to the stage's own and the given one no nearer: the set-up as it was
     error_at[4.0] = 1.5

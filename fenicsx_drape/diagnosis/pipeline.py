@@ -277,9 +277,11 @@ def friction_round(stage: SetupResult | None, stated: Baseline, base: Baseline, 
     (:func:`~fenicsx_drape.diagnosis.setup_fit.refit_setup`) at the friction the baseline
     refitted with it (when it moved) and at the model's given friction, the baseline
     refitted at each (:func:`at_setup`); the one whose baseline is nearest the data is kept
-    when it is nearer than the first. The set-up entry's ``fitted`` is then its value and
-    ``fitted_at_stated_friction`` the stage's (its sd and errors are the stage's). Returns
-    the set-up and the baseline (each itself when nothing came nearer).
+    when it is nearer than the first. The set-up entry's ``fitted`` and ``error_after`` are
+    then its value and that baseline's error on the forming tests, and
+    ``fitted_at_stated_friction`` and ``error_after_at_stated_friction`` the stage's (its sd,
+    held-out error and evidence are the stage's). Returns the set-up and the baseline (each
+    itself when nothing came nearer).
     """
     from fenicsx_drape.diagnosis.kinds.forming import SCALE, XTOL
 
@@ -314,6 +316,10 @@ def friction_round(stage: SetupResult | None, stated: Baseline, base: Baseline, 
         say(f"  {name} {entry['fitted']}: baseline {at.normalised:.3g} (with "
             f"{first['fitted']}: {kept[1].normalised:.3g})")
         if at.normalised < kept[1].normalised:
+            # its error is the baseline's there, on the forming tests (one model, one error)
+            formed = [c for c in at.compared if c.id in first["error_after"]["per_test"]]
+            entry["error_after"] = error_record(formed) if formed else first["error_after"]
+            entry["error_after_at_stated_friction"] = first["error_after"]["normalised"]
             kept = (again, at)
     return kept
 
