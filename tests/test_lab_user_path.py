@@ -176,6 +176,7 @@ def test_the_set_up_stage_reads_a_holder_force_off_the_force_curve_and_the_edge(
     assert abs(entry["fitted"] - 300.0) <= max(2.0 * entry["sd"], 30.0)
 
 
+@pytest.mark.bench  # 75 CPU-s; the README lab command (above) passes the same rule each run
 def test_shear_read_off_a_finer_net_is_the_nets_not_physics(tmp_path):
     """A sound lab estimate on a 10 mm net against the model's 20 mm cells (resolution).
 
