@@ -13,7 +13,8 @@ plies (the default). ``--solver`` chooses the stack's linear solve
 ``plies``, GMRES preconditioned by each ply's factor and the stack moving as one,
 fe/stack_solver.py; ``--lag`` keeps its factors over that many Newton iterations).
 ``--orderings`` factors each run's last Jacobian again with each of MUMPS's orderings and
-prints its flops and factor size.
+with PETSc's own LU and its orderings, and prints the flops (MUMPS), the factor's entries and
+the CPU time of each.
 
 Every line: plies, nodes, wall and CPU time and their ratios to the single ply's (CPU is the
 steadier figure on a shared machine), steps, cut-backs, Newton iterations, Krylov iterations,
@@ -44,7 +45,8 @@ parser.add_argument("--lag", type=int, default=None,
                     help="keep the preconditioner's factors over LAG Newton iterations "
                          "(-snes_lag_preconditioner; with --solver plies)")
 parser.add_argument("--orderings", action="store_true",
-                    help="factor each stack's last Jacobian again with MUMPS's orderings")
+                    help="factor each stack's last Jacobian again with MUMPS's orderings "
+                         "and PETSc's")
 args = parser.parse_args()
 
 GAP = 1.25
