@@ -93,12 +93,6 @@ STACK_SOLVERS = ("plies", "direct")
 """``SolverOptions.stack_solver``: how a stack's linear solves go (fe/stack_solver.py)."""
 """``SolverOptions.bending_jacobian``: how the tow bending's stencils enter Newton's solve."""
 
-STACK_ORDERING = {"mat_mumps_icntl_7": 4}
-"""A stack's factor is ordered by MUMPS's PORD (ICNTL(7) = 4) rather than its automatic choice
-(AMF in Debian's build): on the double dome's quarter at 10 mm, 97 against 125 Mflop a
-factorisation for four plies, 590 against 1004 for eight (51 against 64 ms), the same
-for two (docs/laminates-internals.md, Speed)."""
-
 SPLIT_FROM_NODES = 500
 """``bending_jacobian = "auto"``: a sheet of more nodes than this, or a stack of plies, solves
 with ``"preconditioner"``, a smaller one with ``"full"``. On the hemisphere, idle machine:
@@ -393,9 +387,7 @@ class TrussProblem:
         contact = next((t for t in self._couplings if hasattr(t, "first_ply_map")), None)
         plies = opts.stack_solver == "plies" and contact is not None
         krylov = split or plies
-        ordering = STACK_ORDERING if contact is not None and opts.linear_solver == "mumps" \
-            and not plies else {}
-        options = {"pc_factor_mat_solver_type": opts.linear_solver, **ordering,
+        options = {"pc_factor_mat_solver_type": opts.linear_solver,
                    **(BENDING_PRECONDITIONER if krylov else {}), **opts.petsc_options}
         operator = self._operator() if split else self._A
         self.newton = Newton(self._residual, self._jacobian, operator, self._b,
