@@ -4,8 +4,9 @@ A bundle may hold measurements that cannot belong to its case: axes swapped, ano
 grid, a flat frame shifted, a scan in metres. No effect or set-up explains them, and blaming
 the model sends a user the wrong way. :func:`data_check` asks every measurement of a formed
 part its kind's ``check`` against its case (the checks, and what makes a measurement
-suspect: :mod:`~fenicsx_drape.diagnosis.kinds.checks` for positions, a shifted frame and a
-registered scan; :mod:`~fenicsx_drape.diagnosis.kinds.outline` for an edge in plan;
+suspect: :mod:`~fenicsx_drape.diagnosis.kinds.checks` for positions, a shifted frame, a
+registered scan and shear points against their test's grid;
+:mod:`~fenicsx_drape.diagnosis.kinds.outline` for an edge in plan;
 :mod:`~fenicsx_drape.diagnosis.kinds.punch_force` for a force curve), before any fit, and
 returns the report's ``data_check`` entries (``suspect`` with ``why``, the first reason
 found). A reading of the data that was chosen (a blank placed off-centre rather than a
@@ -38,6 +39,7 @@ def data_check(bundle) -> list[dict[str, Any]]:
     from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
 
     out = []
+    checked = []
     for test in bundle.tests:
         kind = find_kind(test)
         if kind is None or not kind.formed:
@@ -53,7 +55,35 @@ def data_check(bundle) -> list[dict[str, Any]]:
         out.append({"test": lab.parent if lab is not None else test.id,
                     "measurement": lab.measurement if lab is not None else "file",
                     "suspect": suspect, "why": why})
+        checked.append(test)
+    _shear_against_grid(checked, out)
     return out
+
+
+def _shear_against_grid(tests: list, entries: list[dict[str, Any]]) -> None:
+    """Shear points of a test named when its grid of the same ply tells another pattern.
+
+    Only a grid that passed its own checks (on the tools, on the blank) is the reference; the
+    entries of ``tests`` (in the same order) are changed in place.
+    """
+    from fenicsx_drape.diagnosis.kinds.checks import check_shear_against_grid
+    from fenicsx_drape.diagnosis.kinds.forming import forming_case_of
+
+    grids = {(e["test"], getattr(t, "ply", None)): t for t, e in zip(tests, entries, strict=True)
+             if e["measurement"] == "file" and not e["suspect"]}
+    for test, entry in zip(tests, entries, strict=True):
+        if entry["measurement"] != "shear_points" or entry["suspect"]:
+            continue
+        grid = grids.get((entry["test"], getattr(test, "ply", None)))
+        if grid is None:
+            continue
+        try:
+            noise = find_kind(test).noise(test)[0], find_kind(grid).noise(grid)[0]
+        except DrapeInputError:  # a noise that cannot be told: the diagnosis says so later
+            continue
+        found = check_shear_against_grid(test, grid, forming_case_of(test), *noise)
+        if found:
+            entry["suspect"], entry["why"] = found
 
 
 def suspect_tests(bundle, entries: list[dict[str, Any]]) -> set[str]:

@@ -12,7 +12,13 @@ them before any fit) looks at its measurement against its case and says ``(suspe
   moves the fewest axes, then whose spans are most like the tools');
 - *another part*: more than :data:`OTHER_PART_SHARE` of the flat positions lie more than a
   quarter cell outside the case's blank, or of the formed positions farther than a cell from
-  every tool at the end of the motion (a part formed on these tools lies on them);
+  every tool at the end of the motion (a part formed on these tools lies on them); or at least
+  :data:`INSIDE_COUNT` and :data:`INSIDE_SHARE` of the formed positions at a tool (within a
+  cell of its surface, or inside it) lie inside it deeper than a cell at the end of the
+  motion: a ply lies on the tools, not in them, and a net whose nodes lie on a convex tool
+  cuts into it by less than a cell (the scenario benchmark's right bundles of seed 51, formed
+  on 20 and 30 mm cells: by at most 9.4 mm); a shallower part's grid under a deeper part's
+  punch is found so;
 - *a shifted frame* (a grid: flat and formed positions of its nodes): on a symmetry plane of
   the case (x = 0 or y = 0) the tools hold the sheet's column of that plane: the grid's column
   nearest the plane in the formed positions has flat and formed coordinates that agree. When
@@ -28,6 +34,17 @@ them before any fit) looks at its measurement against its case and says ``(suspe
   when a flat position lies more than :data:`SHIFT_TOLERANCE_MM` outside the blank, and
   otherwise the blank offset, which the set-up stage sizes (``blank_offset_mm``), is
   chosen: not suspect, the ``why`` says so.
+
+Shear points and a grid of one test and one ply (:func:`check_shear_against_grid`) are two
+measurements of one ply: the shear of the grid's cells where the points lie (the angle between
+the formed images of the ply's warp and weft, each cell's own; its noise 2 × the grid's
+position noise / its spacing, in radians) and the points' shear must tell one pattern. The
+points are named another part's when they differ from the grid's cells by more than
+:data:`PATTERN_SDS` × the two noises combined (rms over the points within the grid's cells)
+*and* by more than the points vary about their mean: the grid then explains none of their
+pattern (on the scenario benchmark's right bundles of seed 51 it explains at least half of
+their variance; of the cup's shear lines under the double dome's grid, none). A grid named
+suspect by its own checks is no reference.
 
 A *registered* measurement (``register = true``, its frame fitted by the comparison:
 :func:`check_registered`) is checked only for what no rigid motion changes, its size: the
@@ -45,11 +62,16 @@ import numpy as np
 
 #: A share of a measurement's points beyond the case that makes it another part's.
 OTHER_PART_SHARE = 0.1
+#: Positions inside a tool deeper than a cell: at least this many, and this share of those at
+#: the tool (none on the scenario benchmark's right bundles of seed 51: at most 0.47 cell).
+INSIDE_COUNT, INSIDE_SHARE = 3, 0.05
 #: A flat-formed difference on a symmetry plane beyond this share of the grid spacing.
 SHIFT_OF_GRID = 0.1
 #: A shift of at least this (mm) is named; a flat position this far outside the blank is off it.
 SHIFT_TOLERANCE_MM = 1.0
 AXES = "xyz"
+#: Shear points differ from their grid by more than this many times the combined noise.
+PATTERN_SDS = 3.0
 
 
 def columns_of(test, names) -> np.ndarray | None:
@@ -102,17 +124,39 @@ def _axes(formed: np.ndarray, reach, cell: float) -> str | None:
     return f"{text}: positions of another part, or of another frame?"
 
 
-def _off_tools(case, formed: np.ndarray) -> float:
-    """The share of formed positions farther than a cell from every tool at the end."""
+def _on_tools(case, formed: np.ndarray) -> tuple[float, tuple | None]:
+    """The formed positions against the tools at the end of the motion (module docstring).
+
+    Returns:
+        The share of positions farther than a cell from every tool, and the tool most cut
+        into: ``(deep, at, depth, point, tool)`` — of the ``at`` positions within a cell of
+        that tool or inside it, ``deep`` lie inside it deeper than a cell, the deepest
+        ``depth`` mm at ``point`` — or None when no position lies deeper than a cell in a tool.
+    """
     from fenicsx_drape.forming.running.geometry import _distance
     from fenicsx_drape.forming.tools.build import build_tools
 
     tools = build_tools(case)
     end = case.duration_s
+    cell = case.blank.cell_mm
     near = np.full(len(formed), np.inf)
-    for tool in tools.values():
-        near = np.minimum(near, np.abs(_distance(tool, formed, end)))
-    return float(np.mean(near > case.blank.cell_mm))
+    cut = None
+    for spec in case.tools:
+        d = np.asarray(_distance(tools[spec.name], formed, end), dtype=float)
+        near = np.minimum(near, np.abs(d))
+        at, deep = d < cell, d < -cell
+        if deep.any() and (cut is None or deep.sum() / at.sum() > cut[0] / cut[1]):
+            k = int(np.argmin(d))
+            cut = (int(deep.sum()), int(at.sum()), float(-d[k]), formed[k], spec)
+    return float(np.mean(near > cell)), cut
+
+
+def noun_of(test) -> str:
+    """What a lab calls the measurement of ``test``: grid, shear points, scan or edge."""
+    lab = getattr(test, "lab", None)
+    name = lab.measurement if lab is not None else "file"
+    return {"file": "grid", "shear_points": "shear points", "surface": "scan",
+            "outline": "edge"}.get(name, name)
 
 
 def _spacing(test, grid: np.ndarray) -> float:
@@ -237,11 +281,20 @@ def check_positions(test, case) -> tuple[bool, str] | None:
                           f"case's blank (up to ({flat[k, 0]:.4g}, {flat[k, 1]:.4g}) mm): "
                           "another part's grid?")
     if formed is not None and len(formed):
-        share = _off_tools(case, formed)
+        share, cut = _on_tools(case, formed)
         if share > OTHER_PART_SHARE:
             return True, (f"{100 * share:.0f} % of the formed positions lie farther than a "
                           f"cell ({cell:g} mm) from every tool at the end of the motion: "
                           "another part's shape?")
+        if cut is not None and cut[0] >= max(INSIDE_COUNT, INSIDE_SHARE * cut[1]):
+            deep, at, depth, p, spec = cut
+            return True, (f"{deep} of the {at} formed positions at the {spec.role} "
+                          f"{spec.name!r} (within a cell of it, or in it) lie inside it deeper "
+                          f"than a cell ({cell:g} mm) at the end of its motion, up to "
+                          f"{depth:.3g} mm at ({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) mm: a ply "
+                          "formed on these tools lies on them, not in them (a net cuts into "
+                          "a tool by less than a cell): another part's "
+                          f"{noun_of(test)}?")
     return _shift(test, case)
 
 
@@ -251,3 +304,100 @@ def check_registered_or_positions(test, case) -> tuple[bool, str] | None:
     if lab is not None and lab.frame.register:
         return check_registered(test, case)
     return check_positions(test, case)
+
+
+def grid_cells(grid: np.ndarray, angle_deg: float) -> tuple[np.ndarray, np.ndarray,
+                                                              np.ndarray, float]:
+    """Each cell of a grid (columns i, j, x0, y0, x, y, z): its own shear and centres.
+
+    A cell's deformation is the least-squares map of its four corners' flat positions to their
+    formed ones; the ply's warp and weft (at ``angle_deg`` to x) turn with it, and its shear is
+    90° minus the angle between their images (the measurement spec's sign).
+
+    Returns:
+        Flat centres (m, 2), formed centres (m, 3), shear (m,) in degrees, and the grid's
+        spacing (median cell side, mm).
+    """
+    index = {(int(r[0]), int(r[1])): k for k, r in enumerate(grid)}
+    flat, formed = grid[:, 2:4], grid[:, 4:7]
+    c, s = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
+    fibres = np.array([[c, -s], [s, c]])  # columns: warp, weft on the flat blank
+    centres0, centres, shear, sides = [], [], [], []
+    for (i, j), a in index.items():
+        corners = [a, index.get((i + 1, j)), index.get((i, j + 1)), index.get((i + 1, j + 1))]
+        if None in corners:
+            continue
+        dX = flat[corners] - flat[corners].mean(axis=0)
+        dx = formed[corners] - formed[corners].mean(axis=0)
+        F = np.linalg.lstsq(dX, dx, rcond=None)[0].T  # (3, 2): flat to formed
+        warp, weft = (F @ fibres).T
+        cos = warp @ weft / max(np.linalg.norm(warp) * np.linalg.norm(weft), 1e-300)
+        shear.append(90.0 - np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+        centres0.append(flat[corners].mean(axis=0))
+        centres.append(formed[corners].mean(axis=0))
+        sides.append(np.ptp(flat[corners], axis=0).mean())
+    spacing = float(np.median(sides)) if sides else 0.0
+    return np.array(centres0), np.array(centres), np.array(shear), spacing
+
+
+def ply_angle_of(test, case) -> float:
+    """The warp's angle (deg) of the ply a measurement is of (the outermost when not named)."""
+    angle = float(case.blank.ply_angle_deg)
+    if case.plies:
+        ply = getattr(test, "ply", None) or len(case.plies)
+        angle += float(case.plies[ply - 1].angle_deg)
+    return angle
+
+
+def check_shear_against_grid(points, grid, case, sd_points: float, sd_grid_mm: float
+                             ) -> tuple[bool, str] | None:
+    """Shear points against the shear of their test's grid on the same ply (module docstring).
+
+    Args:
+        points: The shear points' test (``shear_deg`` at flat ``x0_mm, y0_mm`` or formed
+            ``x_mm, y_mm, z_mm`` positions).
+        grid: The same forming test's grid of the same ply.
+        case: Their forming case.
+        sd_points: The points' shear noise (degrees).
+        sd_grid_mm: The grid's position noise (mm).
+
+    Returns:
+        ``(True, why)`` when the points cannot be of the ply the grid measured, else None
+        (also when the two cannot be set side by side: magnitudes only, formed positions in
+        a registered frame, too few points within the grid's cells).
+    """
+    lab = points.lab
+    table = columns_of(grid, ("i", "j", "x0_mm", "y0_mm", "x_mm", "y_mm", "z_mm"))
+    shear = points.columns.get("shear_deg")
+    if table is None or shear is None or lab.shear_magnitude:
+        return None
+    if not lab.flat and any(getattr(t.lab, "frame", None) is not None and t.lab.frame.register
+                            for t in (points, grid) if t.lab is not None):
+        return None  # formed positions in a frame the comparison fits: not set side by side
+    where = columns_of(points, ("x0_mm", "y0_mm") if lab.flat else ("x_mm", "y_mm", "z_mm"))
+    if where is None:
+        return None
+    centres0, centres, cell_shear, spacing = grid_cells(table, ply_angle_of(points, case))
+    if len(cell_shear) < 2 or not spacing > 0:
+        return None
+    centre = centres0 if lab.flat else centres
+    distance = np.linalg.norm(where[:, None, :] - centre[None, :, :], axis=2)
+    inside = distance.min(axis=1) <= 0.75 * spacing  # within the grid's cells
+    if inside.sum() < 5:
+        return None
+    measured = np.asarray(shear, dtype=float)[inside]
+    of_grid = cell_shear[distance[inside].argmin(axis=1)]
+    sd_grid = np.degrees(2.0 * sd_grid_mm / spacing)
+    apart = float(np.sqrt(np.mean((measured - of_grid) ** 2)))
+    spread = float(np.std(measured))
+    allowed = PATTERN_SDS * float(np.hypot(sd_points, sd_grid))
+    if apart > allowed and apart > spread:
+        return True, (f"the shear points differ from the shear of the test's own grid "
+                      f"(each grid cell's angle between the ply's warp and weft, at "
+                      f"{int(inside.sum())} points within its cells) by {apart:.3g}° rms, "
+                      f"more than {PATTERN_SDS:g} × their combined noise ({allowed:.3g}°) "
+                      f"and more than the points vary ({spread:.3g}° rms about their mean): "
+                      "the grid explains none of their pattern, and one ply has one shear: "
+                      "another part's shear points?")
+    return None
+

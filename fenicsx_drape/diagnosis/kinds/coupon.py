@@ -230,8 +230,32 @@ def plot_curves(comparisons: Mapping[str, Comparison], test: Test, path: Path,
     return save_figure(fig, path)
 
 
+class ForceRows:
+    """What kinds whose rows are measured forces share: the unit, the values, their sd.
+
+    A kind using it defines ``noise(test) -> (sd_N, source)``.
+    """
+
+    def unit(self, test: Test) -> str:
+        """Newtons."""
+        return "N"
+
+    def measured(self, test: Test) -> np.ndarray:
+        """The measured force per row (N)."""
+        return np.asarray(test.force_N, dtype=float)
+
+    def value_sd(self, test: Test) -> np.ndarray:
+        """Each row's force sd (N): its ``force_sd_N``, else the test's noise."""
+        sd = test.column("force_sd_N")
+        return np.full(test.n_rows, self.noise(test)[0]) if sd is None else np.asarray(sd)
+
+    def sd_column(self, test: Test) -> str:
+        """``force_sd_N``."""
+        return "force_sd_N"
+
+
 @dataclasses.dataclass(frozen=True)
-class CouponKind:
+class CouponKind(ForceRows):
     """A coupon kind (:class:`~fenicsx_drape.diagnosis.kinds.base.Kind`): forces per row."""
 
     name: str  # the bundle's kind of its tests
@@ -251,26 +275,9 @@ class CouponKind:
         """Whether ``test`` is of this kind."""
         return test.kind == self.name
 
-    def unit(self, test: Test) -> str:
-        """Newtons."""
-        return "N"
-
-    def measured(self, test: Test) -> np.ndarray:
-        """The measured force per row (N)."""
-        return test.force_N
-
     def noise(self, test: Test) -> tuple[float, str]:
         """The force noise (N) and its source (:func:`coupon_noise`)."""
         return coupon_noise(test)
-
-    def value_sd(self, test: Test) -> np.ndarray:
-        """Each row's force sd (N): its ``force_sd_N``, else the test's noise."""
-        sd = test.column("force_sd_N")
-        return np.full(test.n_rows, self.noise(test)[0]) if sd is None else np.asarray(sd)
-
-    def sd_column(self, test: Test) -> str:
-        """``force_sd_N``."""
-        return "force_sd_N"
 
     def simulate(self, test: Test, model: Model) -> np.ndarray:
         """The force per row (N) by the unit-cell solutions (:func:`coupon_simulate`)."""

@@ -50,7 +50,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fenicsx_drape.diagnosis.kinds.base import FitHook, Region
-from fenicsx_drape.diagnosis.kinds.coupon import _loading_phases, coupon_noise, plot_curves
+from fenicsx_drape.diagnosis.kinds.coupon import (
+    ForceRows,
+    _loading_phases,
+    coupon_noise,
+    plot_curves,
+)
 from fenicsx_drape.errors import InputFileError
 from fenicsx_drape.forming.case.spec import MODEL_INTERPLY
 
@@ -205,7 +210,7 @@ def fit_interply_tests(bundle: Bundle, model: Model, *,
 
 
 @dataclasses.dataclass(frozen=True)
-class InterplyFrictionKind:
+class InterplyFrictionKind(ForceRows):
     """Inter-ply friction tests (:class:`~fenicsx_drape.diagnosis.kinds.base.Kind`)."""
 
     name: str = NAME
@@ -217,26 +222,9 @@ class InterplyFrictionKind:
         """Whether ``test`` is an inter-ply friction test."""
         return test.kind == NAME
 
-    def unit(self, test: Test) -> str:
-        """Newtons."""
-        return "N"
-
-    def measured(self, test: Test) -> np.ndarray:
-        """The measured pulling force per row (N)."""
-        return np.asarray(test.force_N, dtype=float)
-
     def noise(self, test: Test) -> tuple[float, str]:
         """The force noise (N) and its source, as a coupon's (module doc)."""
         return coupon_noise(checked(test))
-
-    def value_sd(self, test: Test) -> np.ndarray:
-        """Each row's force sd (N): its ``force_sd_N``, else the test's noise."""
-        sd = test.column("force_sd_N")
-        return np.full(test.n_rows, self.noise(test)[0]) if sd is None else np.asarray(sd)
-
-    def sd_column(self, test: Test) -> str:
-        """``force_sd_N``."""
-        return "force_sd_N"
 
     def simulate(self, test: Test, model: Model) -> np.ndarray:
         """The pulling force per row (N) by the model's inter-ply law (:func:`simulate`)."""
