@@ -13,7 +13,8 @@ plies (the default). ``--solver`` chooses the stack's linear solve
 ``plies``, GMRES preconditioned by each ply's factor and the stack moving as one,
 fe/stack_solver.py; ``--lag`` keeps its factors over that many Newton iterations).
 ``--orderings`` factors each run's last Jacobian again with each of MUMPS's orderings and
-prints its flops and factor size.
+with PETSc's own LU and its orderings, and prints the flops (MUMPS), the factor's entries and
+the CPU time of each.
 
 Every line: plies, nodes, wall and CPU time and their ratios to the single ply's (CPU is the
 steadier figure on a shared machine), steps, cut-backs, Newton iterations, Krylov iterations,
@@ -44,7 +45,8 @@ parser.add_argument("--lag", type=int, default=None,
                     help="keep the preconditioner's factors over LAG Newton iterations "
                          "(-snes_lag_preconditioner; with --solver plies)")
 parser.add_argument("--orderings", action="store_true",
-                    help="factor each stack's last Jacobian again with MUMPS's orderings")
+                    help="factor each stack's last Jacobian again with MUMPS's orderings "
+                         "and PETSc's")
 args = parser.parse_args()
 
 GAP = 1.25
@@ -55,24 +57,39 @@ ORDERINGS = {"AMD": 0, "AMF": 2, "PORD": 4, "QAMD": 6}
 """MUMPS's orderings (ICNTL(7)) in Debian's build (METIS and SCOTCH fall back to AMF)."""
 
 
+PETSC_ORDERINGS = ("nd", "rcm", "qmd")
+"""PETSc's own LU with its orderings (nested dissection, reverse Cuthill-McKee, quotient
+minimum degree): the factor's entries and the CPU time of one factorisation."""
+
+
 def ordering_flops(A) -> str:
-    """MUMPS's flops (RINFOG(3)) and its factor's entries (INFOG(29)) for each ordering."""
+    """MUMPS's flops (RINFOG(3)) and its factor's entries (INFOG(29)) for each ordering, and
+    PETSc's own LU's factor entries and CPU time for each of its orderings."""
     from petsc4py import PETSc
 
     out = []
-    for name, code in ORDERINGS.items():
+    for name, code in [*ORDERINGS.items(), *((o, None) for o in PETSC_ORDERINGS)]:
         ksp = PETSc.KSP().create(A.getComm())
         ksp.setOperators(A)
         ksp.setType("preonly")
         pc = ksp.getPC()
         pc.setType("lu")
-        pc.setFactorSolverType("mumps")
+        pc.setFactorSolverType("mumps" if code is not None else "petsc")
+        if code is None:
+            pc.setFactorOrdering(name)
         pc.setFactorSetUpSolverType()
         F = pc.getFactorMatrix()
-        F.setMumpsIcntl(7, code)
+        if code is not None:
+            F.setMumpsIcntl(7, code)
+        cpu = time.process_time()
         ksp.setUp()
-        out.append(f"{name} {F.getMumpsRinfog(3) / 1e6:.1f} Mflop, "
-                   f"{F.getMumpsInfog(29) / 1e3:.0f} k entries")
+        cpu = time.process_time() - cpu
+        if code is not None:
+            out.append(f"{name} {F.getMumpsRinfog(3) / 1e6:.1f} Mflop, "
+                       f"{F.getMumpsInfog(29) / 1e3:.0f} k entries, {1e3 * cpu:.0f} ms")
+        else:
+            entries = pc.getFactorMatrix().getInfo()["nz_used"]
+            out.append(f"PETSc {name} {entries / 1e3:.0f} k entries, {1e3 * cpu:.0f} ms")
         ksp.destroy()
     return "; ".join(out)
 

@@ -139,7 +139,9 @@ def main() -> None:
     SD_MM = args.sd_mm
     set_trusted(True)  # the bundles bring the project's own double_dome.py
     paper = default_model()
-    stated = load_case(CASE, cell_mm=args.cell_mm, step_mm=args.step_mm)
+    # The lab states the holder's μ (the truth's): where a case does not, the diagnosis's
+    # baseline fits it and the holding force is no set-up candidate (μF, eq. 1).
+    stated = load_case(CASE, cell_mm=args.cell_mm, step_mm=args.step_mm, mu=0.3)
     results = {"drift": drift(stated, paper)} if args.drift else {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, (setup, mu_tool) in BUNDLES.items():

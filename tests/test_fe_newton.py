@@ -309,3 +309,49 @@ def test_a_full_step_that_lowers_the_residual_is_taken():
     np.testing.assert_allclose(ratios, (2 / 3) ** p, rtol=1e-9)  # the full step, every time
     _, seen = run("l2")  # PETSc's own: its parabola's step, well short of the full one
     assert seen[1].residual_norm < 0.5 * seen[0].residual_norm < (2 / 3) ** p
+
+
+@pytest.mark.skip_in_parallel  # a sequential matrix
+def test_the_factors_options_reach_a_factor_made_again_as_the_pattern_grows():
+    """A stack's Jacobian gains entries as its pairs follow the plies, and PETSc then makes
+    the factor again: a ``mat_mumps_*`` option must still be there, and leave with its solver."""
+    import gc
+
+    from petsc4py import PETSc
+
+    from fenicsx_drape.fe.newton import Newton
+
+    coupled = [False]
+    K = np.array([[2.0, 1.0], [1.0, 3.0]])
+    b = np.array([1.0, 2.0])
+    A = PETSc.Mat().createAIJ((2, 2), nnz=2, comm=MPI.COMM_SELF)
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    A.setUp()
+
+    def stiffness():
+        return K if coupled[0] else np.diag(np.diag(K))
+
+    def residual(x, F):
+        F.setValues([0, 1], stiffness() @ x.getArray(readonly=True) - b)
+        F.assemble()
+        return True
+
+    def jacobian(x, local):
+        for i, j in zip(*np.nonzero(stiffness())):
+            A.setValue(i, j, stiffness()[i, j])
+        A.assemble()
+
+    x, db, key = PETSc.Vec().createSeq(2), PETSc.Options(), "t_kept_mat_mumps_icntl_14"
+    newton = Newton(residual, jacobian, A, x.duplicate(), prefix="t_kept_", atol=1e-12,
+                    rtol=0.0, max_it=5, options={"mat_mumps_icntl_14": 50})
+    for grown in (False, True):
+        coupled[0] = grown
+        x.set(0.0)
+        assert newton.solve(x).converged
+        newton.release_options()
+        np.testing.assert_allclose(x.getArray(), np.linalg.solve(stiffness(), b), rtol=1e-12)
+        assert newton.snes.getKSP().getPC().getFactorMatrix().getMumpsIcntl(14) == 50
+        assert db.hasName(key) and not db.hasName("t_kept_snes_atol")
+    del newton
+    gc.collect()
+    assert not db.hasName(key)

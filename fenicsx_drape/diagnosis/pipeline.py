@@ -14,8 +14,9 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
    the forming tests) and compared with every test (:mod:`~fenicsx_drape.diagnosis.
    compare`); the rows beyond ``OUTLIER_SD`` robust sd are left out and it is refitted.
 3. **Set-up before physics** (:func:`~fenicsx_drape.diagnosis.setup_stage.setup_stage` →
-   ``SetupResult``): the set-up as stated against the set-up fitted; the best, when one is
-   significant, is applied and the baseline refitted at it (:func:`at_setup`).
+   ``SetupResult``): the set-up as stated (the baseline as fitted: one model, one error)
+   against the set-up fitted; the best, when one is significant, is applied and the
+   baseline refitted at it (:func:`at_setup`).
 4. **Held-out error and resolution** (:func:`heldout_stage` → ``HeldOut``,
    :func:`resolution_stage` → ``Resolution``): every row predicted by the fold that held it
    out; each forming measurement the baseline misses compared with the same model on half
@@ -37,7 +38,8 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
 7. **The best candidate, looked at again** (:func:`setup_with_effect_stage`,
    :func:`setup_needed_stage`, :func:`net_check_stage`): a significant best with no set-up
    error named: the set-up stage again with it in (a missing effect can hide a set-up
-   error); with one named: the best refitted at the stated set-up, and the set-up error
+   error); with one named: the best refitted at the stated set-up (every candidate, when
+   a holding force or μ was named and no effect is significant), and the set-up error
    withdrawn when it adds no held-out evidence (an effect can stand behind a set-up error);
    above the noise: is what it leaves its net's own error? Where the case's net can judge
    none of the forming measurements, the candidates that gain on it are formed on the finer
@@ -58,7 +60,7 @@ import dataclasses
 import functools
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -154,8 +156,11 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     data = prepare_tests(declare_noise(checked.bundle, model.noise))
     base = baseline_stage(data, model, say)
     parameters = SETUP_PARAMETERS if setup is None and candidates is None else setup
-    stage = setup_stage(base.data.bundle, model, parameters, setup_rules(), say)
+    # The set-up as stated is the baseline: the same fitted values, one error.
+    stage = setup_stage(base.data.bundle, model, parameters, setup_rules(), say,
+                        baseline=base.model)
     stated, base = base, at_setup(base, stage, model, say)
+    stage, base = friction_round(stage, stated, base, model, say)
     # The held-out error and the net's own error are independent: their runs together.
     held, resolution = together([functools.partial(heldout_stage, base),
                                  functools.partial(resolution_stage, base)], say)
@@ -163,8 +168,9 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
     effects = effects_stage(names, model, base, held, stage, resolution, say)
     groups = groups_stage(base, say)
     stage, best = setup_with_effect_stage(stage, effects.best, base, say)
-    stage, best, base, held = setup_needed_stage(stage, best, stated, base, held, resolution,
-                                                 model, say)
+    looked = setup_needed_stage(stage, best, stated, base, held, resolution, model, say,
+                                effects=effects)
+    stage, best, base, held, resolution, effects = looked
     best = net_check_stage(best, say)
     effects, best = finer_net_stage(effects, best, base, held, resolution, say)
     decision = decide(effects, best, stage, checked)
@@ -261,6 +267,65 @@ def at_setup(base: Baseline, stage: SetupResult | None, model: Model,
     say(f"  normalised error {normalised_error(compared):.3g}")
     return dataclasses.replace(base, data=data, model=fitted, compared=compared,
                                optimiser=optimiser_record(coupons), coupons=coupons)
+
+
+def friction_round(stage: SetupResult | None, stated: Baseline, base: Baseline, model: Model,
+                   say: Progress) -> tuple[SetupResult | None, Baseline]:
+    """The set-up error fitted again at the friction refitted with it, and at the given one.
+
+    The set-up candidates are fitted at the stated set-up's friction: the baseline's, fitted
+    where no case states it, with the set-up as stated, so that friction may have taken up
+    part of the set-up's error, and the two can stay where they trade off (a ply laid at 4°
+    on the double dome: μ fitted at 0° to 0.333 for the truth's 0.3, the ply then fitted at
+    4.21° ± 1.43°, and μ refitted at 4.21° stays at 0.333). The set-up is fitted again
+    (:func:`~fenicsx_drape.diagnosis.setup_fit.refit_setup`) at the friction the baseline
+    refitted with it (when it moved) and at the model's given friction, the baseline
+    refitted at each (:func:`at_setup`); the one whose baseline is nearest the data is kept
+    when it is nearer than the first. The set-up entry's ``fitted`` and ``error_after`` are
+    then its value and that baseline's error on the forming tests, and
+    ``fitted_at_stated_friction`` and ``error_after_at_stated_friction`` the stage's (its sd,
+    held-out error and evidence are the stage's). Returns the set-up and the baseline (each
+    itself when nothing came nearer).
+    """
+    from fenicsx_drape.diagnosis.kinds.forming import SCALE, XTOL
+
+    if stage is None or stage.best is None or not stage.fitted or base is stated:
+        return stage, base
+    before = stage.stated_model.parameters
+
+    def differs(values) -> bool:
+        return any(abs(float(values[n]) - float(before[n])) > XTOL * SCALE.get(n, 1.0)
+                   for n in stage.fitted)
+
+    frictions = [{n: float(m.parameters[n]) for n in stage.fitted} for m in (base.model, model)]
+    frictions = [f for i, f in enumerate(frictions) if differs(f) and f not in frictions[:i]]
+    name, p0 = stage.best.parameter, np.asarray(stage.best.p, dtype=float)
+    first = stage.entries[0]
+    kept = (stage, base)
+    for friction in frictions:
+        say(f"{name} fitted again at " + ", ".join(f"{n} {v:.4g}" for n, v in friction.items())
+            + " (the stage's: " + ", ".join(f"{n} {float(before[n]):.4g}"
+                                               for n in friction) + ")")
+        p = refit_setup(stage.bundle, name, p0, stage.stated_model.with_parameters(**friction),
+                        say)
+        if np.allclose(p, p0):
+            continue
+        entry = {**first, "fitted": fitted_value(stage.bundle, name, p, stage.stated_model),
+                 "fitted_at_stated_friction": first["fitted"]}
+        again = dataclasses.replace(
+            stage, best=dataclasses.replace(stage.best, p=tuple(float(v) for v in p)),
+            corrected=corrected(stage.bundle, name, p, stage.stated_model),
+            entries=(entry, *stage.entries[1:]))
+        at = at_setup(stated, again, model, say)
+        say(f"  {name} {entry['fitted']}: baseline {at.normalised:.3g} (with "
+            f"{first['fitted']}: {kept[1].normalised:.3g})")
+        if at.normalised < kept[1].normalised:
+            # its error is the baseline's there, on the forming tests (one model, one error)
+            formed = [c for c in at.compared if c.id in first["error_after"]["per_test"]]
+            entry["error_after"] = error_record(formed) if formed else first["error_after"]
+            entry["error_after_at_stated_friction"] = first["error_after"]["normalised"]
+            kept = (again, at)
+    return kept
 
 
 # --------------------------------------------------------------------------------------------
@@ -438,7 +503,8 @@ def setup_with_effect_stage(stage: SetupResult | None, best: Candidate | None, b
         return stage, best  # (at the noise at the stated set-up: nothing hidden is left)
     say(f"set-up stage again, with {best.effect} in")
     with_effect = stage.given_model.with_effects(*best.effects)
-    again = setup_stage(base.data.bundle, with_effect, stage.parameters, setup_rules(), say)
+    again = setup_stage(base.data.bundle, with_effect, stage.parameters, setup_rules(), say,
+                        fitted=stage.fitted, label=f"the model as given with {best.effect}")
     if again is None or again.setup_error is None:
         return stage, best
     again = dataclasses.replace(
@@ -466,39 +532,82 @@ def setup_with_effect_stage(stage: SetupResult | None, best: Candidate | None, b
         parameters={p: float(refit.parameters[p]) for p in best.parameters})
 
 
-def setup_needed_stage(stage: SetupResult | None, best: Candidate | None, stated: Baseline,
-                       base: Baseline, held: HeldOut, resolution: Resolution, model: Model,
-                       say: Progress
-                       ) -> tuple[SetupResult | None, Candidate | None, Baseline, HeldOut]:
-    """Is the set-up error still needed once the best effect is in?
+class Looked(NamedTuple):
+    """What :func:`setup_needed_stage` leaves: each value new when the set-up is withdrawn."""
 
-    An effect and a set-up parameter can act alike (a tool friction and a larger holding
-    force both hold the sheet back), so a set-up error fitted before physics may only stand
-    in for the effect, and refitting it with the effect can stay in the valley they share.
-    The best effect is refitted at the *stated* set-up, from the stated baseline, and judged
-    on the same held-out rows: when the set-up fitted with it predicts them less than
-    ``EVIDENCE_THRESHOLD`` times better, the set-up error is withdrawn (the effect, not the
-    set-up, was missing) and the effect at the stated set-up is the best. Returns the set-up,
-    the best candidate, the baseline and its held-out error, each new when withdrawn.
+    stage: SetupResult | None  # the set-up (its error withdrawn, or as it was)
+    best: Candidate | None  # the best candidate (at the stated set-up, when withdrawn)
+    base: Baseline  # the baseline the candidates are judged against
+    held: HeldOut  # its held-out error
+    resolution: Resolution | None  # its net's own error
+    effects: Effects | None  # the candidates, ranked
+
+
+# Set-up parameters that any missing restraint can stand in for (eq. 1: the holder acts
+# through μF only): with one of them named, every candidate effect is tried at the stated
+# set-up too, not only a significant best (:func:`setup_needed_stage`).
+RESTRAINTS = ("holder_force_N", "mu")
+
+
+def setup_needed_stage(stage: SetupResult | None, best: Candidate | None, stated: Baseline,
+                       base: Baseline, held: HeldOut, resolution: Resolution | None,
+                       model: Model, say: Progress, effects: Effects | None = None) -> Looked:
+    """Is the set-up error still needed once an effect is in?
+
+    An effect and a set-up parameter can act alike (a tool friction, or a viscosity that grows
+    with strain, and a larger holding force all hold the sheet back), so a set-up error
+    fitted before physics may only stand in for the effect, and refitting it with the effect
+    can stay in the valley they share (the effect then gains nothing there and is not named).
+    The effects are refitted at the *stated* set-up, from the stated baseline, and judged on
+    the same held-out rows: the significant best when there is one; with a holding force or
+    μ named (:data:`RESTRAINTS`) and no significant best, every ranked candidate (one the
+    set-up took the place of). When the best of them is significant against the stated
+    baseline and the set-up fitted (alone or with an effect) predicts the held-out rows less
+    than ``EVIDENCE_THRESHOLD`` times better, the set-up error is withdrawn (the effect, not
+    the set-up, was missing): the effects at the stated set-up are the ones ranked, judged
+    against the stated baseline and its net. Returns :class:`Looked`.
     """
-    if (best is None or not best.significant or not stage or stage.setup_error is None
-            or stage.found_with_effect or stated is base):
-        return stage, best, base, held
-    say(f"candidate {best.effect} at the stated set-up: is {stage.setup_error} needed?")
+    same = Looked(stage, best, base, held, resolution, effects)
+    if not stage or stage.setup_error is None or stage.found_with_effect or stated is base:
+        return same
+    significant = best is not None and best.significant
+    if significant:
+        names = [best.effects[-1]]
+    elif stage.setup_error in RESTRAINTS and effects is not None:
+        names = [c.effects[-1] for c in effects.ranked]
+    else:
+        names = []
+    if not names:
+        return same
+    say(f"{' and '.join(names)} at the stated set-up: is {stage.setup_error} needed?")
     held_stated = heldout_stage(stated, say)
-    alone = effect_stage(best.effects[-1], model, stated, held_stated, None, resolution, say)
-    if not isinstance(alone, Candidate) or not alone.significant:
-        return stage, best, base, held
-    gain = alone.heldout_normalised / max(best.heldout_normalised, 1e-300)
-    say(f"  held-out {alone.heldout_normalised:.3g} at the stated set-up, "
-        f"{best.heldout_normalised:.3g} with {stage.setup_error} fitted: evidence {gain:.3g}")
+    net = resolution
+    if stage.resolution is not None:  # the stated set-up's net: the stage checked it
+        net = Resolution(stage.resolution, frozenset(explained(stage.resolution)))
+    tried = together([functools.partial(effect_stage, name, model, stated, held_stated, None,
+                                        net) for name in names], say)
+    ranked = rank([c for c in tried if isinstance(c, Candidate)])
+    if not ranked or not ranked[0].significant:
+        return same
+    alone = ranked[0]
+    # What the set-up fitted predicts at best: with the best effect, or alone and with any.
+    fitted = (best.heldout_normalised if significant else
+              min([held.normalised, *(c.heldout_normalised for c in effects.ranked)]))
+    gain = alone.heldout_normalised / max(fitted, 1e-300)
+    say(f"  held-out {alone.heldout_normalised:.3g} with {alone.effect} at the stated set-up, "
+        f"{fitted:.3g} with {stage.setup_error} fitted: evidence {gain:.3g}")
     if gain >= EVIDENCE_THRESHOLD:
-        return stage, best, base, held
-    entry = {**stage.entries[0], "withdrawn_for": best.effect,
+        return same
+    entry = {**stage.entries[0], "withdrawn_for": alone.effect,
              "evidence_with_effect": float(gain)}
     stage = dataclasses.replace(stage, setup_error=None, withdrawn=stage.setup_error,
                                 entries=(entry, *stage.entries[1:]))
-    return stage, alone, stated, held_stated
+    if effects is not None and significant:  # the best replaced by itself at the stated set-up
+        effects = dataclasses.replace(effects, ranked=(alone, *effects.ranked[1:]))
+    elif effects is not None:  # every candidate tried at the stated set-up
+        untested = [u for u in tried if not isinstance(u, Candidate)]
+        effects = Effects(tuple(ranked), (*effects.untestable, *untested))
+    return Looked(stage, alone, stated, held_stated, net, effects)
 
 
 def net_check_stage(best: Candidate | None, say: Progress) -> Candidate | None:
@@ -520,7 +629,7 @@ def net_check_stage(best: Candidate | None, say: Progress) -> Candidate | None:
 
 
 def finer_net_stage(effects: Effects, best: Candidate | None, base: Baseline, held: HeldOut,
-                    resolution: Resolution, say: Progress
+                    resolution: Resolution | None, say: Progress
                     ) -> tuple[Effects, Candidate | None]:
     """The candidates on the finer net, where the case's net can judge none of what they gain.
 
@@ -536,7 +645,7 @@ def finer_net_stage(effects: Effects, best: Candidate | None, base: Baseline, he
     """
     from fenicsx_drape.runs import resolution as cells
 
-    entries = {e["measurement"]: e for e in resolution.entries
+    entries = {e["measurement"]: e for e in (resolution.entries if resolution else ())
                if e["explains"] and e.get("fine_residual") is not None}
     forming = [c.id for c in base.compared if is_formed_id(base, c.id)]
     if (not entries or not forming or set(forming) - set(entries)

@@ -138,6 +138,9 @@ class SetupResult:
     # the noise it judged with, where widened by the net's own error: ``measurements`` (the
     # net's error of each), ``normalised`` (the stated set-up's error on it); None: as stated
     widened: Entry | None = None
+    # the forming parameters the stated model's fit moved (a diagnosis's baseline: the
+    # holder's μ where no case states it); the set-up parameters they take up are untestable
+    fitted: tuple[str, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)

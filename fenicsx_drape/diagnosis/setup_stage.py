@@ -4,8 +4,12 @@ When a formed part disagrees with the model, its set-up is the first suspect. Be
 physics effect is tried, :func:`setup_stage` fits each set-up parameter
 (:mod:`~fenicsx_drape.diagnosis.setup_parameters`: the ply's angle, the blank's offset, the
 holding force, the holder's μ, the punch's offset) to the forming tests of a bundle, as a
-candidate of its own. The model's material and friction stay as stated (as given, or as the
-coupons fitted them): the reference is the **stated set-up**, fitted to nothing.
+candidate of its own. The reference is the **stated set-up**: in a diagnosis, the baseline
+as fitted (its material as given or fitted to the coupons, the friction no case states
+fitted to the forming tests), so that the stated model has one error in a run, the
+baseline's, on one noise; the stage fits nothing more to it. A set-up parameter that fit
+takes up is untestable (:func:`taken_up`: the holding force and μ, where the baseline fits
+μ). Alone (:func:`fit_setup`), the model as given.
 
 Per candidate, the same definitions as an effect's (``diagnose``'s module doc): 1. the scan
 and whether it is testable, 2. the fit, 3. the held-out error
@@ -38,8 +42,7 @@ node_folds`), and
    - ``evidence_stated`` (the stated set-up's held-out error / the candidate's, on the noise
      as stated, against the stated set-up on the case's own model and on the model the
      candidate needs) is ``>= EVIDENCE_THRESHOLD``: the data as measured, at their own noise,
-     are predicted better on held-out nodes (a holding force of 49 ± 44 N for 100 N beside a
-     missing tow buckling, 1.02, is not);
+     are predicted better on held-out nodes;
    - ``evidence`` and ``evidence_on_model`` are above 1: on the noise widened by the net's
      own error, where the finer net shows a residual to be that error, the gain does not
      come from those measurements alone (the measurements the net can judge improve too).
@@ -201,17 +204,23 @@ def stated_evidence(c: SetupFit, noise: dict[str, float] | None, stated: float |
 
 def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
               parameters: Sequence[str] | None = None,
-              progress: Progress | None = None) -> SetupResult:
+              progress: Progress | None = None, fitted: Sequence[str] = (),
+              label: str = "") -> SetupResult:
     """Try every set-up candidate on the bundle's forming tests (module doc).
 
     Args:
         bundle: The measurements (only the forming tests count here).
-        model: The model as stated: material as given or coupon-fitted, friction as given.
+        model: The model as stated: material as given or coupon-fitted, friction as given
+            (in a diagnosis, the baseline as fitted: :func:`setup_stage`).
         rules: The diagnosis's fixed rules (:func:`~fenicsx_drape.diagnosis.decision.
             setup_rules`).
         parameters: The set-up parameters to try (default :data:`~fenicsx_drape.diagnosis.
             setup_parameters.SETUP_PARAMETERS`).
         progress: Called with a line of text per stage.
+        fitted: The forming parameters ``model``'s fit moved (a diagnosis's baseline: the
+            holder's μ where no case states it); a set-up parameter they take up is
+            untestable (:func:`taken_up`).
+        label: What the stated set-up is, in the console line (e.g. "the baseline").
 
     Returns:
         The candidates' entries ranked, the set-up error (or None), the untestable ones, the
@@ -239,7 +248,8 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
     # The candidates are independent (but μ after the force: it is tied to it, eq. 1): tried
     # together, their runs formed in common batches; the outcomes taken in order.
     tied = "mu" in names and "holder_force_N" in names[:names.index("mu")]
-    own = [n for n in names if not (n == "mu" and tied)]
+    fitted_away = taken_up(names, tests, fitted)
+    own = [n for n in names if not (n == "mu" and tied) and n not in fitted_away]
     resolution = None
     stated_noise = {c.id: c.noise for c in base_cmp}  # each test's noise as stated
     net_error: dict[str, float] = {}  # the net's own error, where it widens the noise
@@ -269,8 +279,8 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
             base_cmp = stated_comparisons(tests, model)
     base_ho = normalised_error(base_cmp)  # nothing is fitted: held-out = the error
     stated_error = restated_error(error_record(base_cmp), stated_noise)
-    say(f"set-up as stated: normalised error {stated_error['normalised']:.3g} on "
-        f"{len(tests)} forming test(s)" + (
+    say(f"set-up as stated{f' ({label})' if label else ''}: normalised error "
+        f"{stated_error['normalised']:.3g} on {len(tests)} forming test(s)" + (
             f" ({base_ho:.3g} with the noise of {', '.join(sorted(net_error))} widened by "
             "the net's own error, as the set-up stage judges)" if net_error else ""))
     rule = (f"significant when evidence (stated held-out / candidate held-out, on "
@@ -293,6 +303,10 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
     tried: list[tuple[dict[str, Any], SetupFit]] = []
     untestable: list[dict[str, Any]] = []
     for name in names:
+        if name in fitted_away:
+            untestable.append({"effect": name, "setup": True, "reason": fitted_away[name]})
+            say(f"set-up candidate {name}: untestable ({fitted_away[name]})")
+            continue
         if name in outcomes:
             entry, c = outcomes[name]
             if c is None:
@@ -340,7 +354,28 @@ def fit_setup(bundle: Bundle, model: Model, rules: Rules, *,
                    untestable=tuple(untestable), stated_error=stated_error,
                    stated_heldout_normalised=stated_error["normalised"], scheme=NODE_SCHEME,
                    rule=rule, resolution=resolution, model_note=note, best=best,
-                   widened=widening)
+                   widened=widening, fitted=tuple(fitted))
+
+
+def taken_up(names: Sequence[str], tests: Sequence[Test], fitted: Sequence[str]
+             ) -> dict[str, str]:
+    """The set-up parameters the stated model's own fit takes up, with the reason.
+
+    The holding force and the holder's μ act on the part only through μF (eq. 1). Where no
+    forming test's case states μ, a diagnosis's baseline fits it (``fitted``), so the
+    stated set-up already sits at the best μF: a factor on the force, or μ again, would
+    only repeat that fit (fitted before physics, it would take up whatever restraint the
+    model misses, as the baseline's μ may).
+    """
+    from fenicsx_drape.diagnosis.kinds.forming import holder_mu_free
+
+    held = [t for t in tests if forming_case_of(t).holder is not None]
+    if "mu" not in fitted or not held or not all(holder_mu_free(t) for t in held):
+        return {}
+    why = ("the holder's μ is not stated in the case: the baseline fits it, and the "
+           "holding force acts through μF only (eq. 1), so the stated set-up is at its best "
+           "μF already")
+    return {n: why for n in names if n in ("holder_force_N", "mu")}
 
 
 def restated_error(record: dict[str, Any], noise: dict[str, float]) -> dict[str, Any]:
@@ -424,26 +459,41 @@ def widened(test: Test, extra: float) -> Test:
 
 
 def setup_stage(bundle: Bundle, model: Model, parameters: Sequence[str] | None, rules: Rules,
-                progress: Progress | None = None) -> SetupResult | None:
+                progress: Progress | None = None, *, baseline: Model | None = None,
+                fitted: Sequence[str] | None = None, label: str = ""
+                ) -> SetupResult | None:
     """The diagnosis's set-up stage: the candidates, and the bundle with the best applied.
 
-    The model is taken as stated: its material fitted to the bundle's coupon tests (if any),
-    its friction as given. Returns None when nothing is to be tried (no parameters, or no
+    The set-up as stated is one model with one error: given ``baseline`` (the diagnosis's
+    baseline, fitted to ``bundle``), that model as fitted, the same nuisance values (the
+    material fitted to the coupons, the friction the cases do not state fitted to the
+    forming tests), so that the set-up as stated is the baseline, its error the baseline's;
+    without it, ``model`` with its material fitted to the bundle's coupon tests (if any), its
+    friction as given. ``fitted``: the forming parameters that model's fit moved (default:
+    the baseline's, :func:`~fenicsx_drape.diagnosis.kinds.forming.free_parameters`; none
+    without a baseline). Returns None when nothing is to be tried (no parameters, or no
     forming test); else the stage's result, whose ``corrected`` bundle has the chosen set-up
     applied (the bundle itself when none is significant).
     """
     from fenicsx_drape.diagnosis.comparison import fit_bundle
+    from fenicsx_drape.diagnosis.kinds.forming import free_parameters
 
     if not parameters or not any(is_formed(t) for t in bundle.tests):
         return None
     say = progress or (lambda line: None)
     stated_model = model
     coupons = tuple(t for t in bundle.tests if not is_formed(t))
-    if coupons:
+    if baseline is not None:
+        stated_model = baseline
+        if fitted is None:
+            fitted = free_parameters(baseline, forming_tests(bundle))
+        label = label or "the baseline"
+    elif coupons:
         say("set-up: the material fitted to the coupon tests first")
         stated_model = fit_bundle(dataclasses.replace(bundle, tests=coupons), model,
                                   max_iterations=rules.iterations, from_features=True)
-    stage = fit_setup(bundle, stated_model, rules, parameters=parameters, progress=say)
+    stage = fit_setup(bundle, stated_model, rules, parameters=parameters, progress=say,
+                      fitted=tuple(fitted or ()), label=label)
     stage = dataclasses.replace(stage, given_model=model, parameters=tuple(parameters))
     if stage.best is None:
         return stage

@@ -37,6 +37,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import shlex
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 
 from petsc4py import PETSc
@@ -48,6 +49,20 @@ LINE_SEARCHES = ("full-l2", "l2", "bt", "basic", "cp", "nleqerr")
 
 SOLVER_PREFIXES = ("snes_", "ksp_", "pc_", "mat_", "npc_", "sub_")
 """Options of the load step's solver: given without prefix, they reach every truss problem."""
+
+KEPT_OPTIONS = ("mat_mumps_", "mat_superlu_dist_")
+"""Options read by the factor each time it is made, kept while their solver lives."""
+
+
+def _kept(key: str) -> bool:
+    return any(name in key for name in KEPT_OPTIONS)
+
+
+def _forget(keys: list[str]) -> None:
+    db = PETSc.Options()
+    for key in keys:
+        db.delValue(key)
+
 
 _REUSE_REDUCTION = 0.1  # Newton converges fast after a full step that cut ‖F‖ this much ...
 _GLOBAL_ITERATIONS = 6  # ... or after this many iterations: the exact Jacobian is asked
@@ -195,11 +210,20 @@ class Newton:
         self._reset()
 
     def release_options(self) -> None:
-        """Remove this solver's options from PETSc's database (the factor has read them)."""
+        """Remove this solver's options from PETSc's database (the factor has read them).
+
+        The factor package's own options (``mat_mumps_*``, ...: :data:`KEPT_OPTIONS`) stay
+        until the solver is gone: PETSc makes the factor again, reading them, whenever the
+        Jacobian's pattern grows (a stack's pairs reaching new cells).
+        """
         db = PETSc.Options()
+        kept = [key for key in self._keys if _kept(key)]
         for key in self._keys:
-            db.delValue(key)
+            if not _kept(key):
+                db.delValue(key)
         self._keys = []
+        if kept and not getattr(self, "_kept", None):
+            self._kept = weakref.finalize(self, _forget, kept)
 
     def _reset(self) -> None:
         self.evaluations = 0  # residuals evaluated in this solve

@@ -502,6 +502,7 @@ class PlyContact:
                 self.n_rate[on] = self.n[on] - _unit(np.cross(Su, Sv))
         self._on = np.flatnonzero(self.active)
         self._build_pattern()
+        self._weigh_slots()
 
     def _gap_vector(self, x: np.ndarray) -> np.ndarray:
         """The gap vectors d = x_a − x_p (p, 3) (zero for the pairs that are not active)."""
@@ -535,15 +536,25 @@ class PlyContact:
             self.pattern = (np.searchsorted(r, np.arange(end - first + 1)).astype(np.int32),
                             c.astype(np.int32))
             self.pattern_version += 1
-        # Each live block (pair, node i, node j) and the slot of the pattern it adds to, as a
-        # sparse sum: the blocks of all pairs go to their slots in one product.
+        # Each live block (pair, node i, node j) and the slot of the pattern it adds to
+        # (_weigh_slots makes the sparse sum).
+        self._live_at = np.nonzero(self._live)
+        self._slot = np.searchsorted(self._keys, keys)
+        self._G = np.zeros((len(on), 3, 3))
+
+    def _weigh_slots(self) -> None:
+        """The sparse map of the pairs' −∂f/∂d blocks G (p, 9) to the pattern's slots.
+
+        Block (node i, node j) of pair p is c_i c_j G_p, with c = (1, −w) the derivatives of
+        d by the five nodes' positions; the weights are fixed within a step, so the Jacobian
+        is one sparse product a Newton iteration.
+        """
         from scipy.sparse import csr_matrix
 
-        self._live_at = np.nonzero(self._live)
-        slot = np.searchsorted(self._keys, keys)
-        self._to_slots = csr_matrix((np.ones(len(slot)), (slot, np.arange(len(slot)))),
-                                    shape=(len(self._keys), len(slot)))
-        self._c, self._G = np.zeros((len(on), 5)), np.zeros((len(on), 3, 3))
+        p, i, j = self._live_at
+        c = np.column_stack([np.ones(len(self._on)), -self.w[self._on]])
+        self._to_slots = csr_matrix((c[p, i] * c[p, j], (self._slot, p)),
+                                    shape=(len(self._keys), len(self._on)))
 
     def follow(self, x: np.ndarray) -> None:
         """Re-pair every node with the point of the ply below nearest it now (positions ``x``).
@@ -609,12 +620,11 @@ class PlyContact:
         pressed = (f_n > 0.0)[:, None, None]
         G = (k_touch * nn_T + area[:, None, None] * np.einsum("pik,pkj->pij", out.dtau_ds, P)
              - pressed * k_touch * np.einsum("pi,pj->pij", out.dtau_dp, n))
-        c = np.column_stack([np.ones(p_count), -w])  # ∂d/∂x of the five nodes
         nodes = np.concatenate([a, J.ravel()])
         forces = np.concatenate([f_a, (-w[:, :, None] * f_a[:, None, :]).reshape(-1, 3)])
         for i in range(3):  # a scatter-add (bincount is much faster than ufunc.at)
             f[:, i] = np.bincount(nodes, forces[:, i], minlength=nn)
-        self._c, self._G = c, G  # the blocks are made when the Jacobian asks (values)
+        self._G = G  # the blocks are made when the Jacobian asks (values)
         self._trial = (x.copy(), out.state, p, s, dt)
         # The forces of the last evaluation (N), also on constrained nodes; on the local
         # nodes (every pair is on every rank: whole on ghosts too).
@@ -624,11 +634,9 @@ class PlyContact:
     @property
     def values(self) -> np.ndarray:
         """The 3 × 3 blocks (N/mm) on :attr:`pattern` at the last :meth:`forces` call."""
-        p, i, j = self._live_at
-        if not len(p):
+        if not len(self._live_at[0]):
             return np.zeros((len(self._keys), 3, 3))
-        blocks = (self._c[p, i] * self._c[p, j])[:, None] * self._G[p].reshape(-1, 9)
-        return (self._to_slots @ blocks).reshape(-1, 3, 3)
+        return (self._to_slots @ self._G.reshape(-1, 9)).reshape(-1, 3, 3)
 
     def commit(self) -> None:
         """Keep the pairs' slip; the pairs follow the converged plies, and so do δ and n."""

@@ -445,10 +445,14 @@ class TrussProblem:
         """Add the coupling terms' blocks, without the rows and columns of constrained dofs."""
         free = ~self.constrained[: self.num_owned]
         free_all = free if self.comm.size == 1 else np.concatenate(self.comm.allgather(free))
-        for term in self._couplings:
+        masks = self.__dict__.setdefault("_coupling_masks", {})  # by term: (key, mask)
+        for k, term in enumerate(self._couplings):
             indptr, indices = term.pattern
-            rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-            values = term.values * (free[rows][:, :, None] & free_all[indices][:, None, :])
+            key = (term.pattern_version, free_all.tobytes())  # a mask per pattern
+            if masks.get(k, (None,))[0] != key:
+                rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+                masks[k] = (key, free[rows][:, :, None] & free_all[indices][:, None, :])
+            values = term.values * masks[k][1]
             A.setValuesBlockedIJV(indptr, indices, values, PETSc.InsertMode.ADD_VALUES,
                                   rowmap=self._owned_global)
 
@@ -501,7 +505,16 @@ class TrussProblem:
         nodes two apart, less that lumping). Rebuilt when the constraints change.
         """
         K = self._bending.constrained_matrix
-        if self._bending_in_A is None or self._bending_in_A[0] is not K:
+        parts = getattr(self, "_bending_parts", None)
+        if self._bending_in_A is not None and self._bending_in_A[0] is K:
+            return self._bending_in_A[1], self._bending_in_A[2]
+        if parts is not None and parts[0] is K:
+            # Only A's pattern grew (the coupling terms' blocks join nodes of two plies, K's
+            # stencils nodes of one ply): the split stands, its copy in A's pattern is remade.
+            near_in_A = self._A.duplicate(copy=False)
+            near_in_A.axpy(1.0, parts[1], PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            self._bending_in_A = (K, near_in_A, parts[2])
+        else:
             first = K.getOwnershipRange()[0]
             ki, kj, kv = K.getValuesCSR()
             ai, aj, _ = self._A.getValuesCSR()
@@ -520,8 +533,8 @@ class TrussProblem:
                                                     near[keep]), comm=self.comm)
             near_in_A = self._A.duplicate(copy=False)
             near_in_A.axpy(1.0, own, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
-            own.destroy()
             rest = PETSc.Mat().createAIJ(sizes, csr=(ki, kj, far), comm=self.comm)
+            self._bending_parts = (K, own, rest)
             self._bending_in_A = (K, near_in_A, rest)
         return self._bending_in_A[1], self._bending_in_A[2]
 
