@@ -359,7 +359,7 @@ def test_an_effect_the_finer_net_judges_is_named_and_said_so():
     assert unjudged(checked, judged_there) == []
     words = conclusion(judged_there, judged_there, base, "pattern", resolution=checked)
     assert words.startswith("Missing effect: holder_friction")
-    assert "On the 10 mm net the effect brings them from 8.81 to 1.04" in words
+    assert "On the 10 mm net the effect brings it from 8.81 to 1.04" in words
     # Not at the noise on the finer net either: not adequate (nothing judges it).
     short = dataclasses.replace(judged_there, finer_net={**finer, "normalised": 2.0})
     assert not adequate(short)

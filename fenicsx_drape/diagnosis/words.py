@@ -237,7 +237,8 @@ def _missing_words(missing: Candidate, normalised: float, setup_fitted: str | No
     if finer is not None:
         return (f"{head}, still above it: the net it ran on cannot judge "
                 f"{', '.join(finer['measurements'])} (its own error there is as large as "
-                f"the residual). On the {finer['cell_mm']:g} mm net the effect brings them "
+                f"the residual). On the {finer['cell_mm']:g} mm net the effect brings "
+                f"{'it' if len(finer['measurements']) == 1 else 'them'} "
                 f"from {finer['baseline_normalised']:.3g} to {finer['normalised']:.3g} × the "
                 f"noise (evidence {finer['evidence']:.3g}): that net judges it.")
     if not nets:
