@@ -28,7 +28,7 @@ from fenicsx_drape.diagnosis.report import found_text, summary
 from fenicsx_drape.diagnosis.resolution import shown, within_net
 from fenicsx_drape.diagnosis.results import Candidate, DataCheck, Effects, SetupResult
 from fenicsx_drape.diagnosis.setup_words import setup_fields, setup_sentence, setup_summary
-from fenicsx_drape.diagnosis.words import conclusion
+from fenicsx_drape.diagnosis.words import conclusion, unjudged
 from fenicsx_drape.measurements.bundle import Bundle
 from fenicsx_drape.model import default_model
 
@@ -62,6 +62,14 @@ def candidate(effect: str, after: list[Comparison], *, significant: bool = True,
 
 
 NO_DATA_CHECK = DataCheck((), frozenset(), Bundle(name="b", tests=()))
+
+
+def named_alone(best, base, checked) -> str:
+    """``best`` as the only candidate: named, every measurement judged; the conclusion."""
+    decision = decide(Effects((best,), ()), best, None, NO_DATA_CHECK)
+    assert decision.named is best
+    assert unjudged(checked, best) == []
+    return conclusion(best, best, base, "pattern", resolution=checked)
 
 
 def test_the_one_rule_against_the_issue_numbers():
@@ -274,7 +282,6 @@ def test_an_effect_whose_refit_reaches_the_noise_on_the_case_s_own_net_is_named(
     way, and the effect is named. Its held-out rows alone (each measurement predicted from
     the others of its trial) stay above the noise, which used to leave it no evidence (1).
     """
-    from fenicsx_drape.diagnosis.words import unjudged
 
     noise = {"t1/file": 0.24, "t1/outline": 0.24, "t1/punch_force": 0.827,
              "t1/surface": 0.24}
@@ -300,10 +307,7 @@ def test_an_effect_whose_refit_reaches_the_noise_on_the_case_s_own_net_is_named(
     assert gain == pytest.approx(normalised_error(base) / normalised_error(held))
     assert gain > 2.0
     best = candidate("tow_buckling", refit, significant=gain >= 1.2, evidence_=gain)
-    decision = decide(Effects((best,), ()), best, None, NO_DATA_CHECK)
-    assert decision.named is best
-    assert unjudged(checked, best) == []
-    words = conclusion(best, best, base, "pattern", resolution=checked)
+    words = named_alone(best, base, checked)
     assert words.startswith("Missing effect: tow_buckling")
     assert "at the noise" in words
 
@@ -342,7 +346,6 @@ def test_an_effect_the_finer_net_judges_is_named_and_said_so():
     (residual 1.99 mm, its own error 2.65 mm), and on it the truth itself stays near 3.6 ×
     the noise; on the 10 mm net the baseline is at 8.81 and holder_friction at 1.04. The
     finer net judges it: named, and the conclusion says on which net."""
-    from fenicsx_drape.diagnosis.words import unjudged
 
     checked = [entry("t1", 1.99, 0.3, 2.65, 2.64, "mm")]
     assert checked[0]["explains"]
@@ -354,10 +357,7 @@ def test_an_effect_the_finer_net_judges_is_named_and_said_so():
              "baseline_normalised": 8.81, "evidence": 8.81 / 1.04}
     judged_there = dataclasses.replace(plain, significant=True, finer_net=finer)
     assert adequate(judged_there)
-    decision = decide(Effects((judged_there,), ()), judged_there, None, NO_DATA_CHECK)
-    assert decision.named is judged_there
-    assert unjudged(checked, judged_there) == []
-    words = conclusion(judged_there, judged_there, base, "pattern", resolution=checked)
+    words = named_alone(judged_there, base, checked)
     assert words.startswith("Missing effect: holder_friction")
     assert "On the 10 mm net the effect brings it from 8.81 to 1.04" in words
     # Not at the noise on the finer net either: not adequate (nothing judges it).
