@@ -15,8 +15,10 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
    compare`); the rows beyond ``OUTLIER_SD`` robust sd are left out and it is refitted.
 3. **Set-up before physics** (:func:`~fenicsx_drape.diagnosis.setup_stage.setup_stage` →
    ``SetupResult``): the set-up as stated (the baseline as fitted: one model, one error)
-   against the set-up fitted; the best, when one is significant, is applied and the
-   baseline refitted at it (:func:`at_setup`).
+   against the set-up fitted, on every row (the baseline's outliers given back: a set-up
+   error can make them, :func:`setup_rows`); the best, when one is significant, is applied
+   and the baseline refitted at it, the stated outliers still wild there left out again
+   (:func:`at_setup`).
 4. **Held-out error and resolution** (:func:`heldout_stage` → ``HeldOut``,
    :func:`resolution_stage` → ``Resolution``): every row predicted by the fold that held it
    out; each forming measurement the baseline misses compared with the same model on half
