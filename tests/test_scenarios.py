@@ -171,7 +171,10 @@ def test_a_set_up_error_with_an_effect_is_kept_only_when_each_part_shows():
     # the effect alone: the model handed (the effect removed), the ply as it was
     assert effect_alone["ply_angle_deg"] == 5.2
     assert set(truth["effects"]) - set(effect_alone["effects"]) == {"strain_dependent_viscosity"}
-    assert {k: v for k, v in setup_alone.items() if k != "effects"} == {
+    # both on the truth's own sheet: the whole blank a turned ply needs
+    assert setup_alone["symmetry_of"] == {"ply_angle_deg": 5.2}
+    assert specs["counterfactual"][0]["symmetry_of"] == {"ply_angle_deg": 5.2}
+    assert {k: v for k, v in setup_alone.items() if k not in ("effects", "symmetry_of")} == {
         k: v for k, v in effect_alone.items() if k not in ("effects", "ply_angle_deg")}
     assert not generate.compound(generate.draw(51, 2, 0, "setup", "ply_angle_deg"))
     # the rule on given signals: together, and each part on its own
@@ -185,6 +188,28 @@ def test_a_set_up_error_with_an_effect_is_kept_only_when_each_part_shows():
     assert generate.expected(d, ["setup"])["net_hides"] == ["setup"]
     assert not generate.expected(d, ["setup"])["resolution_ok"]
     assert generate.expected(d, ["setup", "effect"])["resolution_ok"]
+
+
+def test_a_counterfactual_at_the_stated_set_up_is_formed_on_the_truths_sheet(tmp_path):
+    """The hemisphere's case is a quarter; its ply turned 5° needs the whole blank, and so
+    does the model at the stated ply beside it (symmetry = [], the centre held as the planes
+    held it); with nothing hidden the quarter stays."""
+    pytest.importorskip("dolfinx")
+    generate = pytest.importorskip("generate")
+    truth = pytest.importorskip("truth")
+    from fenicsx_drape.forming import load_case
+
+    d = generate.draw(51, 2, 0, "setup", "ply_angle_deg", {"part": "hemisphere", "setup": 5.2,
+                                                            "trials": [{}]})
+    stated = truth.prepare(generate.run_specs(d)["counterfactual"][0], tmp_path)
+    overrides = truth.overrides_of(stated)
+    assert overrides["symmetry"] == [] and "ply_angle_deg" not in overrides
+    case = stated / "case" / "case.toml"
+    assert set(load_case(case).blank.symmetry) == {"x", "y"}
+    whole = load_case(case, **overrides).blank
+    assert whole.symmetry == () and whole.hold_origin and whole.ply_angle_deg == 0.0
+    nothing = generate.draw(51, 0, 0, "nothing", None, {"part": "hemisphere", "trials": [{}]})
+    assert "symmetry_of" not in generate.run_specs(nothing)["counterfactual"][0]
 
 
 def test_a_part_the_net_hides_may_go_unnamed_beside_the_other():

@@ -15,16 +15,17 @@ set-up is hidden), the rest drawn from ``numpy.random.default_rng([seed, index, 
 
 The truth is formed (:mod:`truth`) with the truth's model (the paper's model at Table 2, plus
 the hidden effect when it is not the paper's), and so is the **counterfactual**: the model
-handed to the diagnosis at the set-up as stated. A hidden effect or set-up error is kept only
-when it *can show* (:func:`shows`): the lab's measures of the truth and of the counterfactual
-differ by at least :data:`SHOW` times the noise (normalised as the diagnosis normalises: the
-root mean square over measurements of RMS difference / noise); a set-up error with an effect
-only when each part shows on its own by the same measure as well — the **set-up error alone**
-(the truth against the truth's model at the set-up as stated) and the **effect alone** (the
-truth against the model handed, at the truth's set-up). Otherwise another part, net and mix
-of kinds is drawn (:data:`ATTEMPTS` in all), and a slot whose truth never shows is reported as
-such. The truth's model is also formed on the lab case's own net: the **net error** says how
-far the case's net alone moves the lab's measures.
+handed to the diagnosis at the set-up as stated (on the truth's own sheet: where the truth's
+set-up error drops a symmetry plane, so does the counterfactual). A hidden effect or set-up
+error is kept only when it *can show* (:func:`shows`): the lab's measures of the truth and of
+the counterfactual differ by at least :data:`SHOW` times the noise (normalised as the diagnosis
+normalises: the root mean square over measurements of RMS difference / noise); a set-up error
+with an effect only when each part shows on its own by the same measure as well — the **set-up
+error alone** (the truth against the truth's model at the set-up as stated) and the **effect
+alone** (the truth against the model handed, at the truth's set-up). Otherwise another part, net
+and mix of kinds is drawn (:data:`ATTEMPTS` in all), and a slot whose truth never shows is
+reported as such. The truth's model is also formed on the lab case's own net: the **net error**
+says how far the case's net alone moves the lab's measures.
 
 The lab's measures are :mod:`lab`'s, written by hand into the bundle (``bundle.toml``, one CSV
 per measurement, the lab's case with its STL tools); the model handed (``model.toml``) and the
@@ -304,6 +305,7 @@ def draw(seed: int, index: int, attempt: int, cls: str, detail: str | None,
 # Can it show?
 
 PARTS = {"setup": "setup_alone", "effect": "effect_alone"}  # a part: its counterfactual's runs
+PLANES_BROKEN = ("ply_angle_deg", "blank_offset_mm", "tool_offset_mm")  # set-ups off the planes
 
 
 def compound(d: Draw) -> bool:
@@ -368,6 +370,11 @@ def _run_spec(d: Draw, trial: dict, *, effects, parameters, setup: bool, cell_mm
             spec["holder_force_N"] = trial["holder_force_N"] * s["factor"]
         else:
             spec[s["parameter"]] = s["value"]
+    elif d.setup is not None and d.setup["parameter"] in PLANES_BROKEN:
+        # At the stated set-up on the truth's own sheet: the truth's set-up drops symmetry
+        # planes, and a quarter model mirrored differs from the whole sheet through its net
+        # and holds, not through the set-up error.
+        spec["symmetry_of"] = {d.setup["parameter"]: d.setup["value"]}
     return spec
 
 
