@@ -223,14 +223,16 @@ def table(records: list[dict], scores: dict[str, dict], command: str) -> str:
         lines.append(f"- **{r['id']}** ({r['class']}: {hidden_text(r)}; {r['part']}, "
                      f"{kinds_text(r)}): {scores[r['id']]['why']}.")
     if left:
-        lines += ["", "Left out (the hidden effect or set-up never moved the lab's measures by "
-                  f"{generate.SHOW:g} × the noise, or its runs failed):", ""]
+        lines += ["", "Left out (the hidden effect or set-up error, or a part of both, never "
+                  f"moved the lab's measures by {generate.SHOW:g} × the noise, or its runs "
+                  "failed):", ""]
         for r in left:
             sig = ", ".join(f"{a.get('part')} {a.get('signal', float('nan')):.2f}" + (
                 " ({setup:.2f} / {effect:.2f})".format(**a["signal_parts"])
                 if a.get("signal_parts") else "") for a in r["attempts"] if "signal" in a)
-            lines.append(f"- {r['id']} ({r['class']}: {r.get('hidden_effect') or ''}"
-                         f"{(r.get('setup') or {}).get('parameter', '')}): {r['left_out']}"
+            what = "; ".join(x for x in (r.get("hidden_effect"),
+                                         (r.get("setup") or {}).get("parameter")) if x)
+            lines.append(f"- {r['id']} ({r['class']}: {what}): {r['left_out']}"
                          + (f" (signal by part: {sig})" if sig else "") + ".")
     lines += ["", END]
     return "\n".join(lines)
