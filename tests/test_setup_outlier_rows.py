@@ -3,10 +3,11 @@
 A punch off the die's axis by more than their clearance meets the matched die only as the
 tools close: its mark is the force curve's last row (the octagon's punch 0.9 mm off: 340 N
 where the stated set-up gives 39 N, 45 × the noise). Judged against the set-up as stated,
-that row is an outlier and the baseline leaves it out; the set-up stage is given it back
-(:func:`~fenicsx_drape.diagnosis.pipeline.setup_rows`), and at the fitted set-up the
-stated set-up's outliers are judged again (:func:`~fenicsx_drape.diagnosis.pipeline.
-at_setup`): a row the fitted set-up explains stays in, one still wild there is left out.
+that row is an outlier and the baseline leaves it out. Where the set-up stage names nothing
+without it, the stage is tried again with it (:func:`~fenicsx_drape.diagnosis.pipeline.
+with_outlier_rows`), and at the fitted set-up the stated set-up's outliers are judged again
+(:func:`~fenicsx_drape.diagnosis.pipeline.at_setup`): a row the fitted set-up explains
+stays in, one still wild there is left out.
 
 No forming run: a lab's force curve on the octagon's case (read, not formed), the
 baseline's fits stood in for by the curves they would give.
@@ -139,6 +140,38 @@ def test_the_set_up_stage_is_given_the_stated_set_ups_outlier_rows(lab):
     # No outlier: the baseline's own bundle, nothing else.
     clean = pipeline.Baseline(data, base.model, (), (), {}, {}, None)
     assert pipeline.setup_rows(data, clean) is data.bundle
+
+
+def stage_naming(bundle, best):
+    """A set-up stage's result that names ``best`` (or nothing) on ``bundle``."""
+    return types.SimpleNamespace(best=best, bundle=bundle, corrected=bundle)
+
+
+def test_the_set_up_stage_is_tried_again_with_them_when_it_names_nothing(lab, monkeypatch):
+    data, travel = lab
+    base = stated_baseline(data, travel)
+    calls = []
+
+    def stand_in(bundle, model, parameters, rules, say, **keys):
+        calls.append(bundle.tests[0].n_rows)
+        return stage_naming(bundle, "tool_offset_mm" if bundle.tests[0].n_rows == ROWS
+                            else None)
+
+    monkeypatch.setattr(pipeline, "setup_stage", stand_in)
+    first = stage_naming(base.data.bundle, None)
+    again = pipeline.with_outlier_rows(first, data, base, default_model(), None, print)
+    assert calls == [ROWS] and again.best == "tool_offset_mm"  # the clash row in
+    # Named without them: they stay out (a missing effect's wild rows would dilute it).
+    named = stage_naming(base.data.bundle, "holder_force_N")
+    assert pipeline.with_outlier_rows(named, data, base, default_model(), None, print) is named
+    # Nothing named with them either: the stage without them stands.
+    monkeypatch.setattr(pipeline, "setup_stage", lambda bundle, *a, **k: stage_naming(bundle,
+                                                                                    None))
+    assert pipeline.with_outlier_rows(first, data, base, default_model(), None, print) is first
+    # No outlier: nothing tried again.
+    clean = pipeline.Baseline(data, base.model, (), (), {}, {}, None)
+    assert pipeline.with_outlier_rows(first, data, clean, default_model(), None, print) is first
+    assert calls == [ROWS]
 
 
 @pytest.mark.parametrize("clash, kept", [(331.0, ROWS), (39.0, ROWS - 1)])
