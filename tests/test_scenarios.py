@@ -285,12 +285,14 @@ def _case(name: str, *marks, xfail: str | None = None):
 
 @pytest.mark.skip_in_parallel
 @pytest.mark.parametrize("name", [
+    # 20-30 CPU-s each on two idle cores: make test
     _case("nothing", pytest.mark.slow),
-    _case("effect", pytest.mark.bench),  # about a CPU-minute each: make bench
-    _case("setup", pytest.mark.bench),
+    _case("effect", pytest.mark.slow),
+    _case("setup", pytest.mark.slow),
+    _case("discretisation", pytest.mark.slow),
+    # 50 CPU-s to several CPU-minutes each: make bench
     _case("other part", pytest.mark.bench),
     _case("setup+effect", pytest.mark.bench),
-    _case("discretisation", pytest.mark.bench),
     _case("stack: sliding", pytest.mark.bench,
           xfail="names a tool offset [1, 1] ± 0.66 mm (evidence 1.52, not significant) and no "
                 "effect: interply_friction refits to 5.89 x the noise (evidence 1)"),
