@@ -15,9 +15,12 @@ single candidate brings the error ... to the noise floor".
 - *a set-up error S with an effect E*: both named;
 - *data of another part*: the replaced measurement named suspect, no effect, no "write a
   user law";
-- where the lab case's own net moves the measures by at least half as much as the hidden
-  effect or set-up error does (``resolution_ok``: the truth's model formed on the case's net
-  against the truth), "the net's own error" with nothing named is right too.
+- where the lab case's own net moves the measures by at least half as much as a hidden part
+  (the effect, the set-up error) does on its own (``net_hides``: the truth's model formed on
+  the case's net against the truth, set against each part's own signal), that part may go
+  unnamed when the conclusion puts the rest down to "the net's own error" (and says no "write
+  a user law"); ``resolution_ok``: the net hides every hidden part, so "the net's own error"
+  with nothing named is right.
 
 Everything else is wrong, and :func:`judge` says why from the report's own entries.
 """
@@ -101,6 +104,15 @@ def _setup_entry(report: dict, parameter: str) -> str:
     return f"{parameter} not tried"
 
 
+def net_hidden(expected: dict) -> set[str]:
+    """The hidden parts ("effect", "setup") the case's net may be blamed for: ``net_hides``,
+    or, in a record without it, every hidden part when ``resolution_ok``."""
+    if "net_hides" in expected:
+        return set(expected["net_hides"])
+    hidden = {k for k in ("effect", "setup") if expected.get(k)}
+    return hidden if expected.get("resolution_ok") else set()
+
+
 def judge(record: dict, report: dict) -> tuple[bool, str]:
     """Whether the report's answer is right for the scenario, and why not when it is not."""
     exp = record["expected"]
@@ -117,22 +129,23 @@ def judge(record: dict, report: dict) -> tuple[bool, str]:
     if ans["user_law"]:
         why.append(f"the conclusion says to write a user law (baseline {_num(base)} × noise)")
     named = ans["effects"]
-    net_ok = bool(exp.get("resolution_ok") and not named and not ans["setup"] and ans["net"]
-                  and not ans["user_law"])
+    hides = net_hidden(exp)
+
+    def excused(part: str, other_named) -> bool:
+        # the case's net moves the measures as much as this part does: unnamed is right too
+        return part in hides and not other_named and ans["net"] and not ans["user_law"]
+
     if want_effect:
-        if want_effect not in named:
-            if net_ok:
-                pass  # the case's net moves the measures as much as the truth: right too
-            else:
-                what = f"named {ans['effect']}" if named else "named no effect"
-                why.append(f"{what}; {_candidate(report, want_effect)}")
+        if want_effect not in named and not excused("effect", named):
+            what = f"named {ans['effect']}" if named else "named no effect"
+            why.append(f"{what}; {_candidate(report, want_effect)}")
     elif named:
         c = next((c for c in report.get("candidates", []) if c["effect"] == ans["effect"]), {})
         after = c.get("error_after", {}).get("normalised")
         why.append(f"named {ans['effect']} where no effect is missing (baseline {_num(base)} → "
                    f"{_num(after)} × noise, evidence {_num(c.get('evidence'))})")
-    if want_setup and not net_ok:
-        if ans["setup"] not in want_setup:
+    if want_setup:
+        if ans["setup"] not in want_setup and not excused("setup", ans["setup"]):
             what = f"named {ans['setup']}" if ans["setup"] else "named no set-up error"
             why.append(f"{what}; {_setup_entry(report, want_setup[0])}")
     elif ans["setup"]:

@@ -15,13 +15,17 @@ set-up is hidden), the rest drawn from ``numpy.random.default_rng([seed, index, 
 
 The truth is formed (:mod:`truth`) with the truth's model (the paper's model at Table 2, plus
 the hidden effect when it is not the paper's), and so is the **counterfactual**: the model
-handed to the diagnosis at the set-up as stated. A hidden effect or set-up error is kept only
-when it *can show*: the lab's measures of the truth and of the counterfactual differ by at
-least :data:`SHOW` times the noise (normalised as the diagnosis normalises: the root mean
-square over measurements of RMS difference / noise); otherwise another part, net and mix of
-kinds is drawn (:data:`ATTEMPTS` in all), and a slot whose effect never shows is reported as
-such. The truth's model is also formed on the lab case's own net: the **net error** says how
-far the case's net alone moves the lab's measures.
+handed to the diagnosis at the set-up as stated (on the truth's own sheet: where the truth's
+set-up error drops a symmetry plane, so does the counterfactual). A hidden effect or set-up
+error is kept only when it *can show* (:func:`shows`): the lab's measures of the truth and of
+the counterfactual differ by at least :data:`SHOW` times the noise (normalised as the diagnosis
+normalises: the root mean square over measurements of RMS difference / noise); a set-up error
+with an effect only when each part shows on its own by the same measure as well — the **set-up
+error alone** (the truth against the truth's model at the set-up as stated) and the **effect
+alone** (the truth against the model handed, at the truth's set-up). Otherwise another part, net
+and mix of kinds is drawn (:data:`ATTEMPTS` in all), and a slot whose truth never shows is
+reported as such. The truth's model is also formed on the lab case's own net: the **net error**
+says how far the case's net alone moves the lab's measures.
 
 The lab's measures are :mod:`lab`'s, written by hand into the bundle (``bundle.toml``, one CSV
 per measurement, the lab's case with its STL tools); the model handed (``model.toml``) and the
@@ -48,7 +52,7 @@ SETUPS = ("ply_angle_deg", "blank_offset_mm", "holder_force_N", "mu", "tool_offs
 KINDS = ("grid", "shear", "scan", "edge", "force")
 SHOW = 3.0  # a hidden effect or set-up error must move the lab's measures this far (× noise)
 ATTEMPTS = 4  # draws of part, net and kinds before a slot is given up
-RECORD = 4  # version of a scenario's record and bundle (its truths are kept apart: truth.py)
+RECORD = 5  # version of a scenario's record and bundle (its truths are kept apart: truth.py)
 ETA_O = 1.37  # Table 2 (N·s/tow)
 T_REF_C = 20.0
 R_GAS = 8.314  # J/(mol K)
@@ -298,6 +302,45 @@ def draw(seed: int, index: int, attempt: int, cls: str, detail: str | None,
 
 
 # --------------------------------------------------------------------------------------------
+# Can it show?
+
+PARTS = {"setup": "setup_alone", "effect": "effect_alone"}  # a part: its counterfactual's runs
+PLANES_BROKEN = ("ply_angle_deg", "blank_offset_mm", "tool_offset_mm")  # set-ups off the planes
+
+
+def compound(d: Draw) -> bool:
+    """Whether the draw hides a set-up error with an effect (two parts that must each show)."""
+    return bool(d.hidden_effect and d.setup)
+
+
+def shows(signal: float, parts: dict[str, float] | None = None) -> bool:
+    """Whether a hidden truth can show: the truth against the counterfactual (``signal``) and,
+    for a set-up error with an effect, each part on its own (``parts``: the set-up error
+    alone, the effect alone), all at least :data:`SHOW` × the noise."""
+    return signal >= SHOW and all(v >= SHOW for v in (parts or {}).values())
+
+
+def part_signals(d: Draw, signal: float, parts: dict[str, float] | None = None
+                 ) -> dict[str, float]:
+    """Each hidden part's own signal: a set-up error with an effect has both of ``parts``, a
+    single effect or set-up error the truth's ``signal`` (its counterfactual differs from the
+    truth by that part alone); nothing hidden, none."""
+    if compound(d):
+        return dict(parts or {})
+    if d.hidden_effect:
+        return {"effect": signal}
+    return {"setup": signal} if d.setup else {}
+
+
+def net_hides(signals: dict[str, float], net_error: float | None) -> list[str]:
+    """The hidden parts the lab case's own net moves the measures at least half as much as
+    the part does (``net_error`` >= signal / 2): the diagnosis may put those down to the net."""
+    if net_error is None:
+        return []
+    return [k for k, v in signals.items() if net_error >= 0.5 * v]
+
+
+# --------------------------------------------------------------------------------------------
 # The runs a scenario needs
 
 
@@ -327,20 +370,36 @@ def _run_spec(d: Draw, trial: dict, *, effects, parameters, setup: bool, cell_mm
             spec["holder_force_N"] = trial["holder_force_N"] * s["factor"]
         else:
             spec[s["parameter"]] = s["value"]
+    elif d.setup is not None and d.setup["parameter"] in PLANES_BROKEN:
+        # At the stated set-up on the truth's own sheet: the truth's set-up drops symmetry
+        # planes, and a quarter model mirrored differs from the whole sheet through its net
+        # and holds, not through the set-up error.
+        spec["symmetry_of"] = {d.setup["parameter"]: d.setup["value"]}
     return spec
 
 
 def run_specs(d: Draw) -> dict[str, list[dict]]:
-    """The truth, the counterfactual and the truth on the case's net, one run per trial."""
+    """The truth, the counterfactual and the truth on the case's net, one run per trial; for a
+    set-up error with an effect, also each part's own counterfactual (:data:`PARTS`)."""
     truth, counter, on_case = [], [], []
+    alone: dict[str, list[dict]] = {"setup": [], "effect": []}
+    net = {"cell_mm": d.truth_cell_mm, "step_mm": d.truth_step_mm}
     for t in d.trials:
         truth.append(_run_spec(d, t, effects=d.truth_effects, parameters=d.truth_parameters,
-                               setup=True, cell_mm=d.truth_cell_mm, step_mm=d.truth_step_mm))
+                               setup=True, **net))
         counter.append(_run_spec(d, t, effects=d.model_effects, parameters={}, setup=False,
-                                 cell_mm=d.truth_cell_mm, step_mm=d.truth_step_mm))
+                                 **net))
         on_case.append(_run_spec(d, t, effects=d.truth_effects, parameters=d.truth_parameters,
                                  setup=True, cell_mm=d.case_cell_mm, step_mm=d.case_step_mm))
+        # the set-up error alone: the truth's own model (the effect kept) at the stated set-up
+        alone["setup"].append(_run_spec(d, t, effects=d.truth_effects,
+                                        parameters=d.truth_parameters, setup=False, **net))
+        # the effect alone: the model handed at the truth's set-up
+        alone["effect"].append(_run_spec(d, t, effects=d.model_effects, parameters={},
+                                         setup=True, **net))
     out = {"truth": truth, "counterfactual": counter, "case_net": on_case}
+    if compound(d):
+        out.update({PARTS[k]: v for k, v in alone.items()})
     if d.other_part:
         o = d.other_part["part"]
         q = parts.PARTS[o]
@@ -554,33 +613,45 @@ def write_bundle(d: Draw, folder: Path, tables: list[dict[str, dict]], stl_cache
 # One scenario, made
 
 
-def expected(d: Draw, net_hides: bool) -> dict:
-    """What counts as right for this scenario (the rule of docs/scenarios.md)."""
+def expected(d: Draw, hides: list[str]) -> dict:
+    """What counts as right for this scenario (the rule of docs/scenarios.md): ``hides``, the
+    hidden parts ("effect", "setup") the case's net may be blamed for (:func:`net_hides`);
+    ``resolution_ok`` when it is every hidden part."""
     setups = None
     if d.setup:
         p = d.setup["parameter"]
         setups = ["holder_force_N", "mu"] if p in ("holder_force_N", "mu") else [p]
     data = FILES[d.other_part["kind"]][0] if d.other_part else None
+    hidden = [k for k, v in (("effect", d.hidden_effect), ("setup", d.setup)) if v]
     return {"effect": d.hidden_effect, "setup": setups, "data": data,
-            "resolution_ok": net_hides}
+            "resolution_ok": bool(hidden) and set(hidden) <= set(hides),
+            "net_hides": [k for k in hidden if k in hides]}
 
 
 def _attempt(d: Draw, cache: Path, say) -> dict:
-    """Form a draw's truth and counterfactual; how far the hidden truth moves the measures."""
+    """Form a draw's truth and counterfactuals; how far the hidden truth moves the measures,
+    and each part of a set-up error with an effect on its own."""
     specs = run_specs(d)
-    runs = {k: truths.form_all(v, cache, say=say) for k, v in specs.items()
-            if k in ("truth", "counterfactual", "other")}
+    keys = [k for k in ("truth", "counterfactual", "other", *PARTS.values()) if k in specs]
+    formed = iter(truths.form_all([s for k in keys for s in specs[k]], cache, say=say))
+    runs = {k: [next(formed) for _ in specs[k]] for k in keys}
     sheets = {k: [lab.read_run(r) for r in v] for k, v in runs.items()}
     forces = {k: [lab.read_forces(r) for r in v] for k, v in runs.items()}
     exact = [measure(d, i, sheets["truth"][i], forces["truth"][i], noisy=False)
              for i in range(len(d.trials))]
-    per = {}
-    for i, t in enumerate(d.trials):
-        for k, v in differences(d, exact[i], sheets["counterfactual"][i],
-                                forces["counterfactual"][i]).items():
-            per[f"{t['id']}/{k}"] = v
+
+    def against(key: str) -> dict[str, float]:
+        per = {}
+        for i, t in enumerate(d.trials):
+            for k, v in differences(d, exact[i], sheets[key][i], forces[key][i]).items():
+                per[f"{t['id']}/{k}"] = v
+        return per
+
+    per = against("counterfactual")
+    parts_per = {part: against(key) for part, key in PARTS.items() if key in specs}
     return {"specs": specs, "sheets": sheets, "forces": forces, "exact": exact, "per": per,
-            "signal": normalised(per)}
+            "signal": normalised(per), "parts_per": parts_per,
+            "parts": {k: normalised(v) for k, v in parts_per.items()}}
 
 
 def _finish(d: Draw, got: dict, folder: Path, cache: Path, record: dict, say) -> dict:
@@ -613,12 +684,14 @@ def _finish(d: Draw, got: dict, folder: Path, cache: Path, record: dict, say) ->
     (folder / "model.toml").write_text(
         f"# the model handed to the diagnosis (scenario {d.id})\n"
         + truths.model_toml(d.model_effects, {}))
-    net_hides = bool((d.hidden_effect or d.setup) and net_error is not None
-                     and net_error >= 0.5 * signal)
+    signals = part_signals(d, signal, got["parts"])
+    parts = {"signal_parts": got["parts"], "signal_parts_per_measurement": got["parts_per"]
+             } if compound(d) else {}
     record = {**record, "class": d.cls, "detail": d.detail,
               **{k: v for k, v in vars(d).items() if k not in ("id", "cls", "detail")},
-              "signal": signal, "signal_per_measurement": per, "net_error": net_error,
-              "net_error_per_measurement": net_per, "expected": expected(d, net_hides)}
+              "signal": signal, "signal_per_measurement": per, **parts, "net_error": net_error,
+              "net_error_per_measurement": net_per,
+              "expected": expected(d, net_hides(signals, net_error))}
     (folder / "truth.json").write_text(json.dumps(record, indent=1, default=_plain))
     return record
 
@@ -643,16 +716,21 @@ def make(seed: int, index: int, work: Path, cache: Path, say=print) -> dict:
             say(f"  {d.id} attempt {attempt}: a run failed ({err})")
             continue
         tried.append({"attempt": attempt, "part": d.part, "net": d.net, "kinds": d.kinds,
-                      "signal": got["signal"]})
+                      "signal": got["signal"],
+                      **({"signal_parts": got["parts"]} if got["parts"] else {})})
+        alone = ", ".join(f"{k} alone {v:.2f}" for k, v in got["parts"].items())
         say(f"  {d.id} attempt {attempt}: {d.part}, {d.net} net, {'+'.join(d.kinds)}: "
-            f"signal {got['signal']:.2f} × noise")
-        if not (d.hidden_effect or d.setup) or d.stack == "bonded" or got["signal"] >= SHOW:
+            f"signal {got['signal']:.2f} × noise" + (f" ({alone})" if alone else ""))
+        if not (d.hidden_effect or d.setup) or d.stack == "bonded" or \
+                shows(got["signal"], got["parts"]):
             break
     else:
         failed = all("failed" in t for t in tried)
         record = {"id": d.id, "seed": seed, "generator": [truths.VERSION, RECORD],
                   "class": cls, "detail": detail, "left_out": "its runs failed" if failed else
-                  f"cannot show: below {SHOW} × the noise on {len(tried)} draws",
+                  f"cannot show: below {SHOW} × the noise on {len(tried)} draws"
+                  + (" (the set-up error and the effect each on its own)" if compound(d)
+                     else ""),
                   "attempts": tried, "hidden_effect": d.hidden_effect, "setup": d.setup}
         folder.mkdir(parents=True, exist_ok=True)
         record_path.write_text(json.dumps(record, indent=1, default=_plain))
@@ -666,8 +744,8 @@ def small(folder: Path, cache: Path, cls: str, detail: str | None = None, seed: 
           say=print, **fixed) -> dict:
     """One small scenario of a class (the tests'): ``fixed`` choices (:func:`draw`), by
     default the octagon on the lab case's own net, one trial, noise stated by keys. No
-    "can show" redraw: the record's ``signal`` says how far the hidden truth moves the
-    measures."""
+    "can show" redraw: the record's ``signal`` (and ``signal_parts``) say how far the hidden
+    truth moves the measures."""
     fixed = {"part": "octagon", "net": "same", "trials": [{}], "stated": "key", **fixed}
     d = draw(seed, 0, 0, cls, detail, fixed)
     got = _attempt(d, cache, say)

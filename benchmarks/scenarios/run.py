@@ -143,6 +143,14 @@ def trials_text(r: dict) -> str:
     return str(len(t))
 
 
+def signal_text(r: dict) -> str:
+    """The signal; for a set-up error with an effect, each part's own after it (set-up / effect)."""
+    parts = r.get("signal_parts")
+    if not parts:
+        return f"{r['signal']:.1f}"
+    return f"{r['signal']:.1f} ({parts['setup']:.1f} / {parts['effect']:.1f})"
+
+
 def kinds_text(r: dict) -> str:
     return "+".join("shear (fd)" if k == "shear" and r.get("shear_mode") == "fd" else k
                     for k in r["kinds"])
@@ -207,7 +215,7 @@ def table(records: list[dict], scores: dict[str, dict], command: str) -> str:
         lines.append(
             f"| {r['id']} | {r['class']}: {hidden_text(r)} | {part} | {net} | {kinds_text(r)} |"
             f" {trials_text(r)} | {answer_text(s)} | {'yes' if s['right'] else '**no**'} | "
-            f"{base} | {after} | {r['signal']:.1f} | {net_error} | "
+            f"{base} | {after} | {signal_text(r)} | {net_error} | "
             f"{s['seconds']:.0f} | {s['cpu_seconds']:.0f} | {s['runs']} |")
     wrong = [r for r in done if not scores[r["id"]]["right"]]
     lines += ["", f"Wrong answers ({len(wrong)}):", ""]
@@ -215,13 +223,16 @@ def table(records: list[dict], scores: dict[str, dict], command: str) -> str:
         lines.append(f"- **{r['id']}** ({r['class']}: {hidden_text(r)}; {r['part']}, "
                      f"{kinds_text(r)}): {scores[r['id']]['why']}.")
     if left:
-        lines += ["", "Left out (the hidden effect or set-up never moved the lab's measures by "
-                  f"{generate.SHOW:g} × the noise, or its runs failed):", ""]
+        lines += ["", "Left out (the hidden effect or set-up error, or a part of both, never "
+                  f"moved the lab's measures by {generate.SHOW:g} × the noise, or its runs "
+                  "failed):", ""]
         for r in left:
-            sig = ", ".join(f"{a.get('part')} {a.get('signal', float('nan')):.2f}"
-                            for a in r["attempts"] if "signal" in a)
-            lines.append(f"- {r['id']} ({r['class']}: {r.get('hidden_effect') or ''}"
-                         f"{(r.get('setup') or {}).get('parameter', '')}): {r['left_out']}"
+            sig = ", ".join(f"{a.get('part')} {a.get('signal', float('nan')):.2f}" + (
+                " ({setup:.2f} / {effect:.2f})".format(**a["signal_parts"])
+                if a.get("signal_parts") else "") for a in r["attempts"] if "signal" in a)
+            what = "; ".join(x for x in (r.get("hidden_effect"),
+                                         (r.get("setup") or {}).get("parameter")) if x)
+            lines.append(f"- {r['id']} ({r['class']}: {what}): {r['left_out']}"
                          + (f" (signal by part: {sig})" if sig else "") + ".")
     lines += ["", END]
     return "\n".join(lines)

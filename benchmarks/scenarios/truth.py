@@ -2,10 +2,12 @@
 
 A truth run is a dict (JSON): the part, the net (``cell_mm``, ``step_mm``), the process
 (``duration_s``, ``holder_force_N``, the holder's ``mu`` when stated), the set-up as it was
-(``ply_angle_deg``, ``blank_offset_mm``, ``tool_offset_mm``), the stack or not, and the model
-(``effects``, ``parameters``). :func:`form_all` writes each run's case file (the real tools,
-:mod:`parts`) and model file into a folder named by the SHA-256 of that dict, and forms it in
-a process of its own (``python3 truth.py FOLDER``: ``load_case`` with the overrides,
+(``ply_angle_deg``, ``blank_offset_mm``, ``tool_offset_mm``), the stack or not, the model
+(``effects``, ``parameters``), and ``symmetry_of``: a set-up whose sheet the run is formed on
+(the symmetry planes that set-up keeps; a counterfactual at the stated set-up formed on the
+truth's own sheet, not on the case's quarter). :func:`form_all` writes each run's case file (the
+real tools, :mod:`parts`) and model file into a folder named by the SHA-256 of that dict, and
+forms it in a process of its own (``python3 truth.py FOLDER``: ``load_case`` with the overrides,
 ``load_model``, ``form_case`` without pictures), two at a time. A folder that holds a finished
 run is not formed again: a rerun of the benchmark reuses its truths.
 
@@ -63,14 +65,25 @@ def prepare(spec: dict, cache: Path) -> Path:
     return folder
 
 
+def overrides_of(folder: Path) -> dict:
+    """The case overrides of the truth run in ``folder`` (its ``spec.json``)."""
+    from fenicsx_drape.forming import load_case
+
+    spec = json.loads((folder / "spec.json").read_text())
+    overrides = {k: spec[k] for k in OVERRIDES if spec.get(k) is not None}
+    if spec.get("symmetry_of"):
+        # the planes the named set-up keeps (load_case drops those it breaks)
+        like = load_case(folder / "case" / "case.toml", **spec["symmetry_of"])
+        overrides["symmetry"] = list(like.blank.symmetry)
+    return overrides
+
+
 def form_one(folder: Path) -> dict:
     """Form the truth of ``folder`` (in this process): its summary."""
     from fenicsx_drape.forming import form_case, load_case
     from fenicsx_drape.model import load_model
 
-    spec = json.loads((folder / "spec.json").read_text())
-    overrides = {k: spec[k] for k in OVERRIDES if spec.get(k) is not None}
-    case = load_case(folder / "case" / "case.toml", **overrides)
+    case = load_case(folder / "case" / "case.toml", **overrides_of(folder))
     model = load_model(folder / "model.toml")
     _, summary = form_case(folder / "run.partial", case, model, pictures=False)
     os.replace(folder / "run.partial", folder / "run")
