@@ -293,9 +293,8 @@ def _case(name: str, *marks, xfail: str | None = None):
     # 50 CPU-s to several CPU-minutes each: make bench
     _case("other part", pytest.mark.bench),
     _case("setup+effect", pytest.mark.bench),
-    _case("stack: sliding", pytest.mark.bench,
-          xfail="names a tool offset [1, 1] ± 0.66 mm (evidence 1.52, not significant) and no "
-                "effect: interply_friction refits to 5.89 x the noise (evidence 1)"),
+    # ~600 CPU-s with its truths: the stack formed again at the stated set-up for each candidate
+    _case("stack: sliding", pytest.mark.bench, pytest.mark.timeout(1200)),
     _case("stack: bonded", pytest.mark.bench),
 ])
 def test_a_small_scenario_gets_the_right_answer(tmp_path, truths, name):

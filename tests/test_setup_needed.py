@@ -8,7 +8,8 @@ friction on the double dome (a holder force 351 N fitted for the 200 N stated) i
 it was made for: evidence 1.0002, withdrawn. With a holding force named and no significant
 effect (the effects refitted at the fitted force gain nothing: a hidden viscosity that grows
 with strain taken up by a force of 633 N for 400 N stated), every ranked candidate is tried
-at the stated set-up.
+at the stated set-up; so too with a placement named as set apart only (a sliding stack's
+plies, bonded in the model, took the punch 1 mm off).
 """
 
 import dataclasses
@@ -138,13 +139,53 @@ def test_a_force_that_predicts_better_than_any_effect_at_the_stated_set_up_stand
 
 
 def test_a_placement_is_not_looked_at_again_for_effects_not_significant(stand_ins):
-    """A ply angle is not a restraint an effect stands in for: with no significant effect,
-    nothing is refitted at the stated set-up (no runs)."""
+    """A ply angle named as significant is not a restraint an effect stands in for: with no
+    significant effect, nothing is refitted at the stated set-up (no runs)."""
     ranked = (candidate(1.1, False),)
-    looked, _, at_setup = run(ranked[0], Effects(ranked, ()), at=stage("ply_angle_deg"),
-                              held=Held(1.0))
+    named = stage("ply_angle_deg")
+    named = dataclasses.replace(named, entries=({**named.entries[0], "significant": True,
+                                                 "set_apart": True},))
+    looked, _, at_setup = run(ranked[0], Effects(ranked, ()), at=named, held=Held(1.0))
     assert stand_ins["tried"] == [] and looked.stage.setup_error == "ply_angle_deg"
     assert looked.base is at_setup
+
+
+def set_apart_only(parameter: str = "tool_offset_mm") -> SetupResult:
+    """A placement named as set apart only: the small sliding-stack scenario's tool offset."""
+    entry = {"parameter": parameter, "stated": [0.0, 0.0], "fitted": [1.0, 1.0],
+             "sd": [0.659, 0.661], "sd_fit": [0.0461, 0.0464], "significant": False,
+             "set_apart": True}
+    return dataclasses.replace(stage(parameter), entries=(entry,))
+
+
+def test_an_effect_a_placement_set_apart_only_took_the_place_of_is_named(stand_ins):
+    """A tool offset named as set apart only (its fit's own sd leaves out what a missing
+    effect leaves), no effect significant at it: each ranked candidate is refitted at the
+    stated set-up, and the one that predicts the held-out rows better than the offset did
+    (the small sliding-stack scenario: interply_friction 5.89 × the noise at the offset,
+    9.42 the offset alone) is named, the offset withdrawn."""
+    ranked = (candidate(5.89, False, "interply_friction"),
+              candidate(8.35, False, "tool_friction"))
+    stand_ins["by_name"] = {"interply_friction": 1.1, "tool_friction": 12.0}
+    looked, stated, _ = run(ranked[0], Effects(ranked, ()), at=set_apart_only(),
+                            held=Held(9.42))
+    assert stand_ins["tried"] == ["interply_friction", "tool_friction"]
+    assert looked.stage.setup_error is None and looked.stage.withdrawn == "tool_offset_mm"
+    assert looked.stage.entries[0]["withdrawn_for"] == "interply_friction"
+    assert looked.stage.entries[0]["evidence_with_effect"] == pytest.approx(1.1 / 5.89)
+    assert looked.best.effect == "interply_friction" and looked.base is stated
+
+
+def test_a_placement_set_apart_only_that_predicts_better_stands(stand_ins):
+    """The same, but the offset predicts the held-out rows 1.3 × better than any effect at
+    the stated set-up: it stands, the candidates as ranked at it."""
+    ranked = (candidate(5.89, False, "interply_friction"),)
+    stand_ins["heldout"] = 1.3 * 5.89
+    looked, _, at_setup = run(ranked[0], Effects(ranked, ()), at=set_apart_only(),
+                              held=Held(9.42))
+    assert stand_ins["tried"] == ["interply_friction"]
+    assert looked.stage.setup_error == "tool_offset_mm" and looked.base is at_setup
+    assert looked.best is ranked[0] and looked.effects.ranked == ranked
 
 
 def test_the_set_up_is_fitted_again_at_the_friction_refitted_with_it(monkeypatch):
