@@ -285,12 +285,11 @@ def _case(name: str, *marks, xfail: str | None = None):
 
 @pytest.mark.skip_in_parallel
 @pytest.mark.parametrize("name", [
-    # 20-30 CPU-s each on two idle cores: make test
     _case("nothing", pytest.mark.slow),
-    _case("effect", pytest.mark.slow),
-    _case("setup", pytest.mark.slow),
-    _case("discretisation", pytest.mark.slow),
-    # 50 CPU-s to several CPU-minutes each: make bench
+    # 20 CPU-s to several CPU-minutes each: make bench (make test would pass its 10 min)
+    _case("effect", pytest.mark.bench),
+    _case("setup", pytest.mark.bench),
+    _case("discretisation", pytest.mark.bench),
     _case("other part", pytest.mark.bench),
     _case("setup+effect", pytest.mark.bench),
     # ~600 CPU-s with its truths: the stack formed again at the stated set-up for each candidate
