@@ -10,10 +10,10 @@ formed with the forming API, read back from the run's files (``fields.h5``,
 - that the generator reads nothing of the diagnosis or of the project's measures;
 - one small scenario of each truth class (the octagon on the lab case's own 20 mm net, one
   trial, few kinds) through ``drape diagnose BUNDLE --model MODEL.toml --json REPORT.json``
-  with default options, judged by the benchmark's own rule (``classify.judge``). Those the
-  diagnosis gets wrong today are marked ``xfail(strict=True)`` with the answer it misses, so
-  that they flip when it is fixed. ``make test`` runs the cheapest (``slow``); the rest are
-  ``bench``.
+  with default options, judged by the benchmark's own rule (``classify.judge``); all eight
+  are right today (one the diagnosis gets wrong is marked ``xfail(strict=True)`` with the
+  answer it misses, so that it flips when mended). ``make test`` runs the one with nothing
+  hidden (``slow``); the rest are ``bench``.
 """
 
 import ast
