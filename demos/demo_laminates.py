@@ -22,7 +22,9 @@
 # ends of their published ranges. The paper's hemisphere with a [0/90, ±45] stack is the
 # second case. A coarse net (20 mm cells on the double dome, 30 mm on the hemisphere, the whole
 # blank) and a fast stroke (8 s) keep it to a few minutes. `./drape form
-# meshes/hemisphere/stack_0_45.toml --out DIR` forms one stack with every output.
+# meshes/hemisphere/stack_0_45.toml --out DIR` forms one stack with every output. Run as a
+# script, the names after the output folder (`"double dome/[0/90, ±45]"`, part/layup) form
+# only those layups.
 
 # +
 import csv
@@ -79,6 +81,11 @@ layups = {
     ("hemisphere", "single ply [0/90]"): layup("hemisphere", (0.0,)),
     ("hemisphere", "[0/90, ±45]"): layup("hemisphere", (0.0, 45.0)),
 }
+if args[1:]:  # only the layups named (part/layup)
+    unknown = set(args[1:]) - {f"{part}/{name}" for part, name in layups}
+    if unknown:
+        sys.exit(f"no such layup: {', '.join(sorted(unknown))}")
+    layups = {k: v for k, v in layups.items() if f"{k[0]}/{k[1]}" in args[1:]}
 # -
 
 # ## Form them
