@@ -196,8 +196,13 @@ def test_ctrl_c_on_a_parallel_diagnose_stops_the_workers_and_says_what_was_kept(
                "--cache", str(cache), "--workers", "2"]
     root = Path(__file__).resolve().parents[1]
     env = {**os.environ, "PYTHONPATH": str(root), "PYTHONFAULTHANDLER": "1"}
+    # SIGINT at its default in the command, as a shell starts a foreground command: a suite
+    # started in the background of a script (`make test &`) ignores SIGINT, and a command
+    # started with SIGINT ignored keeps ignoring it (Python does not catch it then), so
+    # it would run to its end.
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True, env=env)
+                               start_new_session=True, env=env,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         start = time.monotonic()
         while not descendants(process.pid) and time.monotonic() - start < 300:
@@ -231,3 +236,22 @@ def test_ctrl_c_on_a_parallel_diagnose_stops_the_workers_and_says_what_was_kept(
     assert lines[-1].startswith("drape diagnose: interrupted; ") and str(cache) in lines[-1]
     time.sleep(1.0)
     assert not [pid for pid in workers if running(pid)]
+
+
+def test_a_ctrl_c_while_a_run_fails_is_raised_not_lost():
+    """A SIGINT noted during a run that then raises an error is raised as KeyboardInterrupt
+    (the run's error its cause): a caller that takes a failed run as a failed candidate
+    would otherwise go on as if no Ctrl-C came."""
+    import signal
+
+    from fenicsx_drape.runs.pools import interrupts_between_steps
+
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        pytest.skip("SIGINT is not Python's here (started ignoring it)")
+    with pytest.raises(KeyboardInterrupt) as info, interrupts_between_steps():
+        os.kill(os.getpid(), signal.SIGINT)
+        raise ValueError("the run failed")
+    assert isinstance(info.value.__cause__, ValueError)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    with pytest.raises(ValueError), interrupts_between_steps():  # no Ctrl-C: its own error
+        raise ValueError("the run failed")

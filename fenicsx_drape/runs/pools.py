@@ -69,7 +69,8 @@ def interrupts_between_steps() -> Iterator[Callable[[object], None]]:
     Raised inside a solve it would reach one of PETSc's calls back into Python (a residual, a
     convergence test), where it reads as a failed step: the step would be cut and the run go
     on, interrupted in nothing but its path. So SIGINT is noted while a run is formed and
-    raised by the ``check`` yielded (called after each converged step), or at the end.
+    raised by the ``check`` yielded (called after each converged step), or at the end (also
+    when the run raised an error meanwhile).
     Elsewhere than in the main thread (where Python handles signals), or under a handler of
     the caller's own, nothing changes.
     """
@@ -87,6 +88,11 @@ def interrupts_between_steps() -> Iterator[Callable[[object], None]]:
     signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
     try:
         yield check
+    except Exception as error:  # a run that failed after a Ctrl-C: the Ctrl-C is not lost
+        if noted:
+            noted.clear()
+            raise KeyboardInterrupt from error
+        raise
     finally:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     check()
