@@ -40,16 +40,16 @@ pytest_plugins = ("verdict",)
 # again after another module's test came in between) and the modules are handed out in this
 # order, then those with a test marked ``slow``, then the others: the suite does not end
 # waiting on a long module.
-HEAVY = ("tests/test_lab_user_path.py", "tests/test_demo_laminates.py",
-         "tests/test_lab_diagnose.py", "tests/test_forming_runs_scale.py",
-         "tests/test_reference_reports.py", "tests/test_forming_setup.py",
-         "tests/test_run_cache.py", "tests/test_fit_real.py", "tests/test_stack_diagnosis.py",
-         "tests/test_meshed_hemisphere.py", "tests/test_scenarios.py",
-         "tests/test_diagnose_unknown.py", "tests/test_diagnose_hidden.py",
-         "tests/test_forming_stack.py", "tests/test_fe_newton.py", "tests/test_setup_diagnosis.py",
-         "tests/test_docs_truth.py", "tests/test_forming_stack_lab.py",
+HEAVY = ("tests/test_lab_user_path.py", "tests/test_reference_reports.py",
+         "tests/test_run_cache.py", "tests/test_fit_real.py", "tests/test_demo_laminates.py",
+         "tests/test_scenarios.py", "tests/test_forming_runs_scale.py",
+         "tests/test_forming_setup.py", "tests/test_setup_diagnosis.py",
+         "tests/test_forming_stack.py", "tests/test_diagnose_hidden.py",
+         "tests/test_diagnose_unknown.py", "tests/test_meshed_hemisphere.py",
+         "tests/test_forming_stack_lab.py", "tests/test_docs_truth.py",
          "tests/test_forming_case_diagnosis.py", "tests/test_data_check.py",
          "tests/test_demos_diagnosis.py", "tests/test_forming_ply_angle.py",
+         "tests/test_fe_newton.py", "tests/test_stack_diagnosis.py", "tests/test_lab_diagnose.py",
          "tests/test_verdict.py")  # light, but it waits: not at the end, when nothing else runs
 
 
