@@ -76,6 +76,7 @@ from fenicsx_drape.diagnosis.comparison import (
     simulate,
     where,
 )
+from fenicsx_drape.diagnosis.cost import StageCost
 from fenicsx_drape.diagnosis.data_check import data_check, say_suspects, suspect_tests
 from fenicsx_drape.diagnosis.decision import (
     ADEQUATE,
@@ -148,39 +149,47 @@ def diagnose(bundle: Bundle, model: Model, *, progress: Progress | None = None,
         The report: a dict with every field of the diagnosis contract (:data:`~fenicsx_drape.
         diagnosis.report.CONTRACT`) plus ``add_effects`` (the effects to add),
         ``heldout_scheme``, ``significance``, ``ranking``, ``trends``, ``conclusion``,
-        ``notes`` and ``seconds``.
+        ``notes``, ``seconds`` and ``cost`` (each stage's runs and seconds,
+        :mod:`~fenicsx_drape.diagnosis.cost`).
     """
     from fenicsx_drape.calibration.coupons import declare_noise
 
     start = time.perf_counter()
     say = progress or (lambda line: None)
-    checked = check_data(bundle, say)
+    spent = StageCost()  # each stage's runs and seconds: the report's ``cost``
+    checked = spent("data check", check_data, bundle, say)
     data = prepare_tests(declare_noise(checked.bundle, model.noise))
-    base = baseline_stage(data, model, say)
+    base = spent("baseline", baseline_stage, data, model, say)
     parameters = SETUP_PARAMETERS if setup is None and candidates is None else setup
     # The set-up as stated is the baseline: the same fitted values, one error; when it names
     # nothing, again with the baseline's outlier rows in (:func:`with_outlier_rows`).
-    stage = setup_stage(base.data.bundle, model, parameters, setup_rules(), say,
-                        baseline=base.model)
-    stage = with_outlier_rows(stage, data, base, model, parameters, say)
-    stated, base = base, at_setup(base, stage, model, say)
-    stage, base = friction_round(stage, stated, base, model, say)
+    stage = spent("set-up stage", setup_stage, base.data.bundle, model, parameters,
+                  setup_rules(), say, baseline=base.model)
+    stage = spent("set-up stage, outlier rows in", with_outlier_rows, stage, data, base, model,
+                  parameters, say)
+    stated, base = base, spent("baseline at the set-up", at_setup, base, stage, model, say)
+    stage, base = spent("friction with the set-up", friction_round, stage, stated, base,
+                        model, say)
     # The held-out error and the net's own error are independent: their runs together.
-    held, resolution = together([functools.partial(heldout_stage, base),
-                                 functools.partial(resolution_stage, base)], say)
+    held, resolution = spent("held-out folds and the net", together, [
+        functools.partial(heldout_stage, base), functools.partial(resolution_stage, base)], say)
     names = [n for n in candidate_names(model) if candidates is None or n in candidates]
-    effects = effects_stage(names, model, base, held, stage, resolution, say)
-    groups = groups_stage(base, say)
-    stage, best = setup_with_effect_stage(stage, effects.best, base, say)
-    looked = setup_needed_stage(stage, best, stated, base, held, resolution, model, say,
-                                effects=effects)
+    effects = spent("candidates", effects_stage, names, model, base, held, stage, resolution,
+                    say)
+    groups = spent("coupon groups", groups_stage, base, say)
+    stage, best = spent("set-up again with the best", setup_with_effect_stage, stage,
+                        effects.best, base, say)
+    looked = spent("set-up needed?", setup_needed_stage, stage, best, stated, base, held,
+                   resolution, model, say, effects=effects)
     stage, best, base, held, resolution, effects = looked
-    best = net_check_stage(best, say)
-    effects, best = finer_net_stage(effects, best, base, held, resolution, say)
+    best = spent("the best's net", net_check_stage, best, say)
+    effects, best = spent("a finer net", finer_net_stage, effects, best, base, held,
+                          resolution, say)
     decision = decide(effects, best, stage, checked)
+    measures = spent("report", measures_stage, base, decision.ranked)
     report = format_report(bundle, checked, base, held, resolution, effects, decision, groups,
-                           measures_stage(base, decision.ranked),
-                           seconds=time.perf_counter() - start)
+                           measures, seconds=time.perf_counter() - start,
+                           cost=spent.rows)
     return report  # its conclusion is the summary's (printed once, by the command)
 
 
