@@ -395,8 +395,8 @@ def on_same_rows(a: Baseline, b: Baseline) -> tuple[float, float]:
     (``error_with_outliers``: at a fitted set-up given the stated outliers' rows, its fit on
     every row, :func:`at_setup`). A set-up that explains a wild row keeps it and is judged
     with it; on its own rows it would lose to one that leaves the row out (the octagon's punch
-    0.91 mm off: at [0, -1] mm the clash row is no longer wild, 2.52 × the noise on every row,
-    against 2.26 at [1.06, 0.005] mm without the row, where it is still 25 × the noise).
+    0.91 mm off: at [0, -1] mm the clash row is no longer wild, 2.52 × the noise on every row;
+    at [1.06, 0.005] mm it is still wild, 2.26 without it but 3.07 with it).
     """
     if rows_out(a) == rows_out(b):
         return a.normalised, b.normalised
@@ -412,9 +412,10 @@ def stated_on_rows(data: Prepared, stated: Baseline, base: Baseline, model: Mode
     fitted set-up explains a row the stated one left out (:func:`at_setup`), the stated
     baseline is refitted on the prepared bundle less only the rows still wild at the fitted
     set-up: else an effect at the stated set-up is judged without the clash row that the
-    offset is judged with (the octagon's punch 0.91 mm off: shear_tension_coupling held-out
-    1.95 without it against the offset's 2.52 with it). Itself when both left the same rows
-    out (no outliers, or no set-up fitted).
+    offset is judged with (the octagon's punch 0.91 mm off, at [0, -1] mm held-out 2.54 with
+    the row: shear_tension_coupling at the stated set-up, 1.95 without it, would withdraw the
+    offset; with it the stated set-up is at 5.67 held-out and no effect comes near, tool
+    friction 5.22). Itself when both left the same rows out (no outliers, or no set-up fitted).
     """
     if rows_out(stated) == rows_out(base):
         return stated
