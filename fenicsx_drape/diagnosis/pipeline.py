@@ -40,9 +40,10 @@ value (:mod:`~fenicsx_drape.diagnosis.results`):
 7. **The best candidate, looked at again** (:func:`setup_with_effect_stage`,
    :func:`setup_needed_stage`, :func:`net_check_stage`): a significant best with no set-up
    error named: the set-up stage again with it in (a missing effect can hide a set-up
-   error); with one named: the best refitted at the stated set-up (every candidate, when
-   a holding force or μ was named and no effect is significant), and the set-up error
-   withdrawn when it adds no held-out evidence (an effect can stand behind a set-up error);
+   error); with one named: the best refitted at the stated set-up, on the rows the fitted
+   set-up keeps (:func:`stated_on_rows`; every candidate, when a holding force or μ was
+   named and no effect is significant), and the set-up error withdrawn when it adds no
+   held-out evidence (an effect can stand behind a set-up error);
    above the noise: is what it leaves its net's own error? Where the case's net can judge
    none of the forming measurements, the candidates that gain on it are formed on the finer
    net (:func:`finer_net_stage`).
