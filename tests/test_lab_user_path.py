@@ -43,7 +43,7 @@ def run(folder: Path, bundle: Path, model) -> dict:
     return json.loads((folder / "REPORT.json").read_text())
 
 
-def test_the_readme_lab_command_names_the_hidden_effect(tmp_path, monkeypatch):
+def test_the_readme_lab_command_names_the_hidden_effect(tmp_path, monkeypatch, capsys):
     pytest.importorskip("dolfinx")
     # Under pytest-xdist, DRAPE_WORKERS=1 (conftest.py): the other core runs other tests. The
     # report is the same on any number of workers (test_forming_runs_scale.py), and a pool
@@ -71,6 +71,15 @@ def test_the_readme_lab_command_names_the_hidden_effect(tmp_path, monkeypatch):
         "part/outline": "position_sd_mm", "part/punch_force": "force_sd_N key"}
     assert isinstance(report["resolution"], list)
     assert (tmp_path / "results" / "lab" / "candidates.png").exists()
+    # Where the time went: the stages' runs add up to the command's (provenance.json), and
+    # the console names the costliest stages.
+    made = json.loads((tmp_path / "results" / "lab" / "provenance.json").read_text())
+    made = made["forming_runs"]["runs"]
+    assert sum(r["runs_formed"] for r in report["cost"]) == made["formed"] > 0
+    assert sum(r["runs_asked"] for r in report["cost"]) == made["asked"]
+    assert sum(r["seconds"] for r in report["cost"]) <= report["seconds"]
+    (line,) = [x for x in capsys.readouterr().out.splitlines() if x.startswith("cost: ")]
+    assert f"{made['formed']} forming runs formed" in line
 
 
 @pytest.mark.bench

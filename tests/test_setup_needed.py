@@ -207,7 +207,8 @@ def test_the_set_up_is_fitted_again_at_the_friction_refitted_with_it(monkeypatch
         asked.append(mu)
         return [ply_at[mu]]
 
-    Base = dataclasses.make_dataclass("Base", ["model", "normalised", ("compared", tuple, ())])
+    Base = dataclasses.make_dataclass("Base", ["model", "normalised", ("compared", tuple, ()),
+                                               ("outliers", tuple, ())])
     monkeypatch.setattr(pipeline, "refit_setup", refit_setup)
     monkeypatch.setattr(pipeline, "corrected", lambda bundle, name, p, m: float(p[0]))
     monkeypatch.setattr(pipeline, "fitted_value", lambda bundle, name, p, m: float(p[0]))

@@ -13,6 +13,7 @@ No forming run: a lab's force curve on the octagon's case (read, not formed), th
 baseline's fits stood in for by the curves they would give.
 """
 
+import dataclasses
 import types
 
 import numpy as np
@@ -197,4 +198,63 @@ def test_no_set_up_error_leaves_the_baseline_as_it_was(lab, monkeypatch):
     calls = fitted_at(monkeypatch, travel, 331.0)
     none = types.SimpleNamespace(best=None, bundle=given, corrected=given)
     assert pipeline.at_setup(base, none, default_model(), lambda line: None) is base
+    assert calls == []
+
+
+def test_a_set_up_that_explains_the_row_is_judged_with_it(lab, monkeypatch):
+    # The friction round's second set-up explains the clash (320 N for 340: 3 × the noise,
+    # kept) and is a little farther from the data on its own rows than the first, which
+    # leaves the row out (still wild at 39 N): on every row it is the nearer, and kept.
+    from fenicsx_drape.diagnosis.results import SetupBest
+
+    data, travel = lab
+    stated = stated_baseline(data, travel)
+    given = pipeline.setup_rows(data, stated)
+    stage = types.SimpleNamespace(best=object(), bundle=given, corrected=given)
+    fitted_at(monkeypatch, travel, 39.0)
+    first = pipeline.at_setup(stated, stage, default_model(), lambda line: None)
+    fitted_at(monkeypatch, travel, 320.0)
+    explains = pipeline.at_setup(stated, stage, default_model(), lambda line: None)
+    assert [o["row"] for o in first.outliers] == [ROWS - 1] and explains.outliers == ()
+    assert explains.normalised > first.normalised  # on their own rows: the row left out wins
+    assert pipeline.on_same_rows(explains, first) == (
+        explains.error_with_outliers["normalised"], first.error_with_outliers["normalised"])
+    assert pipeline.on_same_rows(explains, explains) == (explains.normalised,) * 2
+
+    model = default_model()
+    entry = {"parameter": "tool_offset_mm", "stated": [0.0, 0.0], "fitted": [1.06, 0.0],
+             "error_after": {"normalised": 3.09, "per_test": {"t1/punch_force": 3.09}}}
+    Stage = dataclasses.make_dataclass(
+        "Stage", ["best", "fitted", "stated_model", "bundle", "entries", "corrected"])
+    found = Stage(SetupBest("tool_offset_mm", (1.06, 0.0)), ("mu",),
+                  model.with_parameters(mu=0.342), given, (entry,), given)
+    monkeypatch.setattr(pipeline, "refit_setup", lambda *a: np.array([0.0, -1.0]))
+    monkeypatch.setattr(pipeline, "corrected", lambda bundle, name, p, m: tuple(p))
+    monkeypatch.setattr(pipeline, "fitted_value", lambda bundle, name, p, m: list(p))
+    monkeypatch.setattr(pipeline, "at_setup", lambda base, st, m, say: explains)
+    again, base = pipeline.friction_round(found, stated, first, model, lambda line: None)
+    assert base is explains and again.entries[0]["fitted"] == [0.0, -1.0]
+
+
+def test_the_stated_set_up_is_judged_on_the_fitted_set_ups_rows(lab, monkeypatch):
+    # The fitted set-up explains the clash row (331 N): the stated baseline the effects are
+    # refitted at is refitted with it in, as the fitted one is; where the row is still wild
+    # at the fitted set-up (39 N), or no set-up was fitted, the stated baseline as it was.
+    data, travel = lab
+    stated = stated_baseline(data, travel)
+    given = pipeline.setup_rows(data, stated)
+    stage = types.SimpleNamespace(best=object(), bundle=given, corrected=given)
+    say = lambda line: None  # noqa: E731
+    fitted_at(monkeypatch, travel, 331.0)
+    at = pipeline.at_setup(stated, stage, default_model(), say)
+    calls = fitted_at(monkeypatch, travel, 40.0)  # the stated set-up: the clash missed
+    on_rows = pipeline.stated_on_rows(data, stated, at, default_model(), say)
+    assert calls == [ROWS] and on_rows.data.tests[0].n_rows == at.data.tests[0].n_rows == ROWS
+    assert on_rows.outliers == () and on_rows.normalised > 5.0  # the clash row, 45 × noise
+    assert on_rows.error_with_outliers == stated.error_with_outliers
+    fitted_at(monkeypatch, travel, 39.0)
+    still_wild = pipeline.at_setup(stated, stage, default_model(), say)
+    calls = fitted_at(monkeypatch, travel, 40.0)
+    assert pipeline.stated_on_rows(data, stated, still_wild, default_model(), say) is stated
+    assert pipeline.stated_on_rows(data, stated, stated, default_model(), say) is stated
     assert calls == []

@@ -8,7 +8,7 @@ ledger of versions and the provenance.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,6 +22,7 @@ from fenicsx_drape.diagnosis.comparison import (
     trends,
     where,
 )
+from fenicsx_drape.diagnosis.cost import cost_line
 from fenicsx_drape.diagnosis.decision import (
     ADEQUATE,
     MISSING_RULE,
@@ -99,7 +100,7 @@ def candidate_record(c: Candidate, explanation: str) -> dict[str, Any]:
 def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: HeldOut,
                   resolution: Resolution, effects: Effects, decision: Decision,
                   groups: Entry | None, measures: Mapping[str, Any], *,
-                  seconds: float) -> Report:
+                  seconds: float, cost: Sequence[Entry] = ()) -> Report:
     """The contract's report from the stages' results: their fields and their words.
 
     Args:
@@ -114,6 +115,7 @@ def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: H
         groups: The coupon groups' consistency (None: nothing to compare).
         measures: The kinds' own measures by model label (``metrics``).
         seconds: How long the diagnosis took (wall clock).
+        cost: Each stage's forming runs (asked, formed) and wall seconds, in order.
     """
     compared, coupons, missing, stage = base.compared, base.coupons, decision.missing, \
         decision.setup
@@ -185,6 +187,7 @@ def format_report(bundle: Bundle, checked: DataCheck, base: Baseline, heldout: H
         **setup_fields(stage),
         "data_check": list(checked.entries),
         "seconds": seconds,
+        "cost": list(cost),
     })
     report.models, report.comparisons = models, comparisons
     report.tests = base.data.tests
@@ -284,6 +287,8 @@ def summary(report: dict[str, Any]) -> str:
     for o in report.get("outliers", []):
         lines.append(f"outlier left out: {o['file']}:{o['line']} ({o['id']}), residual "
                      f"{o['residual']:.3g} × noise")
+    if report.get("cost"):
+        lines.append(cost_line(report["cost"]))
     lines.append(f"missing_effect: {report['missing_effect']}")
     if not suspect:
         lines.append(report["conclusion"])
