@@ -25,7 +25,7 @@ from fenicsx_drape.diagnosis.kinds.forming import fit_forming, forming_case_of, 
 from fenicsx_drape.diagnosis.setup_stage import fit_setup
 from fenicsx_drape.diagnosis.synthetic import synthetic_case_test, write_case_bundle
 from fenicsx_drape.forming.case.format import PlySpec, case_for_test, load_case
-from fenicsx_drape.measurements.bundle import Bundle, BundleError, load_bundle, write_bundle
+from fenicsx_drape.measurements.bundle import Bundle, BundleError, Test, load_bundle, write_bundle
 from fenicsx_drape.model import default_model
 
 pytestmark = pytest.mark.skip_in_parallel  # serial runs (on ranks: test_forming_stack_parallel)
@@ -201,13 +201,21 @@ def turned_ply_bundle(folder):
         dataclasses.replace(t, forming_case=stack_case()) for t in bundle.tests))
 
 
-def test_the_set_up_stage_reads_each_plys_angle_of_a_stack(tmp_path):
+def test_the_set_up_stage_reads_each_plys_angle_of_a_stack():
     """The names the stage adds on a stack, their stated values and the case each one forms.
 
     The fit itself is the bench test below (it forms the stack 26 times); the stage's fit of a
     turned ply runs in ``make test`` on one ply (test_setup_diagnosis.py).
     """
-    tests = setup_parameters.forming_tests(turned_ply_bundle(tmp_path))
+    # Tests as the turned-ply bundle's (each ply measured, the stated case named), their
+    # grids unformed: what is checked here is read off the case, not off a run.
+    X0 = np.array([[0.0, 0.0], [30.0, 0.0], [0.0, 30.0]])
+    columns = {"i": np.arange(3.0), "j": np.zeros(3), "x0_mm": X0[:, 0], "y0_mm": X0[:, 1],
+               "x_mm": X0[:, 0], "y_mm": X0[:, 1], "z_mm": np.zeros(3),
+               "position_sd_mm": np.full(3, 0.3)}
+    tests = setup_parameters.forming_tests(Bundle("stack", tuple(
+        Test(id=f"ply{k}", kind="forming", file=f"ply{k}.csv", columns=columns,
+             case="case/case.toml", forming_case=stack_case(), ply=k) for k in (1, 2))))
     assert setup_parameters.setup_names(["ply_angle_deg", "mu"], tests) == [
         "ply_angle_deg", "ply_angle_deg/1", "ply_angle_deg/2", "mu"]
     assert setup_parameters.stated(tests[0], "ply_angle_deg/2", SLIDING) == 45.0
