@@ -348,11 +348,13 @@ def test_a_set_up_error_and_a_missing_effect_are_both_named():
     alone, 1421 ± 211 N for the stated 200 N, brings the grid from 6.71 to 1.35 × the noise
     (evidence 4.98); the tool friction at the stated force reaches only 5.64 (not
     significant), so the force is not withdrawn for it; with the force fitted, the friction
-    brings 1.35 to 1.09 (evidence 1.23) and the force is fitted again with it (837 N). Their
-    values are not separated: on the grid a larger force with less friction forms nearly the
-    same part (μ_tool 0.199 with 837 N for the truth's 0.8 with 400 N; a force curve would
-    separate them, but on the 20 mm net its own error is many times its noise:
-    docs/setup-diagnosis.md), so only the verdicts are asserted.
+    brings 1.35 to 1.09 (evidence 1.23, at the edge: another draw of the noise, seed 13,
+    gives 1.19 and names the force alone) and the force is fitted again with it (837 N).
+    Their values are not separated: on one trial's grid a larger force with less friction
+    forms nearly the same part (μ_tool 0.199 with 837 N for the truth's 0.8 with 400 N), so
+    only the verdicts are asserted; two trials separate them (next test). A force curve
+    would too, but on the 20 mm net its own error is many times its noise
+    (docs/setup-diagnosis.md).
     """
     from fenicsx_drape.diagnosis import diagnose
 
@@ -373,6 +375,47 @@ def test_a_set_up_error_and_a_missing_effect_are_both_named():
     assert friction["setup_refitted"]["parameter"] == "holder_force_N"
     assert friction["setup_refitted"]["fitted"] != friction["setup_refitted"]["fitted_alone"]
     assert "is fitted again" in report["conclusion"]
+
+
+@pytest.mark.slow
+@pytest.mark.bench  # make bench: minutes of forming runs
+@pytest.mark.skip_in_parallel
+def test_two_trials_tell_the_holding_force_from_the_tool_friction():
+    """The press's force read half what it was in two trials, and tool friction μ_tool 0.8.
+
+    The quarter double dome (20 mm, 0.1 mm noise, μ stated) stated at 200 N and at 100 N,
+    formed at 400 N and 200 N: a factor on the force shifts the two trials' restraint by
+    different amounts, a tool friction by about the same, so they no longer trade off as
+    on one trial. Measured: the force fitted alone, 307 ± 57 N for the 100 N stated (7.87
+    → 2.39 × the noise); with the friction, μ_tool 0.790 and the force refitted to 201 N
+    (0.994 × the noise, evidence 2.41); the friction at the stated force reaches only 4.95.
+    The set-up error is then withdrawn all the same (setup_error None): ``decision.
+    setup_as_reported`` compares the refitted 201 N with the stated 100 N on the force's sd
+    fitted alone (57 N, 1.76 sd), an sd widened by the lack of fit the missing friction left
+    (its fit's own sd is 5.8 N); that verdict is marked xfail until the rule is settled.
+    """
+    from fenicsx_drape.diagnosis import diagnose
+
+    truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
+    tests = []
+    for k, force in enumerate((200.0, 100.0)):
+        stated = with_overrides(load_case(CASE, **COARSE), mu=0.3, holder_force_N=force)
+        test = synthetic_case_test(truth, with_overrides(stated, holder_force_N=2 * force),
+                                   sd_mm=0.1, seed=12 + 100 * k, full=True,
+                                   test_id=f"dd{force:.0f}")
+        tests.append(dataclasses.replace(test, forming_case=stated, case_keys={}))
+    report = diagnose(Bundle(name="two-trials", tests=tuple(tests)), default_model(),
+                      candidates=["tool_friction"], setup=["holder_force_N"])
+    assert report["missing_effect"] == "tool_friction"
+    (friction,) = report["candidates"]
+    assert friction["parameters"]["mu_tool"] == pytest.approx(0.8, rel=0.05)
+    (force,) = report["setup"]
+    assert force["stated"] == 100.0 and force["significant"]
+    # Refitted with the friction: twice the stated force (the truth), within 5 %.
+    assert friction["setup_refitted"]["fitted"] == pytest.approx(200.0, rel=0.05)
+    if report["setup_error"] is None:
+        pytest.xfail("setup_as_reported judges the refitted force on the sd fitted alone")
+    assert report["setup_error"] == "holder_force_N"
 
 
 def _fit(p, start, sd, sd_fit, **more) -> setup_fit.SetupFit:
