@@ -384,11 +384,12 @@ def test_two_trials_tell_the_holding_force_from_the_tool_friction():
     """The press's force read half what it was in two trials, and tool friction μ_tool 0.8.
 
     The quarter double dome (20 mm, 0.1 mm noise, μ stated) stated at 200 N and at 100 N,
-    formed at 400 N and 200 N: a factor on the force shifts the two trials' restraint by
-    different amounts, a tool friction by about the same, so they no longer trade off as
-    on one trial. Measured: the force fitted alone, 307 ± 57 N for the 100 N stated (7.87
-    → 2.39 × the noise); with the friction, μ_tool 0.790 and the force refitted to 201 N
-    (0.994 × the noise, evidence 2.41); the friction at the stated force reaches only 4.95.
+    formed at 400 N and 200 N: a factor on the force adds twice the restraint (μF, eq. 1)
+    to the first trial that it adds to the second, a tool friction does not follow the
+    force, so they no longer trade off as on one trial. Measured: the force fitted alone,
+    307 ± 57 N for the 100 N stated (7.87 → 2.39 × the noise); with the friction, μ_tool
+    0.790 and the force refitted to 201 N (0.994 × the noise, evidence 2.41); the friction
+    at the stated force reaches only 4.95.
     The set-up error is then withdrawn all the same (setup_error None): ``decision.
     setup_as_reported`` compares the refitted 201 N with the stated 100 N on the force's sd
     fitted alone (57 N, 1.76 sd), an sd widened by the lack of fit the missing friction left
