@@ -306,11 +306,17 @@ def test_a_turned_ply_is_named_with_its_angle_and_a_null_bundle_stays_null():
     assert mu["heldout_normalised"] == force["heldout_normalised"]
 
 
-def force_and_friction(truth, seed: int) -> Bundle:
-    """The quarter double dome formed by ``truth`` with 400 N where the case says 200 N."""
+def force_and_friction(truth, seed: int, mu: float | None = None) -> Bundle:
+    """The quarter double dome formed by ``truth`` with 400 N where the case says 200 N.
+
+    ``mu``: the holder's μ the case states (the lab measured it), formed so too; None: the
+    case states none (the diagnosis's baseline fits it).
+    """
     stated = load_case(CASE, **COARSE)
+    if mu is not None:
+        stated = with_overrides(stated, mu=mu)
     test = synthetic_case_test(truth, with_overrides(stated, holder_force_N=400.0),
-                                  sd_mm=0.1, seed=seed, full=True)
+                               sd_mm=0.1, seed=seed, full=True)
     return Bundle(name="b", tests=(dataclasses.replace(test, forming_case=stated,
                                                        case_keys={}),))
 
@@ -336,25 +342,81 @@ def test_the_set_up_is_fitted_again_with_a_candidate_effect():
 def test_a_set_up_error_and_a_missing_effect_are_both_named():
     """Twice the holding force and tool friction (μ_tool 0.8), 0.1 mm noise, quarter, 20 mm.
 
-    Both are named, and the force is fitted again with the friction (the rounds of set-up
-    and effect). Their values are not separated: on the grid a larger force with less
-    friction forms nearly the same part (measured: 1806 N with μ_tool 0.25 for the truth's
-    400 N and 0.8; docs/setup-diagnosis.md), so only the verdicts are asserted.
+    The case states the holder's μ (0.3, the truth's: a lab that measured it), so the
+    force is a set-up candidate (where no case states μ, the baseline fits it and the force
+    is untestable: test_setup_one_number.py). Each is needed (measured): the force fitted
+    alone, 1421 ± 211 N for the stated 200 N, brings the grid from 6.71 to 1.35 × the noise
+    (evidence 4.98); the tool friction at the stated force reaches only 5.64 (not
+    significant), so the force is not withdrawn for it; with the force fitted, the friction
+    brings 1.35 to 1.09 (evidence 1.23, at the edge: another draw of the noise, seed 13,
+    gives 1.19 and names the force alone) and the force is fitted again with it (837 N).
+    Their values are not separated: on one trial's grid a larger force with less friction
+    forms nearly the same part (μ_tool 0.199 with 837 N for the truth's 0.8 with 400 N), so
+    only the verdicts are asserted; two trials separate them (next test). A force curve
+    would too, but on the 20 mm net its own error is many times its noise
+    (docs/setup-diagnosis.md).
     """
     from fenicsx_drape.diagnosis import diagnose
 
     truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
-    bundle = force_and_friction(truth, seed=12)
+    bundle = force_and_friction(truth, seed=12, mu=0.3)
     # The one set-up and the one effect that act alike here (the point of the test); every
     # candidate on the default path: test_lab_user_path.py, the README's command.
     report = diagnose(bundle, default_model(), candidates=["tool_friction"],
                       setup=["holder_force_N"])
+    assert not [u for u in report["untestable"] if u["effect"] == "holder_force_N"]
     assert report["setup_error"] == "holder_force_N"
+    (force,) = report["setup"]
+    assert force["significant"] and force["fitted"] > 200.0
+    assert "withdrawn_for" not in force  # the friction at the stated force is not enough
     assert report["missing_effect"] == "tool_friction"
     (friction,) = report["candidates"]
+    assert friction["significant"]
     assert friction["setup_refitted"]["parameter"] == "holder_force_N"
     assert friction["setup_refitted"]["fitted"] != friction["setup_refitted"]["fitted_alone"]
     assert "is fitted again" in report["conclusion"]
+
+
+@pytest.mark.slow
+@pytest.mark.bench  # make bench: minutes of forming runs
+@pytest.mark.skip_in_parallel
+def test_two_trials_tell_the_holding_force_from_the_tool_friction():
+    """The press's force read half what it was in two trials, and tool friction μ_tool 0.8.
+
+    The quarter double dome (20 mm, 0.1 mm noise, μ stated) stated at 200 N and at 100 N,
+    formed at 400 N and 200 N: a factor on the force adds twice the restraint (μF, eq. 1)
+    to the first trial that it adds to the second, a tool friction does not follow the
+    force, so they no longer trade off as on one trial. Measured: the force fitted alone,
+    307 ± 57 N for the 100 N stated (7.87 → 2.39 × the noise); with the friction, μ_tool
+    0.790 and the force refitted to 201 N (0.994 × the noise, evidence 2.41); the friction
+    at the stated force reaches only 4.95.
+    The set-up error is then withdrawn all the same (setup_error None): ``decision.
+    setup_as_reported`` compares the refitted 201 N with the stated 100 N on the force's sd
+    fitted alone (57 N, 1.76 sd), an sd widened by the lack of fit the missing friction left
+    (its fit's own sd is 5.8 N); that verdict is marked xfail until the rule is settled.
+    """
+    from fenicsx_drape.diagnosis import diagnose
+
+    truth = default_model().with_effects("tool_friction").with_parameters(mu_tool=0.8)
+    tests = []
+    for k, force in enumerate((200.0, 100.0)):
+        stated = with_overrides(load_case(CASE, **COARSE), mu=0.3, holder_force_N=force)
+        test = synthetic_case_test(truth, with_overrides(stated, holder_force_N=2 * force),
+                                   sd_mm=0.1, seed=12 + 100 * k, full=True,
+                                   test_id=f"dd{force:.0f}")
+        tests.append(dataclasses.replace(test, forming_case=stated, case_keys={}))
+    report = diagnose(Bundle(name="two-trials", tests=tuple(tests)), default_model(),
+                      candidates=["tool_friction"], setup=["holder_force_N"])
+    assert report["missing_effect"] == "tool_friction"
+    (friction,) = report["candidates"]
+    assert friction["parameters"]["mu_tool"] == pytest.approx(0.8, rel=0.05)
+    (force,) = report["setup"]
+    assert force["stated"] == 100.0 and force["significant"]
+    # Refitted with the friction: twice the stated force (the truth), within 5 %.
+    assert friction["setup_refitted"]["fitted"] == pytest.approx(200.0, rel=0.05)
+    if report["setup_error"] is None:
+        pytest.xfail("setup_as_reported judges the refitted force on the sd fitted alone")
+    assert report["setup_error"] == "holder_force_N"
 
 
 def _fit(p, start, sd, sd_fit, **more) -> setup_fit.SetupFit:
