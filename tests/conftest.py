@@ -40,9 +40,9 @@ pytest_plugins = ("verdict",)
 # again after another module's test came in between) and the modules are handed out in this
 # order, then those with a test marked ``slow``, then the others: the suite does not end
 # waiting on a long module.
-HEAVY = ("tests/test_lab_user_path.py", "tests/test_reference_reports.py",
-         "tests/test_run_cache.py", "tests/test_fit_real.py", "tests/test_demo_laminates.py",
-         "tests/test_scenarios.py", "tests/test_forming_runs_scale.py",
+HEAVY = ("tests/test_scenarios.py", "tests/test_lab_user_path.py",
+         "tests/test_reference_reports.py", "tests/test_run_cache.py", "tests/test_fit_real.py",
+         "tests/test_demo_laminates.py", "tests/test_forming_runs_scale.py",
          "tests/test_forming_setup.py", "tests/test_setup_diagnosis.py",
          "tests/test_forming_stack.py", "tests/test_diagnose_hidden.py",
          "tests/test_diagnose_unknown.py", "tests/test_meshed_hemisphere.py",
